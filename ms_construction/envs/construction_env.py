@@ -1,0 +1,452 @@
+"""The construction pick-and-place task shared by the four environments.
+
+One class holds the mechanics; `ms_construction/envs/tasks.py` registers the general task and the
+three single-task environments with their task cards.
+
+Grasp (the paper's ray-cast sensor): a ray leaves the centre of the suction plate along its
+approach axis (tcp z). When it meets the element's grasp face (its +z face, inside the face's
+rectangle, within 60 degrees of the face normal) at a distance <= tau_pick, the element is grasped.
+It is pulled onto the plate (the paper's attaching force) and then held rigidly against it: before
+every physics substep the element's velocity is set so that it reaches its held pose relative to
+the plate at the end of the substep (speed-capped, gravity included). The solver still resolves
+the element's contacts, so a held element cannot pass through walls or slabs: it is stopped there
+while the plate goes on. All of it is batched tensor arithmetic, with no joints made at run time.
+The suction plate itself does not collide with elements (its pads are compliant); every other link
+does.
+"""
+
+from __future__ import annotations
+
+from typing import Any, Optional, Sequence
+
+import numpy as np
+import sapien
+import torch
+
+from mani_skill.envs.sapien_env import BaseEnv
+from mani_skill.sensors.camera import CameraConfig
+from mani_skill.utils import sapien_utils
+from mani_skill.utils.geometry.rotation_conversions import (
+    axis_angle_to_quaternion,
+    quaternion_apply,
+    quaternion_invert,
+    quaternion_multiply,
+    quaternion_to_axis_angle,
+    quaternion_to_matrix,
+)
+from mani_skill.utils.structs import Actor, Pose
+from mani_skill.utils.structs.types import GPUMemoryConfig, SimConfig
+
+from ms_construction.agents.construction_arm import ConstructionArm
+from ms_construction.curriculum import STAGE_NAMES, TOLERANCE_KEYS, resolve_tolerances, stage_tolerances, validate_tolerances
+from ms_construction.site import ConstructionSiteSceneBuilder, build_element
+from ms_construction.site_geometry import ELEMENT_KINDS
+
+PLATE_ELEMENT_COLLISION_BIT = 29
+"""collision group 2 bit shared by the suction plate and the elements: they never collide."""
+MAX_GRASP_INCIDENCE_DEG = 60.0
+HOLD_MAX_SPEED = 3.0
+"""m/s; the pull onto the plate and the tracking of a held element are capped at this speed."""
+HOLD_MAX_ANGULAR_SPEED = 10.0
+"""rad/s."""
+START_XY_NOISE = 0.08
+"""m; element start position on the staging table, uniform in +-this around the table centre."""
+START_YAW_NOISE_DEG = 15.0
+START_YAW_DEG = {"ceiling": 90.0, "window": 0.0, "flooring": 0.0}
+"""nominal yaw on the table: the long side along the table's long side (y)."""
+STORAGE_XY = {"ceiling": (-3.2, -1.2), "window": (-3.2, 0.0), "flooring": (-3.2, 1.2)}
+"""general task: where the episode's unused elements wait, on the ground outside the barriers."""
+SYMMETRIES_DEG = {
+    # rotations about the element's own z axis that leave its installation unchanged:
+    "ceiling": (0.0, 180.0),  # a rectangle, finished face fixed (down)
+    "window": (0.0,),  # head up and inside face in: no symmetry
+    "flooring": (0.0, 90.0, 180.0, 270.0),  # a square, finish up
+}
+
+
+def _quat_z(deg: torch.Tensor) -> torch.Tensor:
+    half = torch.deg2rad(deg) / 2
+    return torch.stack([torch.cos(half), torch.zeros_like(half), torch.zeros_like(half), torch.sin(half)], -1)
+
+
+def _angle_deg(q: torch.Tensor) -> torch.Tensor:
+    """Rotation angle of unit quaternions, degrees in [0, 180]."""
+    return torch.rad2deg(2 * torch.acos(q[..., 0].abs().clamp(max=1.0)))
+
+
+def _clip_norm(v: torch.Tensor, max_norm: float) -> torch.Tensor:
+    n = torch.linalg.norm(v, dim=-1, keepdim=True)
+    return v * torch.clamp(max_norm / n.clamp(min=1e-9), max=1.0)
+
+
+class ConstructionTaskEnv(BaseEnv):
+    """Base of the construction tasks; see ms_construction/envs/tasks.py for the task cards."""
+
+    SUPPORTED_ROBOTS = ["construction_arm"]
+    SUPPORTED_REWARD_MODES = ("sparse", "dense", "normalized_dense", "none")
+    MAX_EPISODE_STEPS = 250
+    """10 s at 20 Hz: a planned pick-carry-place takes about half of it."""
+    DENSE_REWARD_MAX = 5.0
+    TASKS: tuple[str, ...] = ELEMENT_KINDS
+    """task types this environment samples from."""
+    agent: ConstructionArm
+
+    def __init__(
+        self,
+        *args,
+        robot_uids: str = "construction_arm",
+        robot_init_qpos_noise: float = 0.02,
+        curriculum_stage: str = "cp4",
+        tolerances: Optional[dict] = None,
+        tasks: Optional[Sequence[str]] = None,
+        **kwargs,
+    ):
+        self._tol_init = resolve_tolerances(curriculum_stage, tolerances)
+        self.curriculum_stage = curriculum_stage
+        if tasks is not None:
+            if len(self.TASKS) == 1:
+                raise ValueError(f"'tasks' is a kwarg of the general task only; {type(self).__name__} is {self.TASKS[0]}")
+            tasks = tuple(tasks)
+            bad = [t for t in tasks if t not in ELEMENT_KINDS]
+            if bad or not tasks or len(set(tasks)) != len(tasks):
+                raise ValueError(f"tasks={tasks!r}: give distinct task types from {ELEMENT_KINDS}")
+            self.TASKS = tuple(t for t in ELEMENT_KINDS if t in tasks)
+        self.robot_init_qpos_noise = robot_init_qpos_noise
+        super().__init__(*args, robot_uids=robot_uids, **kwargs)
+
+    # ------------------------------------------------------------------------------------- #
+    # configuration
+    # ------------------------------------------------------------------------------------- #
+    @property
+    def _default_sim_config(self):
+        return SimConfig(
+            spacing=12.0,  # the site with its storage area spans about 5.5 m
+            sim_freq=100,
+            control_freq=20,
+            gpu_memory_config=GPUMemoryConfig(
+                max_rigid_contact_count=2**21, max_rigid_patch_count=2**19, found_lost_pairs_capacity=2**25
+            ),
+        )
+
+    @property
+    def _default_sensor_configs(self):
+        pose = sapien_utils.look_at(eye=[-0.2, -2.1, 2.2], target=[-0.1, 0.0, 0.8])
+        return [CameraConfig("base_camera", pose, 128, 128, 1.4, 0.01, 20)]
+
+    @property
+    def _default_human_render_camera_configs(self):
+        pose = sapien_utils.look_at(eye=[0.5, -3.3, 1.95], target=[-0.1, 0.2, 1.05])
+        return CameraConfig("render_camera", pose, 512, 512, 1.25, 0.01, 30)
+
+    def _load_agent(self, options: dict):
+        super()._load_agent(options, sapien.Pose())
+
+    # ------------------------------------------------------------------------------------- #
+    # scene
+    # ------------------------------------------------------------------------------------- #
+    def _load_scene(self, options: dict):
+        self.site = ConstructionSiteSceneBuilder(self, robot_init_qpos_noise=self.robot_init_qpos_noise)
+        self.site.build()
+        m = self.site.manifest
+        self.elements: dict[str, Actor] = {}
+        self.goal_markers: dict[str, Actor] = {}
+        for kind in self.TASKS:
+            el = build_element(self.scene, kind, f"{kind}_element", manifest=m)
+            el.set_collision_group_bit(2, PLATE_ELEMENT_COLLISION_BIT, 1)
+            self.elements[kind] = el
+            self.goal_markers[kind] = self._build_goal_marker(kind, m)
+        self.agent.plate.set_collision_group_bit(2, PLATE_ELEMENT_COLLISION_BIT, 1)
+
+        n, dev = self.num_envs, self.device
+        kinds = ELEMENT_KINDS
+        f32 = dict(dtype=torch.float32, device=dev)
+        # per task type (indexed by task_id): goals [3, slots, 7], grasp pose [3, 7], sizes [3, 3]
+        self._goal_table = torch.tensor([m["goal_poses"][k] for k in kinds], **f32)
+        self._grasp_in_el = torch.tensor([m["elements"][k]["grasp_pose"] for k in kinds], **f32)
+        self._el_size = torch.tensor([m["elements"][k]["size"] for k in kinds], **f32)
+        syms = [list(SYMMETRIES_DEG[k]) + [0.0] * (4 - len(SYMMETRIES_DEG[k])) for k in kinds]
+        self._sym_quats = _quat_z(torch.tensor(syms, **f32))  # [3, 4, 4]; padding repeats identity
+        self._start_yaw = torch.tensor([START_YAW_DEG[k] for k in kinds], **f32)
+        self._task_choices = torch.tensor([kinds.index(k) for k in self.TASKS], device=dev)
+        st = m["staging"]
+        self._staging_xyz = torch.tensor(st["center"], **f32)
+
+        # task state (also in get_state_dict)
+        self.task_id = torch.full((n,), int(self._task_choices[0]), dtype=torch.long, device=dev)
+        self.goal_slot = torch.zeros(n, dtype=torch.long, device=dev)
+        self.held = torch.zeros(n, dtype=torch.bool, device=dev)
+        self.picked = torch.zeros(n, dtype=torch.bool, device=dev)
+        self.first_grasp_now = torch.zeros(n, dtype=torch.bool, device=dev)
+        self.hold_pose_in_tcp = torch.zeros(n, 7, **f32)
+        self.hold_pose_in_tcp[:, 3] = 1
+        self.tolerances = torch.tensor([[self._tol_init[k] for k in TOLERANCE_KEYS]], **f32).repeat(n, 1)
+        self.obj = self.elements[self.TASKS[0]]
+
+    def _build_goal_marker(self, kind: str, manifest: dict) -> Actor:
+        """A translucent green ghost of the element at its goal (human render only)."""
+        builder = self.scene.create_actor_builder()
+        half = np.array(manifest["elements"][kind]["size"]) / 2
+        builder.add_box_visual(half_size=half, material=sapien.render.RenderMaterial(base_color=[0.1, 0.9, 0.2, 0.35]))
+        builder.initial_pose = sapien.Pose(p=[0, 0, -10])
+        marker = builder.build_kinematic(name=f"{kind}_goal_marker")
+        self._hidden_objects.append(marker)
+        return marker
+
+    # ------------------------------------------------------------------------------------- #
+    # episode
+    # ------------------------------------------------------------------------------------- #
+    def _initialize_episode(self, env_idx: torch.Tensor, options: dict):
+        with torch.device(self.device):
+            b = len(env_idx)
+            self.site.initialize(env_idx)
+            if len(self.TASKS) > 1:
+                self.task_id[env_idx] = self._task_choices[torch.randint(len(self._task_choices), (b,))]
+                self._select_active_elements()
+            task = self.task_id[env_idx]
+            self.goal_slot[env_idx] = torch.randint(self._goal_table.shape[1], (b,))
+
+            xyz = self._staging_xyz.repeat(b, 1)
+            xyz[:, :2] += (torch.rand(b, 2) * 2 - 1) * START_XY_NOISE
+            xyz[:, 2] += self._el_size[task, 2] / 2 + 1e-3
+            yaw = self._start_yaw[task] + (torch.rand(b) * 2 - 1) * START_YAW_NOISE_DEG
+            start = torch.cat([xyz, _quat_z(yaw)], -1)
+            zeros = torch.zeros(b, 3)
+            for kind, el in self.elements.items():
+                k = ELEMENT_KINDS.index(kind)
+                active = (task == k)[:, None]
+                el.set_pose(Pose.create(torch.where(active, start, self._storage_pose(kind, b))))
+                el.set_linear_velocity(zeros)
+                el.set_angular_velocity(zeros)
+            self._place_goal_markers(env_idx)
+
+            self.held[env_idx] = False
+            self.picked[env_idx] = False
+            self.first_grasp_now[env_idx] = False
+
+    def _place_goal_markers(self, env_idx: torch.Tensor) -> None:
+        task, goal = self.task_id[env_idx], self._goal_table[self.task_id[env_idx], self.goal_slot[env_idx]]
+        hidden = torch.tensor([0, 0, -10.0, 1, 0, 0, 0], device=self.device).expand_as(goal)
+        for kind, marker in self.goal_markers.items():
+            active = (task == ELEMENT_KINDS.index(kind))[:, None]
+            marker.set_pose(Pose.create(torch.where(active, goal, hidden)))
+
+    def _storage_pose(self, kind: str, b: int) -> torch.Tensor:
+        k = ELEMENT_KINDS.index(kind)
+        x, y = STORAGE_XY[kind]
+        ground = -self.site.manifest["site_params"]["ground_thickness"]
+        pose = torch.tensor([x, y, ground + float(self._el_size[k, 2]) / 2 + 1e-3, 1, 0, 0, 0], device=self.device)
+        return pose.repeat(b, 1)
+
+    def _select_active_elements(self):
+        """Point `self.obj` at each env's element of its task type (one view, no rebuild)."""
+        kinds = [ELEMENT_KINDS[i] for i in self.task_id.tolist()]
+        entities = [self.elements[k]._objs[i] for i, k in enumerate(kinds)]
+        self.obj = Actor.create_from_entities(entities, self.scene, torch.arange(self.num_envs, device=self.device))
+        self.obj.name = "element"
+
+    # ------------------------------------------------------------------------------------- #
+    # tolerances (curriculum)
+    # ------------------------------------------------------------------------------------- #
+    def set_curriculum_stage(self, stage: str, env_idx: Optional[torch.Tensor] = None) -> None:
+        """Switch to a stage of Table I: changes the tolerances and nothing else."""
+        tol = stage_tolerances(stage)
+        self._set_tol(tol, env_idx)
+        self.curriculum_stage = stage
+
+    def set_tolerances(self, pick: Optional[float] = None, place: Optional[float] = None,
+                       angle_deg: Optional[float] = None, env_idx: Optional[torch.Tensor] = None) -> None:
+        """Override some tolerances (m, m, degrees) at run time; the others keep their values."""
+        given = {k: v for k, v in dict(pick=pick, place=place, angle_deg=angle_deg).items() if v is not None}
+        self._set_tol(validate_tolerances(given), env_idx)
+
+    def _set_tol(self, tol: dict, env_idx) -> None:
+        idx = slice(None) if env_idx is None else env_idx
+        for i, key in enumerate(TOLERANCE_KEYS):
+            if key in tol:
+                self.tolerances[idx, i] = tol[key]
+
+    @property
+    def tau_pick(self) -> torch.Tensor:
+        return self.tolerances[:, 0]
+
+    @property
+    def tau_place(self) -> torch.Tensor:
+        return self.tolerances[:, 1]
+
+    @property
+    def tau_angle_deg(self) -> torch.Tensor:
+        return self.tolerances[:, 2]
+
+    # ------------------------------------------------------------------------------------- #
+    # grasp and hold
+    # ------------------------------------------------------------------------------------- #
+    @property
+    def goal_pose(self) -> Pose:
+        """Where the element's own frame must end up."""
+        return Pose.create(self._goal_table[self.task_id, self.goal_slot])
+
+    def grasp_ray(self) -> tuple[torch.Tensor, torch.Tensor]:
+        """(distance along the plate's ray to the grasp face, whether the ray hits the face).
+
+        Distance is +inf where the ray misses the face or meets it from behind or too obliquely."""
+        tcp, el = self.agent.tcp.pose, self.obj.pose
+        q_inv = quaternion_invert(el.q)
+        p = quaternion_apply(q_inv, tcp.p - el.p)  # plate centre in the element frame
+        d = quaternion_apply(q_inv, quaternion_apply(tcp.q, torch.tensor([0.0, 0.0, 1.0], device=self.device).expand_as(p)))
+        size = self._el_size[self.task_id]
+        face_z = size[:, 2] / 2
+        facing = d[:, 2] <= -np.cos(np.deg2rad(MAX_GRASP_INCIDENCE_DEG))
+        above = p[:, 2] >= face_z - 1e-4
+        dist = (p[:, 2] - face_z) / (-d[:, 2]).clamp(min=1e-6)
+        hit = p[:, :2] + dist[:, None] * d[:, :2]
+        inside = (hit.abs() <= size[:, :2] / 2).all(-1)
+        ok = facing & above & inside
+        return torch.where(ok, dist, torch.full_like(dist, float("inf"))), ok
+
+    def _update_grasp(self) -> None:
+        dist, _ = self.grasp_ray()
+        grasp_now = ~self.held & (dist <= self.tau_pick)
+        self.first_grasp_now = grasp_now & ~self.picked
+        self.picked |= grasp_now
+        # held pose: the grasp face against the plate, keeping the element's current rotation
+        # about the plate's axis (the pull does not spin it)
+        tcp, el = self.agent.tcp.pose, self.obj.pose
+        grasp_q = self._grasp_in_el[self.task_id, 3:]
+        tcp_in_el_q = quaternion_multiply(quaternion_invert(el.q), tcp.q)
+        m = quaternion_to_matrix(quaternion_multiply(quaternion_invert(grasp_q), tcp_in_el_q))
+        psi = torch.atan2(m[:, 1, 0], m[:, 0, 0])
+        tcp_in_el = Pose.create_from_pq(self._grasp_in_el[self.task_id, :3], quaternion_multiply(grasp_q, _quat_z(torch.rad2deg(psi))))
+        el_in_tcp = tcp_in_el.inv().raw_pose
+        self.hold_pose_in_tcp = torch.where(grasp_now[:, None], el_in_tcp, self.hold_pose_in_tcp)
+        self.held |= grasp_now
+
+    def _step_action(self, action):
+        action = super()._step_action(action)
+        self._update_grasp()
+        return action
+
+    def _before_control_step(self):
+        self._substep = 0
+
+    def _after_simulation_step(self):
+        self._substep += 1
+
+    def _before_simulation_step(self):
+        if not self.gpu_sim_enabled and not bool(self.held.any()):
+            return
+        if self.gpu_sim_enabled and self._substep > 0:
+            self.scene._gpu_fetch_all()
+        dt = 1.0 / self.sim_freq
+        tcp = self.agent.tcp
+        tcp_pose, el = tcp.pose, self.obj
+        target = tcp_pose * Pose.create(self.hold_pose_in_tcp)
+        el_pose = el.pose
+        # feed-forward: the held point moves with the plate; feedback: close the error this substep;
+        # PhysX adds g*dt to the velocity before integrating the position
+        w_tcp = tcp.angular_velocity
+        v_ff = tcp.linear_velocity + torch.cross(w_tcp, target.p - tcp_pose.p, dim=-1)
+        v = v_ff + (target.p - el_pose.p) / dt
+        v[:, 2] -= self.sim_config.scene_config.gravity[2] * dt
+        v = _clip_norm(v, HOLD_MAX_SPEED)
+        q_err = quaternion_multiply(target.q, quaternion_invert(el_pose.q))
+        w = _clip_norm(w_tcp + quaternion_to_axis_angle(q_err) / dt, HOLD_MAX_ANGULAR_SPEED)
+        held = self.held[:, None]
+        el.set_linear_velocity(torch.where(held, v, el.linear_velocity))
+        el.set_angular_velocity(torch.where(held, w, el.angular_velocity))
+        if self.gpu_sim_enabled:
+            self.scene.px.gpu_apply_rigid_dynamic_data()
+
+    # ------------------------------------------------------------------------------------- #
+    # evaluation, observations, rewards
+    # ------------------------------------------------------------------------------------- #
+    def evaluate(self) -> dict:
+        el, goal = self.obj.pose, self.goal_pose
+        place_dist = torch.linalg.norm(el.p - goal.p, dim=-1)
+        # error rotation in the element frame, minimised over the element's symmetries
+        q_err = quaternion_multiply(quaternion_invert(goal.q), el.q)
+        syms = self._sym_quats[self.task_id]  # [n, 4, 4]
+        cand = quaternion_multiply(q_err[:, None].expand_as(syms), syms)
+        place_angle = _angle_deg(cand).min(dim=1).values
+        success = self.held & (place_dist <= self.tau_place) & (place_angle <= self.tau_angle_deg)
+        return dict(
+            is_grasped=self.held.clone(),
+            picked=self.picked.clone(),
+            first_grasp=self.first_grasp_now.clone(),
+            success=success,
+            place_dist=place_dist,
+            place_angle_deg=place_angle,
+            task_id=self.task_id.clone(),
+        )
+
+    def _get_obs_extra(self, info: dict):
+        goal = self.goal_pose
+        obs = dict(
+            is_grasped=info["is_grasped"].float()[:, None],
+            tcp_pose=self.agent.tcp_pose.raw_pose,
+            goal_pose=goal.raw_pose,
+            task=torch.nn.functional.one_hot(self.task_id, len(ELEMENT_KINDS)).float(),
+        )
+        if "state" in self.obs_mode:
+            el = self.obj.pose
+            grasp_point = (el * Pose.create(self._grasp_in_el[self.task_id])).p
+            obs.update(
+                obj_pose=el.raw_pose,
+                tcp_to_grasp_pos=grasp_point - self.agent.tcp_pose.p,
+                obj_to_goal_pos=goal.p - el.p,
+            )
+        return obs
+
+    def compute_sparse_reward(self, obs: Any, action: torch.Tensor, info: dict):
+        """Algorithm 1: -1/MaxStep every step; 1 on the episode's first grasp; 2 on placement."""
+        reward = torch.full((self.num_envs,), -1.0 / self.MAX_EPISODE_STEPS, device=self.device)
+        reward[info["first_grasp"]] = 1.0
+        reward[info["success"]] = 2.0
+        return reward
+
+    def compute_dense_reward(self, obs: Any, action: torch.Tensor, info: dict):
+        """Staged: reach and face the grasp surface (<= 1); held: 2 + carry (<= 1) + orient (<= 1);
+        placed: 5."""
+        tcp = self.agent.tcp_pose
+        el = self.obj.pose
+        grasp = el * Pose.create(self._grasp_in_el[self.task_id])
+        reach = 1 - torch.tanh(3 * torch.linalg.norm(grasp.p - tcp.p, dim=-1))
+        z = torch.tensor([0.0, 0.0, 1.0], device=self.device).expand_as(tcp.p)
+        face = (1 + (quaternion_apply(tcp.q, z) * quaternion_apply(grasp.q, z)).sum(-1)) / 2
+        approach = 0.5 * reach + 0.5 * reach * face
+        carry = 1 - torch.tanh(2 * info["place_dist"])
+        orient = 1 - info["place_angle_deg"] / 180
+        held = info["is_grasped"].float()
+        reward = (1 - held) * approach + held * (2 + carry + orient)
+        return torch.where(info["success"], torch.full_like(reward, self.DENSE_REWARD_MAX), reward)
+
+    def compute_normalized_dense_reward(self, obs: Any, action: torch.Tensor, info: dict):
+        return self.compute_dense_reward(obs, action, info) / self.DENSE_REWARD_MAX
+
+    # ------------------------------------------------------------------------------------- #
+    # state
+    # ------------------------------------------------------------------------------------- #
+    def get_state_dict(self):
+        state = super().get_state_dict()
+        state["task"] = dict(
+            task_id=self.task_id.clone(),
+            goal_slot=self.goal_slot.clone(),
+            held=self.held.clone(),
+            picked=self.picked.clone(),
+            hold_pose_in_tcp=self.hold_pose_in_tcp.clone(),
+            tolerances=self.tolerances.clone(),
+        )
+        return state
+
+    def set_state_dict(self, state: dict, env_idx: Optional[torch.Tensor] = None):
+        state = dict(state)
+        task = state.pop("task", None)
+        if task is not None:
+            idx = slice(None) if env_idx is None else env_idx
+            for key in ("task_id", "goal_slot", "held", "picked", "hold_pose_in_tcp", "tolerances"):
+                value = torch.as_tensor(task[key], device=self.device)
+                getattr(self, key)[idx] = value[idx] if env_idx is not None and len(value) == self.num_envs else value
+            if len(self.TASKS) > 1:
+                self._select_active_elements()
+        super().set_state_dict(state, env_idx)
+        if task is not None:
+            self._place_goal_markers(torch.arange(self.num_envs, device=self.device))

@@ -1,0 +1,296 @@
+"""Geometry of the construction site, its goal slots and its building elements.
+
+Pure geometry (numpy, manifold3d, trimesh): no simulator here. `scripts/build_assets.py` turns it
+into committed meshes; tasks read the committed manifest, never this module, so a change here shows
+up as a stale asset until the assets are rebuilt.
+
+World frame: z up, the arm's pedestal stands at the origin on the ground slab (top at z = 0).
+Sectors around the arm: the exterior wall with windows at +x, ceiling openings overhead at +y,
+floor recesses at -y, the staging table at -x.
+
+Every element has its own frame at its centre of mass: x along its length, y along its width
+(a window's height), z through its thickness. Its grasp surface is the +z face; the suction plate's
+tcp frame at grasp sits on that face with its z axis pointing into the element.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from dataclasses import dataclass, field
+
+import manifold3d
+import numpy as np
+import trimesh
+from transforms3d.euler import euler2mat
+from transforms3d.quaternions import mat2quat
+
+ELEMENT_KINDS = ("ceiling", "window", "flooring")
+"""Task types in the order of their `task_id` (0 ceiling, 1 window, 2 flooring)."""
+
+
+@dataclass(frozen=True)
+class ElementParams:
+    """One building element: a rigid box (a window is a frame with glass filling it)."""
+
+    size: tuple[float, float, float]
+    """length (x), width (y), thickness (z) in metres."""
+    mass: float = 15.0
+    """kg; the paper's elements all weigh 15 kg."""
+    material: str = "gypsum"
+    """visual material of the body (window: of the frame)."""
+    frame_width: float = 0.0
+    """window only: width of the frame profile around the glass, m."""
+
+
+@dataclass(frozen=True)
+class SiteParams:
+    """Generator parameters of the site (all lengths in metres, angles in degrees)."""
+
+    clearance: float = 0.02
+    """gap between an installed element and its opening, on every side."""
+    ceiling_panel: ElementParams = ElementParams((0.80, 0.60, 0.03), material="gypsum")
+    """acoustic fibre-cement ceiling panel."""
+    window: ElementParams = ElementParams((0.60, 0.80, 0.07), material="aluminium", frame_width=0.06)
+    """double-glazed window: 0.6 m wide, 0.8 m tall, aluminium frame."""
+    floor_panel: ElementParams = ElementParams((0.60, 0.60, 0.035), material="timber")
+    """raised-access floor panel with a timber finish."""
+
+    ground_extent: tuple[float, float, float, float] = (-2.3, 1.7, -2.3, 2.3)
+    """ground slab footprint (x_min, x_max, y_min, y_max); its top is at z = 0."""
+    ground_thickness: float = 0.2
+    story_height: float = 2.4
+    """clear height: the underside of the second-story slab."""
+    slab_thickness: float = 0.2
+    slab_extent: tuple[float, float, float, float] = (-2.0, 1.35, -2.0, 2.0)
+    wall_x: float = 1.15
+    """inner face of the exterior wall."""
+    wall_thickness: float = 0.2
+    wall_y_extent: tuple[float, float] = (-2.0, 2.0)
+    window_sill: float = 0.88
+    """height of the bottom of each window opening."""
+    window_ys: tuple[float, ...] = (-0.85, 0.0, 0.85)
+    """centres of the window openings along the wall."""
+    ceiling_slots: tuple[tuple[float, float, float], ...] = ((0.62, 0.42, 30.0), (0.0, 0.78, 90.0), (-0.62, 0.42, 150.0))
+    """(x, y, yaw) of each ceiling opening; yaw of the panel's length axis."""
+    floor_slots: tuple[tuple[float, float, float], ...] = ((0.75, -1.1, 0.0), (0.0, -1.1, 0.0), (-0.75, -1.1, 0.0))
+    """(x, y, yaw) of each floor recess."""
+
+    staging_center: tuple[float, float] = (-1.15, 0.0)
+    staging_size: tuple[float, float] = (1.1, 1.3)
+    """table top (x, y) size."""
+    staging_height: float = 0.5
+    """top surface of the staging table."""
+    staging_rim: tuple[float, float] = (0.05, 0.03)
+    """barrier rim around the table top: height, thickness."""
+
+    barrier_height: float = 0.8
+    barrier_thickness: float = 0.3
+    barrier_extent: tuple[float, float, float] = (-2.0, 1.15, 2.0)
+    """Jersey barriers along x = x_min and y = +-y_abs, up to the wall at x_max."""
+    column_xy: tuple[tuple[float, float], ...] = ((-1.55, 1.55), (-1.55, -1.55))
+    column_size: float = 0.3
+
+    def element(self, kind: str) -> ElementParams:
+        return {"ceiling": self.ceiling_panel, "window": self.window, "flooring": self.floor_panel}[kind]
+
+    def to_dict(self) -> dict:
+        return dataclasses.asdict(self)
+
+
+MATERIALS = {
+    # name: (base colour RGBA, metallic, roughness)
+    "concrete": ((0.62, 0.61, 0.58, 1.0), 0.0, 0.9),
+    "steel": ((0.38, 0.40, 0.43, 1.0), 0.8, 0.4),
+    "safety": ((0.95, 0.75, 0.10, 1.0), 0.3, 0.5),
+    "timber": ((0.66, 0.47, 0.28, 1.0), 0.0, 0.7),
+    "gypsum": ((0.92, 0.92, 0.88, 1.0), 0.0, 0.8),
+    "aluminium": ((0.80, 0.81, 0.83, 1.0), 0.9, 0.3),
+    "glass": ((0.55, 0.75, 0.85, 0.45), 0.1, 0.05),
+}
+
+
+# --------------------------------------------------------------------------------------------- #
+# poses
+# --------------------------------------------------------------------------------------------- #
+def pose7(p, rot: np.ndarray) -> list[float]:
+    """[x, y, z, qw, qx, qy, qz] from a position and a rotation matrix."""
+    q = mat2quat(rot)
+    q = q if q[0] >= 0 else -q
+    return [round(float(v), 9) + 0.0 for v in (*p, *q)]
+
+
+def pose_matrix(pose: list[float]) -> np.ndarray:
+    from transforms3d.quaternions import quat2mat
+
+    T = np.eye(4)
+    T[:3, :3] = quat2mat(pose[3:])
+    T[:3, 3] = pose[:3]
+    return T
+
+
+GRASP_IN_ELEMENT_ROT = euler2mat(np.pi, 0, 0)
+"""tcp orientation at grasp, in the element frame: tcp z = element -z (pointing into the +z face)."""
+
+
+def grasp_in_element(params: ElementParams) -> list[float]:
+    """The tcp pose at grasp, in the element's frame (centre of its +z face)."""
+    return pose7((0.0, 0.0, params.size[2] / 2), GRASP_IN_ELEMENT_ROT)
+
+
+def goal_poses(p: SiteParams) -> dict[str, list[list[float]]]:
+    """Installation pose of the element's own frame for every slot of every task type."""
+    t_c = p.ceiling_panel.size[2]
+    t_f = p.floor_panel.size[2]
+    goals = {
+        # flipped (grasp face down, towards the plate below), flush with the slab's underside
+        "ceiling": [
+            pose7((x, y, p.story_height + t_c / 2), euler2mat(0, 0, np.deg2rad(yaw)) @ euler2mat(np.pi, 0, 0))
+            for x, y, yaw in p.ceiling_slots
+        ],
+        # standing up, grasp face towards the room (element z = world -x, element y = world z),
+        # centred in the wall's thickness
+        "window": [
+            pose7(
+                (p.wall_x + p.wall_thickness / 2, y, p.window_sill + p.clearance + p.window.size[1] / 2),
+                np.array([[0.0, 0.0, -1.0], [-1.0, 0.0, 0.0], [0.0, 1.0, 0.0]]),
+            )
+            for y in p.window_ys
+        ],
+        # flat, top flush with the ground
+        "flooring": [
+            pose7((x, y, -t_f / 2), euler2mat(0, 0, np.deg2rad(yaw))) for x, y, yaw in p.floor_slots
+        ],
+    }
+    return goals
+
+
+# --------------------------------------------------------------------------------------------- #
+# solids
+# --------------------------------------------------------------------------------------------- #
+def _box(size, center=(0, 0, 0), yaw_deg: float = 0.0) -> manifold3d.Manifold:
+    b = manifold3d.Manifold.cube(list(map(float, size)), True)
+    if yaw_deg:
+        b = b.rotate([0.0, 0.0, float(yaw_deg)])
+    return b.translate(list(map(float, center)))
+
+
+def _box_between(lo, hi) -> manifold3d.Manifold:
+    lo, hi = np.asarray(lo, float), np.asarray(hi, float)
+    return _box(hi - lo, (lo + hi) / 2)
+
+
+@dataclass
+class StaticPart:
+    """One static body of the site: its solid, visual material and the volumes it must leave free."""
+
+    name: str
+    material: str
+    solid: manifold3d.Manifold
+    keep_free: list[tuple[np.ndarray, np.ndarray, float]] = field(default_factory=list)
+    """oriented boxes (center, half sizes, yaw deg) no collision hull may enter: openings, tray."""
+
+
+def static_parts(p: SiteParams) -> list[StaticPart]:
+    c = p.clearance
+    parts = []
+
+    # ground slab with floor recesses
+    x0, x1, y0, y1 = p.ground_extent
+    ground = _box_between((x0, y0, -p.ground_thickness), (x1, y1, 0.0))
+    fl = p.floor_panel.size
+    recess_free = []
+    for x, y, yaw in p.floor_slots:
+        size = (fl[0] + 2 * c, fl[1] + 2 * c, fl[2])
+        ground = ground - _box((size[0], size[1], 2 * fl[2]), (x, y, 0.0), yaw)
+        recess_free.append((np.array([x, y, -fl[2] / 2]), np.array(size) / 2, yaw))
+    parts.append(StaticPart("ground_slab", "concrete", ground, recess_free))
+
+    # second-story slab with ceiling openings
+    x0, x1, y0, y1 = p.slab_extent
+    z0 = p.story_height
+    slab = _box_between((x0, y0, z0), (x1, y1, z0 + p.slab_thickness))
+    cl = p.ceiling_panel.size
+    openings = []
+    for x, y, yaw in p.ceiling_slots:
+        size = (cl[0] + 2 * c, cl[1] + 2 * c, p.slab_thickness)
+        slab = slab - _box((size[0], size[1], 3 * size[2]), (x, y, z0 + size[2] / 2), yaw)
+        openings.append((np.array([x, y, z0 + size[2] / 2]), np.array(size) / 2, yaw))
+    parts.append(StaticPart("upper_slab", "concrete", slab, openings))
+
+    # exterior wall with window openings
+    wy0, wy1 = p.wall_y_extent
+    wall = _box_between((p.wall_x, wy0, 0.0), (p.wall_x + p.wall_thickness, wy1, p.story_height))
+    wd = p.window.size
+    windows = []
+    for y in p.window_ys:
+        # the opening spans the wall's thickness: x is its depth, y its width, z its height
+        size = (p.wall_thickness, wd[0] + 2 * c, wd[1] + 2 * c)
+        center = (p.wall_x + p.wall_thickness / 2, y, p.window_sill + size[2] / 2)
+        wall = wall - _box((3 * size[0], size[1], size[2]), center)
+        windows.append((np.array(center), np.array(size) / 2, 0.0))
+    parts.append(StaticPart("exterior_wall", "concrete", wall, windows))
+
+    # columns carrying the slab
+    cols = [_box((p.column_size, p.column_size, p.story_height), (x, y, p.story_height / 2)) for x, y in p.column_xy]
+    parts.append(StaticPart("columns", "concrete", manifold3d.Manifold.batch_boolean(cols, manifold3d.OpType.Add)))
+
+    # steel staging table with a rim that keeps elements on it
+    sx, sy = p.staging_center
+    lx, ly = p.staging_size
+    h = p.staging_height
+    rim_h, rim_t = p.staging_rim
+    top_t, leg = 0.04, 0.06
+    pieces = [_box((lx, ly, top_t), (sx, sy, h - top_t / 2))]
+    for dx in (-1, 1):
+        for dy in (-1, 1):
+            pieces.append(_box((leg, leg, h - top_t), (sx + dx * (lx / 2 - leg), sy + dy * (ly / 2 - leg), (h - top_t) / 2)))
+    for dx in (-1, 1):
+        pieces.append(_box((rim_t, ly, rim_h), (sx + dx * (lx - rim_t) / 2, sy, h + rim_h / 2)))
+    for dy in (-1, 1):
+        pieces.append(_box((lx, rim_t, rim_h), (sx, sy + dy * (ly - rim_t) / 2, h + rim_h / 2)))
+    table = manifold3d.Manifold.batch_boolean(pieces, manifold3d.OpType.Add)
+    tray = (np.array([sx, sy, h + rim_h]), np.array([lx / 2 - rim_t, ly / 2 - rim_t, rim_h]), 0.0)
+    parts.append(StaticPart("staging_table", "steel", table, [tray]))
+
+    # precast Jersey barriers around the work cell (safety yellow)
+    bx0, bx1, by = p.barrier_extent
+    t = p.barrier_thickness
+    bh = p.barrier_height
+    barriers = [
+        _box_between((bx0 - t, -by - t, 0.0), (bx0, by + t, bh)),
+        _box_between((bx0, by, 0.0), (bx1, by + t, bh)),
+        _box_between((bx0, -by - t, 0.0), (bx1, -by, bh)),
+    ]
+    parts.append(StaticPart("barriers", "safety", manifold3d.Manifold.batch_boolean(barriers, manifold3d.OpType.Add)))
+    return parts
+
+
+def to_trimesh(solid: manifold3d.Manifold) -> trimesh.Trimesh:
+    m = solid.to_mesh()
+    return trimesh.Trimesh(np.asarray(m.vert_properties)[:, :3], np.asarray(m.tri_verts), process=True)
+
+
+def box_planes(center, half, yaw_deg) -> list[tuple[np.ndarray, float]]:
+    """The six face planes (normal, offset) of an oriented box, normals pointing out."""
+    R = euler2mat(0, 0, np.deg2rad(yaw_deg))
+    planes = []
+    for i in range(3):
+        for s in (-1.0, 1.0):
+            n = s * R[:, i]
+            planes.append((n, float(n @ center + half[i])))
+    return planes
+
+
+def hull_intrusion(vertices: np.ndarray, center, half, yaw_deg) -> float:
+    """How deep (m) a convex hull enters an oriented box: 0 if they do not overlap.
+
+    Uses the separating-axis test on the box's face axes and the hull's extent along them; a hull
+    inside the box's slab on all three axes overlaps it by the smallest of the three overlaps.
+    (Conservative for the thin opening volumes used here: it never reports 0 for an overlap.)"""
+    R = euler2mat(0, 0, np.deg2rad(yaw_deg))
+    local = (np.asarray(vertices) - center) @ R
+    overlaps = []
+    for i in range(3):
+        lo, hi = local[:, i].min(), local[:, i].max()
+        overlaps.append(min(hi, half[i]) - max(lo, -half[i]))
+    return max(0.0, float(min(overlaps)))
