@@ -38,8 +38,10 @@ class ArmParams:
     masses: tuple[float, ...] = (45.0, 25.0, 12.0, 8.0, 4.0, 1.0)
     """turret, upper arm, forearm, forearm roll, wrist, flange (kg)."""
     plate_mass: float = 6.0
-    lower: tuple[float, ...] = (-3.0, -1.4, -2.7, -3.14, -2.2, -3.14)
-    upper: tuple[float, ...] = (3.0, 1.9, 2.4, 3.14, 2.2, 3.14)
+    lower: tuple[float, ...] = (-3.2289, -1.4, -2.7, -3.14, -2.2, -6.1)
+    upper: tuple[float, ...] = (3.2289, 1.9, 2.4, 3.14, 2.2, 6.1)
+    # joint1 turns +-185 degrees like common arms of this class, so the staging table (at 180) is
+    # reachable from both sides
     velocity: tuple[float, ...] = (2.0, 2.0, 2.0, 3.0, 3.0, 3.5)
     """rad/s, in the range of industrial arms of this payload class."""
     color: tuple[float, float, float, float] = (0.93, 0.45, 0.08, 1.0)

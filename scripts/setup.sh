@@ -55,10 +55,13 @@ if [ -x "$VENV/bin/python" ] && [ -f "$STAMP" ] && [ "$(cat "$STAMP")" = "$HASH"
   exit 0
 fi
 [ -x "$VENV/bin/python" ] || { log "creating $VENV with $PY"; "$PY" -m venv "$VENV"; }
-PIP=("$VENV/bin/python" -m pip install --disable-pip-version-check -q)
+pip_install() {
+  # the machine's pip config lists local indexes that may be absent; their warnings are noise
+  "$VENV/bin/python" -m pip install --disable-pip-version-check -q "$@" 2> >(grep -v 'is ignored: it is neither' >&2)
+}
 log "installing torch==2.13.0 (CPU) before anything that depends on torch"
-"${PIP[@]}" "torch==2.13.0"
+pip_install "torch==2.13.0"
 log "installing ms_construction (editable, with tests)"
-"${PIP[@]}" -e ".[test]"
+pip_install -e ".[test]"
 echo "$HASH" > "$STAMP"
 log "done: activate with 'source .venv/bin/activate'"
