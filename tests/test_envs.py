@@ -1,0 +1,319 @@
+"""The four construction tasks: API, determinism, grasp, rewards, placement, collisions, state."""
+
+import math
+import subprocess
+import sys
+
+import gymnasium as gym
+import numpy as np
+import pytest
+import sapien
+import torch
+from mani_skill.utils.wrappers import CPUGymWrapper, RecordEpisode
+
+from ms_construction.curriculum import STAGES
+from ms_construction.envs import ENV_IDS
+from ms_construction.site_geometry import ELEMENT_KINDS
+
+from conftest import JointMover, make_env, pick_and_place, quat_z, to_sapien
+
+OBS_MODES = ("state", "state_dict", "rgb", "depth", "rgbd", "pointcloud", "none")
+REWARD_MODES = ("sparse", "dense", "normalized_dense", "none")
+CONTROL_MODES = ("pd_joint_delta_pos", "pd_joint_pos", "pd_ee_delta_pos", "pd_ee_delta_pose")
+PENALTY = float(np.float32(-1.0 / 250))  # rewards are float32 tensors
+
+
+@pytest.mark.parametrize("env_id", ENV_IDS)
+@pytest.mark.parametrize("obs_mode", OBS_MODES)
+def test_every_obs_reward_and_control_mode_steps(env_id, obs_mode):
+    """For each env and obs mode: a step in every control mode, with every reward mode's reward."""
+    env = gym.make(env_id, obs_mode=obs_mode, reward_mode="dense", render_mode="rgb_array")
+    env.reset(seed=0)
+    u = env.unwrapped
+    for control_mode in CONTROL_MODES:
+        u.agent.set_control_mode(control_mode)
+        u.agent.controller.reset()
+        action = torch.as_tensor(u.agent.controller.single_action_space.sample() * 0.5)[None]
+        obs, reward, term, trunc, info = env.step({"control_mode": control_mode, "action": action})
+        for reward_mode in REWARD_MODES:
+            u._reward_mode = reward_mode
+            r = u.get_reward(obs=obs, action=action, info=info)
+            assert r.shape == (1,) and torch.isfinite(r).all(), (control_mode, reward_mode)
+            if reward_mode == "normalized_dense":
+                assert 0 <= float(r) <= 1
+        u._reward_mode = "dense"
+        if obs_mode == "state":
+            assert obs.shape == (1, 43) and torch.isfinite(obs).all()
+        for key in ("is_grasped", "picked", "success", "place_dist", "place_angle_deg", "task_id"):
+            assert info[key].shape == (1,)
+    env.close()
+
+
+def test_gym_make_with_module_prefix_registers_without_import():
+    code = "import gymnasium as gym; e = gym.make('ms_construction:Flooring-v1'); e.reset(seed=0); print(e.unwrapped.task_id.item())"
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=300)
+    assert out.returncode == 0, out.stderr[-2000:]
+    assert out.stdout.strip().splitlines()[-1] == "2"
+
+
+@pytest.mark.parametrize("env_id", ENV_IDS)
+def test_seeded_reset_reproduces_and_seeds_differ(env_id):
+    env = make_env(env_id)
+    a, _ = env.reset(seed=3)
+    goal_a = env.unwrapped.goal_pose.raw_pose.clone()
+    b, _ = env.reset(seed=3)
+    c, _ = env.reset(seed=4)
+    env.close()
+    assert torch.equal(a, b)
+    assert torch.equal(goal_a, env.unwrapped.goal_pose.raw_pose) or not torch.equal(a, c)
+    assert not torch.equal(a, c)
+
+
+def test_nan_action_raises_value_error():
+    env = make_env("Flooring-v1", control_mode="pd_joint_delta_pos")
+    env.reset(seed=0)
+    with pytest.raises(ValueError, match="NaN"):
+        env.step(torch.full((1, 6), float("nan")))
+    env.close()
+
+
+@pytest.mark.parametrize(
+    "kwargs, match",
+    [
+        (dict(curriculum_stage="cp9"), "cp9"),
+        (dict(tolerances=dict(place=-0.1)), "place"),
+        (dict(tolerances=dict(angle_deg=float("nan"))), "angle_deg"),
+        (dict(tolerances=dict(reach=0.1)), "reach"),
+        (dict(tolerances=dict(angle_deg=270)), "angle_deg"),
+    ],
+)
+def test_invalid_tolerances_raise_value_error_naming_the_value(kwargs, match):
+    with pytest.raises(ValueError, match=match):
+        make_env("Flooring-v1", **kwargs)
+
+
+def test_tasks_kwarg_is_validated_and_restricts_the_general_task():
+    with pytest.raises(ValueError, match="bricks"):
+        make_env("ConstructionPickPlace-v1", tasks=("ceiling", "bricks"))
+    with pytest.raises(ValueError, match="general task only"):
+        make_env("Flooring-v1", tasks=("flooring",))
+    env = make_env("ConstructionPickPlace-v1", tasks=("window",))
+    seen = {int(env.reset(seed=s)[1]["task_id"][0]) for s in range(6)}
+    env.close()
+    assert seen == {1}
+
+
+def test_general_task_yields_all_three_task_types():
+    env = make_env("ConstructionPickPlace-v1")
+    seen = set()
+    for seed in range(40):
+        _, info = env.reset(seed=seed)
+        tid = int(info["task_id"][0])
+        seen.add(tid)
+        # the episode's element is on the staging table; the handles point at it
+        assert env.unwrapped.obj._objs[0].name.endswith(f"{ELEMENT_KINDS[tid]}_element")
+        assert float(env.unwrapped.obj.pose.p[0, 2]) > 0.4
+        if len(seen) == 3:
+            break
+    env.close()
+    assert seen == {0, 1, 2}
+
+
+def test_curriculum_stage_sets_table_one_and_changes_nothing_else():
+    env = make_env("ConstructionPickPlace-v1", curriculum_stage="cp1")
+    u = env.unwrapped
+    env.reset(seed=0)
+    for stage, tol in STAGES.items():
+        before = u.get_state_dict()
+        u.set_curriculum_stage(stage)
+        after = u.get_state_dict()
+        np.testing.assert_allclose(u.tolerances[0].numpy(), [tol["pick"], tol["place"], tol["angle_deg"]], rtol=1e-6)
+        for key in after["actors"]:
+            assert torch.equal(before["actors"][key], after["actors"][key])
+        assert torch.equal(before["articulations"]["construction_arm"], after["articulations"]["construction_arm"])
+    u.set_tolerances(place=0.2)
+    assert math.isclose(float(u.tau_place[0]), 0.2, rel_tol=1e-6) and math.isclose(float(u.tau_angle_deg[0]), 20.0)
+    with pytest.raises(ValueError, match="cp0"):
+        u.set_curriculum_stage("cp0")
+    with pytest.raises(ValueError, match="pick"):
+        u.set_tolerances(pick=-1)
+    env.close()
+
+
+@pytest.mark.parametrize("stage", ["cp1", "cp4"])
+def test_grasp_triggers_just_inside_tau_pick_and_not_just_outside(stage):
+    tau = STAGES[stage]["pick"]
+    for distance, expect in ((tau - 0.015, True), (tau + 0.015, False)):
+        env = make_env("Flooring-v1", curriculum_stage=stage)
+        env.reset(seed=0)
+        m = JointMover(env)
+        q = m.solve(m.grasp_pose_above(distance))
+        m.u.agent.robot.set_qpos(torch.tensor(q[None], dtype=torch.float32))
+        m.u.agent.controller.reset()
+        m.q = q
+        assert not bool(m.u.held[0])
+        m.move_to(q, 1)  # the grasp test runs after the step; a pull would start only then
+        dist = float(m.u.grasp_ray()[0][0])
+        assert abs(dist - distance) < 0.005, "the arm did not hold the test pose"
+        assert bool(m.u.held[0]) is expect, f"{stage}: plate {dist:.3f} m from the face, tau_pick {tau}"
+        env.close()
+
+
+def test_sparse_reward_is_algorithm_one_step_by_step():
+    env = make_env("Flooring-v1", reward_mode="sparse")
+    m = pick_and_place(env, seed=1)
+    r = np.array(m.rewards)
+    grasp_steps = np.flatnonzero(r == 1.0)
+    assert len(grasp_steps) == 1, "+1 exactly once, on the first grasp"
+    assert m.infos[grasp_steps[0]]["first_grasp"] and not m.infos[grasp_steps[0] - 1]["is_grasped"]
+    assert r[-1] == 2.0 and m.terminated[-1] and m.infos[-1]["success"]
+    assert not any(m.terminated[:-1])
+    others = np.delete(r, [grasp_steps[0], len(r) - 1])
+    np.testing.assert_array_equal(others, np.full_like(others, PENALTY))
+    # dropping the element and taking it again pays nothing more
+    state = m.u.get_state_dict()
+    state["task"]["held"][:] = False
+    m.u.set_state_dict(state)
+    _, reward, _, _, info = env.step(torch.tensor(m.q[None], dtype=torch.float32))
+    assert bool(info["is_grasped"][0]) and float(reward[0]) in (PENALTY, 2.0)
+    env.close()
+
+
+@pytest.mark.parametrize("env_id", ["CeilingInstallation-v1", "WindowInstallation-v1", "Flooring-v1"])
+def test_placement_succeeds_just_inside_and_fails_just_outside_the_tolerances(env_id):
+    env = make_env(env_id)
+    env.reset(seed=0)
+    u = env.unwrapped
+    state = u.get_state_dict()
+    state["task"]["held"][:] = True
+    u.set_state_dict(state)
+    goal = to_sapien(u.goal_pose.raw_pose)
+    tau_place, tau_angle = float(u.tau_place[0]), float(u.tau_angle_deg[0])
+    axis_x = sapien.Pose(q=[math.cos(math.pi / 4), math.sin(math.pi / 4), 0, 0])  # an offset direction
+
+    def placed(offset: float, angle: float) -> bool:
+        pose = goal * sapien.Pose([offset, 0, 0]) * sapien.Pose(q=quat_z(angle))
+        u.obj.set_pose(pose)
+        info = u.evaluate()
+        assert math.isclose(float(info["place_dist"][0]), offset, abs_tol=2e-4)
+        assert math.isclose(float(info["place_angle_deg"][0]), abs(angle), abs_tol=0.05)
+        return bool(info["success"][0])
+
+    assert placed(0.0, 0.0)
+    assert placed(tau_place - 0.002, 0.0) and not placed(tau_place + 0.002, 0.0)
+    assert placed(0.0, tau_angle - 0.2) and not placed(0.0, tau_angle + 0.2)
+    assert placed(0.0, -(tau_angle - 0.2)) and not placed(0.0, -(tau_angle + 0.2))
+    del axis_x
+    # not held: never placed
+    state = u.get_state_dict()
+    state["task"]["held"][:] = False
+    u.set_state_dict(state)
+    u.obj.set_pose(goal)
+    assert not bool(u.evaluate()["success"][0])
+    env.close()
+
+
+def test_symmetric_placements_count_as_placed():
+    env = make_env("Flooring-v1")
+    env.reset(seed=0)
+    u = env.unwrapped
+    goal = to_sapien(u.goal_pose.raw_pose)
+    for angle, expect in ((90, 0.0), (180, 0.0), (45, 45.0)):
+        u.obj.set_pose(goal * sapien.Pose(q=quat_z(angle)))
+        assert math.isclose(float(u.evaluate()["place_angle_deg"][0]), expect, abs_tol=0.05)
+    env.close()
+
+
+def test_held_element_driven_into_the_slab_does_not_pass_through():
+    """Hold a ceiling panel under solid slab (no opening) and drive the plate 0.3 m past the slab's
+    underside: the panel stops at the slab."""
+    env = make_env("CeilingInstallation-v1")
+    env.reset(seed=0)
+    m = JointMover(env)
+    u = m.u
+    underside = u.site.manifest["site_params"]["story_height"]
+    # plate facing up at a solid part of the slab, the panel 0.15 m below the underside
+    below = sapien.Pose([0.0, -0.6, underside - 0.2], [1, 0, 0, 0])  # tcp z up: identity rotation
+    q = m.solve(below)
+    u.agent.robot.set_qpos(torch.tensor(q[None], dtype=torch.float32))
+    u.agent.controller.reset()
+    m.q = q
+    hold = sapien.Pose([0, 0, u.site.manifest["elements"]["ceiling"]["size"][2] / 2], [0, 1, 0, 0])
+    state = u.get_state_dict()
+    state["task"]["held"][:] = True
+    state["task"]["hold_pose_in_tcp"][:] = torch.tensor([[*hold.p, *hold.q]])
+    u.set_state_dict(state)
+    u.obj.set_pose(below * hold)
+    m.move_to(q, 5)
+    assert bool(u.held[0])
+    top_before = float(u.obj.pose.p[0, 2]) + 0.015
+    assert top_before < underside - 0.03
+    q_up = m.ik.solve(sapien.Pose([0.0, -0.6, underside + 0.1], [1, 0, 0, 0]), seeds=[q], n_random=0)
+    assert q_up is not None
+    tops = []
+    for _ in range(3):
+        m.move_to(q_up, 10, stop_on_done=False)
+        tops.append(float(u.obj.pose.p[0, 2]) + 0.015)
+    assert max(tops) < underside + 0.01, f"panel top reached {max(tops):.3f} m, slab underside {underside} m"
+    assert max(tops) > underside - 0.05, "the panel never reached the slab"
+    env.close()
+
+
+@pytest.mark.parametrize("env_id", ["ConstructionPickPlace-v1", "Flooring-v1"])
+def test_state_round_trip_continues_identically(env_id):
+    env = make_env(env_id, control_mode="pd_joint_delta_pos")
+    env.reset(seed=5)
+    u = env.unwrapped
+    gen = torch.Generator().manual_seed(0)
+    actions = [torch.rand(1, 6, generator=gen) * 2 - 1 for _ in range(12)]
+    for a in actions[:4]:
+        env.step(a)
+    # a held element is part of the task state
+    state = u.get_state_dict()
+    state["task"]["held"][:] = True
+    u.set_state_dict(state)
+    saved = u.get_state_dict()
+
+    def rollout():
+        out = []
+        for a in actions[4:]:
+            obs, r, *_ , info = env.step(a)
+            out.append((obs.clone(), r.clone(), info["is_grasped"].clone()))
+        return out
+
+    first = rollout()
+    env.reset(seed=9)  # somewhere else entirely
+    u.set_state_dict(saved)
+    second = rollout()
+    for (o1, r1, g1), (o2, r2, g2) in zip(first, second):
+        torch.testing.assert_close(o1, o2, atol=1e-5, rtol=0)
+        assert torch.equal(r1, r2) and torch.equal(g1, g2)
+    env.close()
+
+
+def test_cpu_gym_wrapper_returns_numpy_floats_and_bools():
+    env = CPUGymWrapper(make_env("ConstructionPickPlace-v1", control_mode="pd_joint_delta_pos", reward_mode="dense"))
+    obs, info = env.reset(seed=0)
+    assert isinstance(obs, np.ndarray) and obs.shape == (43,)
+    obs, reward, term, trunc, info = env.step(env.action_space.sample())
+    assert isinstance(obs, np.ndarray) and obs.dtype == np.float32
+    assert isinstance(reward, float) and isinstance(term, bool) and isinstance(trunc, bool)
+    assert isinstance(info["success"], bool) and isinstance(info["place_dist"], float)
+    env.close()
+
+
+@pytest.mark.parametrize("env_id", ENV_IDS)
+def test_record_episode_video_is_not_flat(env_id, tmp_path):
+    import imageio.v3 as iio
+
+    env = RecordEpisode(make_env(env_id, render_mode="rgb_array", control_mode="pd_joint_delta_pos"),
+                        str(tmp_path), save_trajectory=False, save_on_reset=False)
+    env.reset(seed=0)
+    for _ in range(8):
+        env.step(torch.as_tensor(env.action_space.sample()))
+    env.flush_video(name="v")
+    env.close()
+    frames = iio.imread(tmp_path / "v.mp4").astype(np.float32)
+    assert frames.shape[0] >= 8 and frames.shape[1:] == (512, 512, 3)
+    assert frames.std() > 20
+    assert np.abs(frames[-1] - frames[0]).mean() > 0.1, "nothing moved"
