@@ -26,19 +26,12 @@ import torch
 from mani_skill.envs.sapien_env import BaseEnv
 from mani_skill.sensors.camera import CameraConfig
 from mani_skill.utils import sapien_utils
-from mani_skill.utils.geometry.rotation_conversions import (
-    axis_angle_to_quaternion,
-    quaternion_apply,
-    quaternion_invert,
-    quaternion_multiply,
-    quaternion_to_axis_angle,
-    quaternion_to_matrix,
-)
 from mani_skill.utils.structs import Actor, Pose
 from mani_skill.utils.structs.types import GPUMemoryConfig, SimConfig
 
 from ms_construction.agents.construction_arm import ConstructionArm
-from ms_construction.curriculum import STAGE_NAMES, TOLERANCE_KEYS, resolve_tolerances, stage_tolerances, validate_tolerances
+from ms_construction.curriculum import TOLERANCE_KEYS, resolve_tolerances, stage_tolerances, validate_tolerances
+from ms_construction.rotations import pose_inv, pose_mul, qangle_deg, qaxis, qconj, qmat, qmul, quat_to_rotvec, quat_z
 from ms_construction.site import ConstructionSiteSceneBuilder, build_element
 from ms_construction.site_geometry import ELEMENT_KINDS
 
@@ -62,16 +55,6 @@ SYMMETRIES_DEG = {
     "window": (0.0,),  # head up and inside face in: no symmetry
     "flooring": (0.0, 90.0, 180.0, 270.0),  # a square, finish up
 }
-
-
-def _quat_z(deg: torch.Tensor) -> torch.Tensor:
-    half = torch.deg2rad(deg) / 2
-    return torch.stack([torch.cos(half), torch.zeros_like(half), torch.zeros_like(half), torch.sin(half)], -1)
-
-
-def _angle_deg(q: torch.Tensor) -> torch.Tensor:
-    """Rotation angle of unit quaternions, degrees in [0, 180]."""
-    return torch.rad2deg(2 * torch.acos(q[..., 0].abs().clamp(max=1.0)))
 
 
 def _clip_norm(v: torch.Tensor, max_norm: float) -> torch.Tensor:
@@ -135,8 +118,10 @@ class ConstructionTaskEnv(BaseEnv):
 
     @property
     def _default_human_render_camera_configs(self):
-        pose = sapien_utils.look_at(eye=[0.5, -3.3, 1.95], target=[-0.1, 0.2, 1.05])
-        return CameraConfig("render_camera", pose, 512, 512, 1.25, 0.01, 30)
+        # from a corner of the site under the slab: staging table, arm, wall with windows, floor
+        # recesses and (above) the ceiling openings
+        pose = sapien_utils.look_at(eye=[-1.1, -1.9, 2.25], target=[0.3, 0.3, 0.95])
+        return CameraConfig("render_camera", pose, 512, 512, 1.45, 0.01, 30)
 
     def _load_agent(self, options: dict):
         super()._load_agent(options, sapien.Pose())
@@ -165,7 +150,7 @@ class ConstructionTaskEnv(BaseEnv):
         self._grasp_in_el = torch.tensor([m["elements"][k]["grasp_pose"] for k in kinds], **f32)
         self._el_size = torch.tensor([m["elements"][k]["size"] for k in kinds], **f32)
         syms = [list(SYMMETRIES_DEG[k]) + [0.0] * (4 - len(SYMMETRIES_DEG[k])) for k in kinds]
-        self._sym_quats = _quat_z(torch.tensor(syms, **f32))  # [3, 4, 4]; padding repeats identity
+        self._sym_quats = quat_z(torch.tensor(syms, **f32))  # [3, 4, 4]; padding repeats identity
         self._start_yaw = torch.tensor([START_YAW_DEG[k] for k in kinds], **f32)
         self._task_choices = torch.tensor([kinds.index(k) for k in self.TASKS], device=dev)
         st = m["staging"]
@@ -181,6 +166,9 @@ class ConstructionTaskEnv(BaseEnv):
         self.hold_pose_in_tcp[:, 3] = 1
         self.tolerances = torch.tensor([[self._tol_init[k] for k in TOLERANCE_KEYS]], **f32).repeat(n, 1)
         self.obj = self.elements[self.TASKS[0]]
+        self._task_onehot = torch.eye(len(kinds), **f32)
+        self._gravity = torch.tensor(self.sim_config.scene_config.gravity, **f32)
+        self._cos_max_incidence = float(np.cos(np.deg2rad(MAX_GRASP_INCIDENCE_DEG)))
 
     def _build_goal_marker(self, kind: str, manifest: dict) -> Actor:
         """A translucent green ghost of the element at its goal (human render only)."""
@@ -209,7 +197,7 @@ class ConstructionTaskEnv(BaseEnv):
             xyz[:, :2] += (torch.rand(b, 2) * 2 - 1) * START_XY_NOISE
             xyz[:, 2] += self._el_size[task, 2] / 2 + 1e-3
             yaw = self._start_yaw[task] + (torch.rand(b) * 2 - 1) * START_YAW_NOISE_DEG
-            start = torch.cat([xyz, _quat_z(yaw)], -1)
+            start = torch.cat([xyz, quat_z(yaw)], -1)
             zeros = torch.zeros(b, 3)
             for kind, el in self.elements.items():
                 k = ELEMENT_KINDS.index(kind)
@@ -285,40 +273,42 @@ class ConstructionTaskEnv(BaseEnv):
         """Where the element's own frame must end up."""
         return Pose.create(self._goal_table[self.task_id, self.goal_slot])
 
-    def grasp_ray(self) -> tuple[torch.Tensor, torch.Tensor]:
+    def _tcp_in_element(self) -> torch.Tensor:
+        """Raw pose [n, 7] of the plate's tcp in the element's frame."""
+        return pose_mul(pose_inv(self.obj.pose.raw_pose), self.agent.tcp.pose.raw_pose)
+
+    def grasp_ray(self, tcp_in_el: Optional[torch.Tensor] = None) -> tuple[torch.Tensor, torch.Tensor]:
         """(distance along the plate's ray to the grasp face, whether the ray hits the face).
 
         Distance is +inf where the ray misses the face or meets it from behind or too obliquely."""
-        tcp, el = self.agent.tcp.pose, self.obj.pose
-        q_inv = quaternion_invert(el.q)
-        p = quaternion_apply(q_inv, tcp.p - el.p)  # plate centre in the element frame
-        d = quaternion_apply(q_inv, quaternion_apply(tcp.q, torch.tensor([0.0, 0.0, 1.0], device=self.device).expand_as(p)))
+        if tcp_in_el is None:
+            tcp_in_el = self._tcp_in_element()
+        p = tcp_in_el[:, :3]
+        d = qaxis(tcp_in_el[:, 3:], 2)  # the ray: the tcp's z axis, in the element frame
         size = self._el_size[self.task_id]
         face_z = size[:, 2] / 2
-        facing = d[:, 2] <= -np.cos(np.deg2rad(MAX_GRASP_INCIDENCE_DEG))
+        facing = d[:, 2] <= -self._cos_max_incidence
         above = p[:, 2] >= face_z - 1e-4
         dist = (p[:, 2] - face_z) / (-d[:, 2]).clamp(min=1e-6)
         hit = p[:, :2] + dist[:, None] * d[:, :2]
-        inside = (hit.abs() <= size[:, :2] / 2).all(-1)
-        ok = facing & above & inside
+        ok = facing & above & (hit.abs() <= size[:, :2] / 2).all(-1)
         return torch.where(ok, dist, torch.full_like(dist, float("inf"))), ok
 
     def _update_grasp(self) -> None:
-        dist, _ = self.grasp_ray()
+        tcp_in_el = self._tcp_in_element()
+        dist, _ = self.grasp_ray(tcp_in_el)
         grasp_now = ~self.held & (dist <= self.tau_pick)
         self.first_grasp_now = grasp_now & ~self.picked
         self.picked |= grasp_now
-        # held pose: the grasp face against the plate, keeping the element's current rotation
-        # about the plate's axis (the pull does not spin it)
-        tcp, el = self.agent.tcp.pose, self.obj.pose
-        grasp_q = self._grasp_in_el[self.task_id, 3:]
-        tcp_in_el_q = quaternion_multiply(quaternion_invert(el.q), tcp.q)
-        m = quaternion_to_matrix(quaternion_multiply(quaternion_invert(grasp_q), tcp_in_el_q))
-        psi = torch.atan2(m[:, 1, 0], m[:, 0, 0])
-        tcp_in_el = Pose.create_from_pq(self._grasp_in_el[self.task_id, :3], quaternion_multiply(grasp_q, _quat_z(torch.rad2deg(psi))))
-        el_in_tcp = tcp_in_el.inv().raw_pose
-        self.hold_pose_in_tcp = torch.where(grasp_now[:, None], el_in_tcp, self.hold_pose_in_tcp)
-        self.held |= grasp_now
+        if self.gpu_sim_enabled or bool(grasp_now.any()):
+            # held pose: the grasp face against the plate, keeping the element's current rotation
+            # about the plate's axis (the pull does not spin it)
+            grasp = self._grasp_in_el[self.task_id]
+            m = qmat(qmul(qconj(grasp[:, 3:]), tcp_in_el[:, 3:]))
+            psi = torch.rad2deg(torch.atan2(m[:, 1, 0], m[:, 0, 0]))
+            held_tcp_in_el = torch.cat([grasp[:, :3], qmul(grasp[:, 3:], quat_z(psi))], -1)
+            self.hold_pose_in_tcp = torch.where(grasp_now[:, None], pose_inv(held_tcp_in_el), self.hold_pose_in_tcp)
+            self.held |= grasp_now
 
     def _step_action(self, action):
         action = super()._step_action(action)
@@ -337,22 +327,21 @@ class ConstructionTaskEnv(BaseEnv):
         if self.gpu_sim_enabled and self._substep > 0:
             self.scene._gpu_fetch_all()
         dt = 1.0 / self.sim_freq
-        tcp = self.agent.tcp
-        tcp_pose, el = tcp.pose, self.obj
-        target = tcp_pose * Pose.create(self.hold_pose_in_tcp)
-        el_pose = el.pose
+        tcp, el = self.agent.tcp, self.obj
+        tcp_pose, el_pose = tcp.pose.raw_pose, el.pose.raw_pose
+        target = pose_mul(tcp_pose, self.hold_pose_in_tcp)
         # feed-forward: the held point moves with the plate; feedback: close the error this substep;
         # PhysX adds g*dt to the velocity before integrating the position
         w_tcp = tcp.angular_velocity
-        v_ff = tcp.linear_velocity + torch.cross(w_tcp, target.p - tcp_pose.p, dim=-1)
-        v = v_ff + (target.p - el_pose.p) / dt
-        v[:, 2] -= self.sim_config.scene_config.gravity[2] * dt
-        v = _clip_norm(v, HOLD_MAX_SPEED)
-        q_err = quaternion_multiply(target.q, quaternion_invert(el_pose.q))
-        w = _clip_norm(w_tcp + quaternion_to_axis_angle(q_err) / dt, HOLD_MAX_ANGULAR_SPEED)
-        held = self.held[:, None]
-        el.set_linear_velocity(torch.where(held, v, el.linear_velocity))
-        el.set_angular_velocity(torch.where(held, w, el.angular_velocity))
+        v = tcp.linear_velocity + torch.cross(w_tcp, target[:, :3] - tcp_pose[:, :3], dim=-1)
+        v = v + (target[:, :3] - el_pose[:, :3]) / dt - self._gravity * dt
+        w = w_tcp + quat_to_rotvec(qmul(target[:, 3:], qconj(el_pose[:, 3:]))) / dt
+        v, w = _clip_norm(v, HOLD_MAX_SPEED), _clip_norm(w, HOLD_MAX_ANGULAR_SPEED)
+        if self.gpu_sim_enabled:  # (on CPU the one env is held, or we returned above)
+            held = self.held[:, None]
+            v, w = torch.where(held, v, el.linear_velocity), torch.where(held, w, el.angular_velocity)
+        el.set_linear_velocity(v)
+        el.set_angular_velocity(w)
         if self.gpu_sim_enabled:
             self.scene.px.gpu_apply_rigid_dynamic_data()
 
@@ -360,13 +349,12 @@ class ConstructionTaskEnv(BaseEnv):
     # evaluation, observations, rewards
     # ------------------------------------------------------------------------------------- #
     def evaluate(self) -> dict:
-        el, goal = self.obj.pose, self.goal_pose
-        place_dist = torch.linalg.norm(el.p - goal.p, dim=-1)
+        el = self.obj.pose.raw_pose
+        goal = self._goal_table[self.task_id, self.goal_slot]
+        place_dist = torch.linalg.norm(el[:, :3] - goal[:, :3], dim=-1)
         # error rotation in the element frame, minimised over the element's symmetries
-        q_err = quaternion_multiply(quaternion_invert(goal.q), el.q)
-        syms = self._sym_quats[self.task_id]  # [n, 4, 4]
-        cand = quaternion_multiply(q_err[:, None].expand_as(syms), syms)
-        place_angle = _angle_deg(cand).min(dim=1).values
+        q_err = qmul(qconj(goal[:, 3:]), el[:, 3:])
+        place_angle = qangle_deg(qmul(q_err[:, None], self._sym_quats[self.task_id])).min(dim=1).values
         success = self.held & (place_dist <= self.tau_place) & (place_angle <= self.tau_angle_deg)
         return dict(
             is_grasped=self.held.clone(),
@@ -378,21 +366,25 @@ class ConstructionTaskEnv(BaseEnv):
             task_id=self.task_id.clone(),
         )
 
+    def _grasp_frame(self) -> torch.Tensor:
+        """Raw world pose [n, 7] of the grasp face's centre, z pointing into the element."""
+        return pose_mul(self.obj.pose.raw_pose, self._grasp_in_el[self.task_id])
+
     def _get_obs_extra(self, info: dict):
-        goal = self.goal_pose
+        goal = self._goal_table[self.task_id, self.goal_slot]
+        tcp = self.agent.tcp.pose.raw_pose
         obs = dict(
             is_grasped=info["is_grasped"].float()[:, None],
-            tcp_pose=self.agent.tcp_pose.raw_pose,
-            goal_pose=goal.raw_pose,
-            task=torch.nn.functional.one_hot(self.task_id, len(ELEMENT_KINDS)).float(),
+            tcp_pose=tcp,
+            goal_pose=goal,
+            task=self._task_onehot[self.task_id],
         )
         if "state" in self.obs_mode:
-            el = self.obj.pose
-            grasp_point = (el * Pose.create(self._grasp_in_el[self.task_id])).p
+            el = self.obj.pose.raw_pose
             obs.update(
-                obj_pose=el.raw_pose,
-                tcp_to_grasp_pos=grasp_point - self.agent.tcp_pose.p,
-                obj_to_goal_pos=goal.p - el.p,
+                obj_pose=el,
+                tcp_to_grasp_pos=self._grasp_frame()[:, :3] - tcp[:, :3],
+                obj_to_goal_pos=goal[:, :3] - el[:, :3],
             )
         return obs
 
@@ -406,12 +398,10 @@ class ConstructionTaskEnv(BaseEnv):
     def compute_dense_reward(self, obs: Any, action: torch.Tensor, info: dict):
         """Staged: reach and face the grasp surface (<= 1); held: 2 + carry (<= 1) + orient (<= 1);
         placed: 5."""
-        tcp = self.agent.tcp_pose
-        el = self.obj.pose
-        grasp = el * Pose.create(self._grasp_in_el[self.task_id])
-        reach = 1 - torch.tanh(3 * torch.linalg.norm(grasp.p - tcp.p, dim=-1))
-        z = torch.tensor([0.0, 0.0, 1.0], device=self.device).expand_as(tcp.p)
-        face = (1 + (quaternion_apply(tcp.q, z) * quaternion_apply(grasp.q, z)).sum(-1)) / 2
+        tcp = self.agent.tcp.pose.raw_pose
+        grasp = self._grasp_frame()
+        reach = 1 - torch.tanh(3 * torch.linalg.norm(grasp[:, :3] - tcp[:, :3], dim=-1))
+        face = (1 + (qaxis(tcp[:, 3:], 2) * qaxis(grasp[:, 3:], 2)).sum(-1)) / 2
         approach = 0.5 * reach + 0.5 * reach * face
         carry = 1 - torch.tanh(2 * info["place_dist"])
         orient = 1 - info["place_angle_deg"] / 180
