@@ -11,6 +11,7 @@ same task with the element held by the plate for the whole run (the grasp's per-
 
 from __future__ import annotations
 
+import os
 import platform
 import statistics
 import sys
@@ -25,6 +26,7 @@ from tqdm import tqdm
 
 import ms_construction
 from ms_construction.envs import ENV_IDS
+from ms_construction.reporting import update_section
 
 REFERENCE = "PickCube-v1"
 
@@ -94,20 +96,17 @@ def main(args: Args) -> None:
     print(table)
     if args.write:
         cmd = "python scripts/benchmark.py" + ("" if args.steps == 1000 and args.repeats == 3 else f" --steps {args.steps} --repeats {args.repeats}")
-        args.out.parent.mkdir(parents=True, exist_ok=True)
-        args.out.write_text(
-            "# Benchmarks\n\n"
+        update_section(args.out, "simulation-speed", title="Benchmarks", body=(
             "## Simulation speed on CPU (physx_cpu, one process)\n\n"
             f"Command: `{cmd}`\n\n"
             "State observations, pd_joint_delta_pos, dense reward, random actions, one env; each figure is the\n"
             f"median of {args.repeats} runs of {args.steps} steps, alternating with the reference in the same process.\n"
             "Target: every task at least 0.8x PickCube-v1.\n\n"
             f"{table}\n\n"
-            f"Machine: {platform.machine()}, {platform.processor() or 'unknown CPU'}, Python {sys.version.split()[0]}, "
+            f"Machine: {platform.machine()}, {os.cpu_count()} cores, Python {sys.version.split()[0]}, "
             f"torch {torch.__version__}, mani_skill {__import__('mani_skill').__version__}.\n"
-        )
+        ))
         print(f"wrote {args.out}")
-
 
 if __name__ == "__main__":
     main(tyro.cli(Args))

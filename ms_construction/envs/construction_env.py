@@ -400,10 +400,11 @@ class ConstructionTaskEnv(BaseEnv):
         placed: 5."""
         tcp = self.agent.tcp.pose.raw_pose
         grasp = self._grasp_frame()
-        reach = 1 - torch.tanh(3 * torch.linalg.norm(grasp[:, :3] - tcp[:, :3], dim=-1))
+        # tanh(d), not tanh(3d): the element starts about 2 m from the plate and must still pull
+        reach = 1 - torch.tanh(torch.linalg.norm(grasp[:, :3] - tcp[:, :3], dim=-1))
         face = (1 + (qaxis(tcp[:, 3:], 2) * qaxis(grasp[:, 3:], 2)).sum(-1)) / 2
         approach = 0.5 * reach + 0.5 * reach * face
-        carry = 1 - torch.tanh(2 * info["place_dist"])
+        carry = 1 - torch.tanh(info["place_dist"])
         orient = 1 - info["place_angle_deg"] / 180
         held = info["is_grasped"].float()
         reward = (1 - held) * approach + held * (2 + carry + orient)

@@ -1,0 +1,783 @@
+"""PPO with a curiosity bonus (ICM) and the paper's tolerance curriculum, for the construction tasks.
+
+In the shape of ManiSkill's PPO baseline (CleanRL style: one file, read top to bottom, one `Args`
+dataclass). Additions: `--curiosity icm` (Pathak et al. 2017), `--curriculum cp1 cp2 cp3 cp4`
+(Table I of the paper, each stage inheriting every parameter of the previous one), sparse reward by
+default (the paper's Algorithm 1), atomic checkpoints and exact `--resume`, a CSV log per run.
+
+    python baselines/ppo/ppo.py --env-id ConstructionPickPlace-v1 --curriculum cp1 cp2 cp3 cp4 --curiosity icm
+    python baselines/ppo/ppo.py --resume runs/<run>/checkpoint.pt            # continue an interrupted run
+    python baselines/ppo/ppo.py --evaluate --checkpoint runs/<run>/checkpoint.pt --env-id Flooring-v1
+
+CPU path (physx_cpu, one env per process): a gymnasium AsyncVectorEnv of CPUGymWrapper envs, one
+process per core by default. GPU path (physx_cuda): ManiSkillVectorEnv. `--sim-backend auto` picks
+by what the machine has.
+"""
+
+from __future__ import annotations
+
+import csv
+import dataclasses
+import math
+import os
+import random
+import signal
+import sys
+import time
+from collections import defaultdict
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Literal, Optional
+
+import gymnasium as gym
+import numpy as np
+import torch
+import torch.nn as nn
+import torch.optim as optim
+import tyro
+from torch.distributions.normal import Normal
+from torch.utils.tensorboard import SummaryWriter
+from tqdm import tqdm
+
+import ms_construction  # noqa: F401  (registers the tasks)
+from ms_construction.curriculum import STAGE_NAMES, stage_tolerances
+
+
+@dataclass
+class Args:
+    exp_name: Optional[str] = None
+    """name of this run (default: env id, curiosity, curriculum and seed)."""
+    seed: int = 1
+    """seed of the experiment."""
+    torch_deterministic: bool = True
+    """`torch.backends.cudnn.deterministic`."""
+    cuda: bool = True
+    """use CUDA for the networks when it is available."""
+    capture_video: bool = False
+    """save evaluation videos to `runs/<run>/videos` (offscreen, CPU or GPU)."""
+    save_model: bool = True
+    """write checkpoints (atomically) to `runs/<run>/checkpoint.pt`."""
+    evaluate: bool = False
+    """only evaluate `--checkpoint` and exit."""
+    checkpoint: Optional[str] = None
+    """initial weights (policy, value, ICM) from this checkpoint; a fresh run otherwise."""
+    resume: Optional[str] = None
+    """continue the interrupted run of this checkpoint: same run folder, stage, step count, optimizer, RNG."""
+    log_dir: str = "runs"
+    """where run folders go."""
+
+    env_id: str = "ConstructionPickPlace-v1"
+    """the environment (the general task, or one of the three single tasks)."""
+    control_mode: str = "pd_joint_delta_pos"
+    """the arm's controller."""
+    reward_mode: str = "sparse"
+    """sparse (the paper's Algorithm 1), dense or normalized_dense."""
+    sim_backend: Literal["auto", "physx_cpu", "physx_cuda"] = "auto"
+    """physx_cuda when a GPU is there (auto), else physx_cpu."""
+    total_timesteps: int = 8_000_000
+    """total env steps of training (the paper: 2M per curriculum stage)."""
+    learning_rate: float = 3e-4
+    """Adam learning rate of policy and value."""
+    num_envs: Optional[int] = None
+    """parallel training envs (default: one per CPU core on physx_cpu, 512 on physx_cuda)."""
+    num_eval_envs: Optional[int] = None
+    """parallel evaluation envs (default: 2 on physx_cpu, 16 on physx_cuda)."""
+    partial_reset: bool = True
+    """reset each env when its episode ends (success ends an episode)."""
+    eval_partial_reset: bool = False
+    """GPU evaluation: reset envs that finish early (off: each env runs one full-length episode)."""
+    num_steps: Optional[int] = None
+    """steps per env per rollout (default: 250 on physx_cpu, 50 on physx_cuda)."""
+    num_eval_steps: int = 250
+    """steps per evaluation (one episode per env)."""
+    anneal_lr: bool = False
+    """anneal the learning rate linearly to 0."""
+    gamma: float = 0.99
+    """discount (long horizon: the sparse reward comes once, up to 250 steps away)."""
+    gae_lambda: float = 0.95
+    """GAE lambda."""
+    num_minibatches: int = 8
+    """minibatches per update epoch."""
+    update_epochs: int = 4
+    """epochs per rollout."""
+    norm_adv: bool = True
+    """normalize advantages per minibatch."""
+    clip_coef: float = 0.2
+    """PPO clip coefficient."""
+    clip_vloss: bool = False
+    """clip the value loss."""
+    ent_coef: float = 0.0
+    """entropy bonus coefficient."""
+    vf_coef: float = 0.5
+    """value loss coefficient."""
+    max_grad_norm: float = 0.5
+    """gradient clipping."""
+    target_kl: Optional[float] = 0.1
+    """stop an update early when the approximate KL exceeds this."""
+    reward_scale: float = 1.0
+    """scale of the extrinsic reward."""
+    eval_freq: int = 10
+    """evaluate every this many iterations (and at stage ends)."""
+    finite_horizon_gae: bool = True
+    """bootstrap episodes cut by the time limit with the value of their last observation (they did
+    not end there); off treats truncation like termination."""
+    hidden_size: int = 256
+    """width of the policy, value and ICM networks."""
+    checkpoint_freq: int = 10
+    """write a checkpoint every this many iterations (and at stage changes, the end, and Ctrl-C)."""
+
+    curiosity: Literal["none", "icm"] = "icm"
+    """intrinsic reward: ICM's forward-model error, or none (plain PPO)."""
+    icm_strength: float = 0.02
+    """scale of the normalized intrinsic reward (ML-Agents' default curiosity strength)."""
+    icm_forward_weight: float = 0.2
+    """beta: ICM loss = (1 - beta) inverse loss + beta forward loss."""
+    icm_feature_dim: int = 64
+    """size of ICM's feature space phi(s)."""
+    icm_learning_rate: float = 3e-4
+    """Adam learning rate of ICM."""
+
+    curriculum: tuple[str, ...] = ("cp1", "cp2", "cp3", "cp4")
+    """tolerance stages in order (Table I); one stage, e.g. `cp4`, trains without a curriculum."""
+    stage_timesteps: int = 2_000_000
+    """promote to the next stage after this many env steps in a stage (the paper: 2M)."""
+    min_stage_timesteps: int = 500_000
+    """promote early only after this many steps in the stage..."""
+    promote_success: float = 0.9
+    """...when the smoothed evaluation place success reaches this (above 1 disables it)."""
+    success_smoothing: float = 0.5
+    """weight of the newest evaluation in the smoothed success (exponential moving average)."""
+
+
+# ------------------------------------------------------------------------------------------------- #
+# Environments
+# ------------------------------------------------------------------------------------------------- #
+class SameStepReset(gym.Wrapper):
+    """CPU worker wrapper: resets the env in the step that ends its episode, like ManiSkillVectorEnv.
+
+    gymnasium 1.0's AsyncVectorEnv would reset on the *next* step instead, so the episode's end is
+    reported in `info` (with the final observation) and the vector env always sees done=False."""
+
+    def step(self, action):
+        obs, reward, terminated, truncated, info = self.env.step(action)
+        done = bool(terminated or truncated)
+        ep = info.get("episode", {})
+        out = dict(
+            terminated=bool(terminated),
+            truncated=bool(truncated),
+            final_obs=obs if done else np.zeros_like(obs),
+            success=bool(ep.get("success_once", False)),
+            picked=bool(info["picked"]),
+            ep_return=float(ep.get("return", 0.0)),
+            ep_length=int(ep.get("episode_len", 0)),
+        )
+        if done:
+            obs, _ = self.env.reset()
+        return obs, reward, False, False, out
+
+    def set_curriculum_stage(self, stage: str) -> None:
+        self.env.unwrapped.set_curriculum_stage(stage)
+
+    def tolerances(self) -> list[float]:
+        """(tau_pick, tau_place, tau_angle_deg) in force."""
+        return self.env.unwrapped.tolerances[0].tolist()
+
+
+class VecEnv:
+    """Both backends behind one interface: torch tensors in and out, same-step resets, and per
+    step a dict with `done`, `terminated`, `truncated`, `final_obs` and the finished episodes'
+    `success`, `picked`, `ep_return`, `ep_length`."""
+
+    def __init__(self, args: Args, num_envs: int, backend: str, device: torch.device, eval_mode: bool = False,
+                 video_dir: Optional[Path] = None):
+        self.backend, self.device, self.num_envs = backend, device, num_envs
+        kwargs = dict(obs_mode="state", control_mode=args.control_mode, reward_mode=args.reward_mode,
+                      render_mode="rgb_array" if video_dir else None, sim_backend=backend)
+        if backend == "physx_cpu":
+            from mani_skill.utils.wrappers import CPUGymWrapper
+
+            def make(i):
+                def thunk():
+                    env = gym.make(args.env_id, **kwargs)
+                    if video_dir is not None and i == 0:
+                        from mani_skill.utils.wrappers import RecordEpisode
+
+                        env = RecordEpisode(env, str(video_dir), save_trajectory=False, video_fps=20)
+                    return SameStepReset(CPUGymWrapper(env, record_metrics=True))
+                return thunk
+
+            self.env = gym.vector.AsyncVectorEnv([make(i) for i in range(num_envs)], context="forkserver")
+        else:
+            from mani_skill.vector.wrappers.gymnasium import ManiSkillVectorEnv
+
+            env = gym.make(args.env_id, num_envs=num_envs, **kwargs)
+            if video_dir is not None:
+                from mani_skill.utils.wrappers import RecordEpisode
+
+                env = RecordEpisode(env, str(video_dir), save_trajectory=False, video_fps=20, max_steps_per_video=args.num_eval_steps)
+            partial = args.eval_partial_reset if eval_mode else args.partial_reset
+            self.env = ManiSkillVectorEnv(env, num_envs, ignore_terminations=not partial, record_metrics=True)
+        self.single_observation_space = self.env.single_observation_space
+        self.single_action_space = self.env.single_action_space
+
+    def reset(self, seed: int) -> torch.Tensor:
+        obs, _ = self.env.reset(seed=seed if self.backend == "physx_cpu" else [seed + i for i in range(self.num_envs)])
+        return torch.as_tensor(obs, dtype=torch.float32, device=self.device)
+
+    def step(self, action: torch.Tensor):
+        t = lambda x, dtype=torch.float32: torch.as_tensor(x, dtype=dtype, device=self.device)  # noqa: E731
+        if self.backend == "physx_cpu":
+            obs, reward, _, _, info = self.env.step(action.cpu().numpy())
+            term, trunc = t(info["terminated"], torch.bool), t(info["truncated"], torch.bool)
+            out = dict(terminated=term, truncated=trunc, done=term | trunc, final_obs=t(info["final_obs"]),
+                       success=t(info["success"], torch.bool), picked=t(info["picked"], torch.bool),
+                       ep_return=t(info["ep_return"]), ep_length=t(info["ep_length"]))
+            return t(obs), t(reward), out
+        obs, reward, term, trunc, info = self.env.step(action)
+        done = term | trunc
+        out = dict(terminated=term, truncated=trunc, done=done, final_obs=obs.clone())
+        if "final_info" in info:
+            fin, mask = info["final_info"], info["_final_info"]
+            out["final_obs"][mask] = info["final_observation"][mask]
+            out.update(success=fin["episode"]["success_once"], picked=fin["picked"],
+                       ep_return=fin["episode"]["return"], ep_length=fin["episode"]["episode_len"].float())
+        else:
+            zeros = torch.zeros_like(reward)
+            out.update(success=zeros.bool(), picked=zeros.bool(), ep_return=zeros, ep_length=zeros)
+        return obs.float(), reward.float(), out
+
+    def set_curriculum_stage(self, stage: str) -> None:
+        if self.backend == "physx_cpu":
+            self.env.call("set_curriculum_stage", stage)
+        else:
+            self.env.unwrapped.set_curriculum_stage(stage)
+
+    def close(self):
+        self.env.close()
+
+
+# ------------------------------------------------------------------------------------------------- #
+# Networks
+# ------------------------------------------------------------------------------------------------- #
+def layer_init(layer, std=np.sqrt(2), bias_const=0.0):
+    torch.nn.init.orthogonal_(layer.weight, std)
+    torch.nn.init.constant_(layer.bias, bias_const)
+    return layer
+
+
+def mlp(n_in: int, n_out: int, hidden: int, out_std: float = np.sqrt(2), act=nn.Tanh) -> nn.Sequential:
+    return nn.Sequential(
+        layer_init(nn.Linear(n_in, hidden)), act(),
+        layer_init(nn.Linear(hidden, hidden)), act(),
+        layer_init(nn.Linear(hidden, hidden)), act(),
+        layer_init(nn.Linear(hidden, n_out), std=out_std),
+    )
+
+
+class Agent(nn.Module):
+    def __init__(self, obs_dim: int, act_dim: int, hidden: int):
+        super().__init__()
+        self.critic = mlp(obs_dim, 1, hidden, out_std=1.0)
+        self.actor_mean = mlp(obs_dim, act_dim, hidden, out_std=0.01 * np.sqrt(2))
+        self.actor_logstd = nn.Parameter(torch.ones(1, act_dim) * -0.5)
+
+    def get_value(self, x):
+        return self.critic(x)
+
+    def get_action(self, x, deterministic=False):
+        mean = self.actor_mean(x)
+        if deterministic:
+            return mean
+        return Normal(mean, torch.exp(self.actor_logstd.expand_as(mean))).sample()
+
+    def get_action_and_value(self, x, action=None):
+        mean = self.actor_mean(x)
+        probs = Normal(mean, torch.exp(self.actor_logstd.expand_as(mean)))
+        if action is None:
+            action = probs.sample()
+        return action, probs.log_prob(action).sum(1), probs.entropy().sum(1), self.critic(x)
+
+
+class RunningMeanStd(nn.Module):
+    """Running mean and variance (parallel algorithm), kept as buffers so checkpoints hold them."""
+
+    def __init__(self):
+        super().__init__()
+        self.register_buffer("mean", torch.zeros(()))
+        self.register_buffer("var", torch.ones(()))
+        self.register_buffer("count", torch.tensor(1e-4))
+
+    def update(self, x: torch.Tensor) -> None:
+        batch_mean, batch_var, n = x.mean(), x.var(unbiased=False), x.numel()
+        delta, total = batch_mean - self.mean, self.count + n
+        self.mean += delta * n / total
+        self.var = (self.var * self.count + batch_var * n + delta**2 * self.count * n / total) / total
+        self.count = total
+
+
+class ICM(nn.Module):
+    """Intrinsic Curiosity Module: encoder phi, inverse model (a from phi(s), phi(s')), forward
+    model (phi(s') from phi(s), a). The encoder learns from the inverse loss only, so phi keeps what
+    the agent's actions change; the forward model's error on it is the curiosity."""
+
+    def __init__(self, obs_dim: int, act_dim: int, feature_dim: int, hidden: int):
+        super().__init__()
+        self.encoder = mlp(obs_dim, feature_dim, hidden, out_std=1.0, act=nn.ELU)
+        self.inverse = mlp(2 * feature_dim, act_dim, hidden, out_std=1.0, act=nn.ELU)
+        self.forward_model = mlp(feature_dim + act_dim, feature_dim, hidden, out_std=1.0, act=nn.ELU)
+        self.error_stats = RunningMeanStd()
+
+    def forward_error(self, obs, next_obs, action) -> torch.Tensor:
+        """Per-transition forward-model error in feature space (features held fixed)."""
+        phi, phi_next = self.encoder(obs).detach(), self.encoder(next_obs).detach()
+        pred = self.forward_model(torch.cat([phi, action], -1))
+        return 0.5 * ((pred - phi_next) ** 2).sum(-1)
+
+    def losses(self, obs, next_obs, action) -> tuple[torch.Tensor, torch.Tensor]:
+        phi, phi_next = self.encoder(obs), self.encoder(next_obs)
+        inverse_loss = ((self.inverse(torch.cat([phi, phi_next], -1)) - action) ** 2).sum(-1).mean()
+        return self.forward_error(obs, next_obs, action).mean(), inverse_loss
+
+    @torch.no_grad()
+    def intrinsic_reward(self, obs, next_obs, action, strength: float) -> torch.Tensor:
+        err = self.forward_error(obs, next_obs, action)
+        self.error_stats.update(err)
+        return strength * err / torch.sqrt(self.error_stats.var + 1e-8)
+
+
+# ------------------------------------------------------------------------------------------------- #
+# Checkpoints, logs, curriculum
+# ------------------------------------------------------------------------------------------------- #
+@dataclass
+class Progress:
+    """Where a run is; saved in checkpoints."""
+
+    global_step: int = 0
+    iteration: int = 0
+    stage_index: int = 0
+    stage_start_step: int = 0
+    smoothed_success: Optional[float] = None
+    stage_changes: list = field(default_factory=list)
+    """(global_step, stage) at every stage start."""
+
+
+CSV_FIELDS = [
+    "global_step", "iteration", "stage", "episodes", "pick_success", "place_success", "extrinsic_return",
+    "intrinsic_return", "episode_length", "eval_pick_success", "eval_place_success", "eval_extrinsic_return",
+    "smoothed_eval_success", "sps", "learning_rate", "value_loss", "policy_loss", "entropy", "approx_kl",
+    "icm_forward_loss", "icm_inverse_loss",
+]
+
+
+def save_checkpoint(path: Path, args: Args, progress: Progress, agent, optimizer, icm, icm_optimizer,
+                    obs_dim: int, act_dim: int) -> None:
+    """Write atomically: a temporary file in the same folder, then an atomic rename."""
+    state = dict(
+        args=dataclasses.asdict(args), progress=dataclasses.asdict(progress), obs_dim=obs_dim, act_dim=act_dim,
+        agent=agent.state_dict(), optimizer=optimizer.state_dict(),
+        icm=None if icm is None else icm.state_dict(),
+        icm_optimizer=None if icm_optimizer is None else icm_optimizer.state_dict(),
+        rng=dict(python=random.getstate(), numpy=np.random.get_state(), torch=torch.get_rng_state(),
+                 cuda=torch.cuda.get_rng_state_all() if torch.cuda.is_available() else None),
+    )
+    path.parent.mkdir(parents=True, exist_ok=True)
+    tmp = path.with_name(path.name + ".tmp")
+    torch.save(state, tmp)
+    os.replace(tmp, path)
+
+
+def load_checkpoint(path: str, obs_dim: int, act_dim: int, env_id: str) -> dict:
+    """Load a checkpoint and refuse one made for other observation or action shapes."""
+    if not Path(path).is_file():
+        raise SystemExit(f"checkpoint not found: {path}")
+    ckpt = torch.load(path, map_location="cpu", weights_only=False)
+    if (ckpt["obs_dim"], ckpt["act_dim"]) != (obs_dim, act_dim):
+        raise SystemExit(
+            f"checkpoint {path} was trained with observations of size {ckpt['obs_dim']} and actions of size "
+            f"{ckpt['act_dim']} (env {ckpt['args']['env_id']}, control mode {ckpt['args']['control_mode']}); "
+            f"{env_id} here has {obs_dim} and {act_dim}. Use the same control mode and observation mode."
+        )
+    return ckpt
+
+
+class CSVLog:
+    """Appends one row per iteration; on resume, drops rows past the checkpoint's step."""
+
+    def __init__(self, path: Path, resume_step: Optional[int]):
+        self.path = path
+        if resume_step is not None and path.exists():
+            with open(path) as f:
+                rows = [r for r in csv.DictReader(f) if int(r["global_step"]) <= resume_step]
+            self._write(rows, "w")
+        elif not path.exists() or resume_step is None:
+            self._write([], "w")
+
+    def _write(self, rows, mode):
+        with open(self.path, mode, newline="") as f:
+            w = csv.DictWriter(f, fieldnames=CSV_FIELDS)
+            if mode == "w":
+                w.writeheader()
+            w.writerows(rows)
+
+    def append(self, row: dict) -> None:
+        self._write([{k: row.get(k, "") for k in CSV_FIELDS}], "a")
+
+
+def should_promote(args: Args, progress: Progress) -> Optional[str]:
+    """Why the current stage ends now ('steps' or 'success'), or None."""
+    if progress.stage_index >= len(args.curriculum) - 1:
+        return None
+    in_stage = progress.global_step - progress.stage_start_step
+    if in_stage >= args.stage_timesteps:
+        return "steps"
+    if (in_stage >= args.min_stage_timesteps and progress.smoothed_success is not None
+            and progress.smoothed_success >= args.promote_success):
+        return "success"
+    return None
+
+
+def validate(args: Args) -> None:
+    bad = [s for s in args.curriculum if s not in STAGE_NAMES]
+    if bad or not args.curriculum:
+        raise SystemExit(f"--curriculum {' '.join(args.curriculum)}: stages must be among {', '.join(STAGE_NAMES)}")
+    if args.reward_mode not in ("sparse", "dense", "normalized_dense"):
+        raise SystemExit(f"--reward-mode {args.reward_mode}: use sparse, dense or normalized_dense")
+    for name in ("total_timesteps", "stage_timesteps", "num_minibatches", "update_epochs", "eval_freq", "checkpoint_freq"):
+        if getattr(args, name) <= 0:
+            raise SystemExit(f"--{name.replace('_', '-')} must be positive, got {getattr(args, name)}")
+
+
+def resolve_defaults(args: Args) -> str:
+    backend = args.sim_backend
+    if backend == "auto":
+        backend = "physx_cuda" if torch.cuda.is_available() else "physx_cpu"
+    gpu = backend == "physx_cuda"
+    if args.num_envs is None:
+        args.num_envs = 512 if gpu else (os.cpu_count() or 1)
+    if args.num_eval_envs is None:
+        args.num_eval_envs = 16 if gpu else 2
+    if args.num_steps is None:
+        args.num_steps = 50 if gpu else 250
+    if args.exp_name is None:
+        args.exp_name = f"{args.env_id}__{args.curiosity}__{'-'.join(args.curriculum)}__s{args.seed}"
+    return backend
+
+
+# ------------------------------------------------------------------------------------------------- #
+# Evaluation
+# ------------------------------------------------------------------------------------------------- #
+@torch.no_grad()
+def evaluate(agent: Agent, envs: VecEnv, args: Args, seed: int) -> dict:
+    """Deterministic policy, the first episode of every eval env: pick and place success, return."""
+    obs = envs.reset(seed=seed)
+    finished = torch.zeros(envs.num_envs, dtype=torch.bool, device=obs.device)
+    stats = defaultdict(lambda: torch.zeros(envs.num_envs, device=obs.device))
+    for _ in range(args.num_eval_steps):
+        action = agent.get_action(obs, deterministic=True)
+        obs, _, info = envs.step(action.clamp(-1, 1))
+        new = info["done"] & ~finished
+        for key in ("success", "picked", "ep_return"):
+            stats[key] = torch.where(new, info[key].float(), stats[key])
+        finished |= info["done"]
+        if finished.all():
+            break
+    mean = lambda x: float(x[finished].mean()) if finished.any() else float("nan")  # noqa: E731
+    return dict(
+        eval_pick_success=mean(stats["picked"]),
+        eval_place_success=mean(stats["success"]),
+        eval_extrinsic_return=mean(stats["ep_return"]),
+        eval_episodes=int(finished.sum()),
+    )
+
+
+# ------------------------------------------------------------------------------------------------- #
+# Training
+# ------------------------------------------------------------------------------------------------- #
+@dataclass
+class Trainer:
+    """Everything a run holds between iterations (what a checkpoint restores)."""
+
+    args: Args
+    backend: str
+    device: torch.device
+    run_dir: Path
+    ckpt_path: Path
+    eval_envs: VecEnv
+    obs_dim: int
+    act_dim: int
+    agent: Agent
+    optimizer: optim.Optimizer
+    icm: Optional[ICM]
+    icm_optimizer: Optional[optim.Optimizer]
+    progress: Progress
+    resumed: bool
+
+    def checkpoint(self) -> None:
+        if self.args.save_model:
+            save_checkpoint(self.ckpt_path, self.args, self.progress, self.agent, self.optimizer, self.icm,
+                            self.icm_optimizer, self.obs_dim, self.act_dim)
+
+
+def setup(args: Args) -> Trainer:
+    """Build (or, with --resume, restore) a run: args, seeds, networks, optimizers, progress."""
+    resume_ckpt = None
+    if args.resume:
+        if not Path(args.resume).is_file():
+            raise SystemExit(f"--resume: checkpoint not found: {args.resume}")
+        resume_ckpt = torch.load(args.resume, map_location="cpu", weights_only=False)
+        saved = resume_ckpt["args"]
+        args = Args(**{**saved, "resume": args.resume, "curriculum": tuple(saved["curriculum"])})
+    validate(args)
+    backend = resolve_defaults(args)
+    run_dir = Path(args.log_dir) / args.exp_name
+    ckpt_path = Path(args.resume) if args.resume else run_dir / "checkpoint.pt"
+
+    random.seed(args.seed)
+    np.random.seed(args.seed)
+    torch.manual_seed(args.seed)
+    torch.backends.cudnn.deterministic = args.torch_deterministic
+    device = torch.device("cuda" if torch.cuda.is_available() and args.cuda else "cpu")
+
+    eval_video = run_dir / "videos" if args.capture_video else None
+    eval_envs = VecEnv(args, args.num_eval_envs, backend, device, eval_mode=True, video_dir=eval_video)
+    obs_dim = int(np.prod(eval_envs.single_observation_space.shape))
+    act_dim = int(np.prod(eval_envs.single_action_space.shape))
+
+    agent = Agent(obs_dim, act_dim, args.hidden_size).to(device)
+    optimizer = optim.Adam(agent.parameters(), lr=args.learning_rate, eps=1e-5)
+    icm = icm_optimizer = None
+    if args.curiosity == "icm":
+        icm = ICM(obs_dim, act_dim, args.icm_feature_dim, args.hidden_size).to(device)
+        icm_optimizer = optim.Adam(icm.parameters(), lr=args.icm_learning_rate)
+
+    progress = Progress()
+    if args.checkpoint:
+        init = load_checkpoint(args.checkpoint, obs_dim, act_dim, args.env_id)
+        agent.load_state_dict(init["agent"])
+        if icm is not None and init["icm"] is not None:
+            icm.load_state_dict(init["icm"])
+        if args.evaluate:
+            progress = Progress(**init["progress"])
+    if resume_ckpt is not None:
+        load_checkpoint(args.resume, obs_dim, act_dim, args.env_id)  # refuses other shapes
+        agent.load_state_dict(resume_ckpt["agent"])
+        optimizer.load_state_dict(resume_ckpt["optimizer"])
+        if icm is not None:
+            icm.load_state_dict(resume_ckpt["icm"])
+            icm_optimizer.load_state_dict(resume_ckpt["icm_optimizer"])
+        progress = Progress(**resume_ckpt["progress"])
+        rng = resume_ckpt["rng"]
+        random.setstate(rng["python"])
+        np.random.set_state(rng["numpy"])
+        torch.set_rng_state(rng["torch"])
+        if rng["cuda"] is not None and torch.cuda.is_available():
+            torch.cuda.set_rng_state_all(rng["cuda"])
+    return Trainer(args, backend, device, run_dir, ckpt_path, eval_envs, obs_dim, act_dim, agent, optimizer,
+                   icm, icm_optimizer, progress, resume_ckpt is not None)
+
+
+def main(args: Args) -> Progress:
+    tr = setup(args)
+    if tr.args.evaluate:
+        stage = tr.args.curriculum[min(tr.progress.stage_index, len(tr.args.curriculum) - 1)]
+        tr.eval_envs.set_curriculum_stage(stage)
+        print({"stage": stage, **evaluate(tr.agent, tr.eval_envs, tr.args, seed=tr.args.seed)})
+        tr.eval_envs.close()
+        return tr.progress
+    return train(tr)
+
+
+def train(tr: Trainer) -> Progress:
+    """The PPO loop; returns where the run ended."""
+    args, device, progress = tr.args, tr.device, tr.progress
+    agent, optimizer, icm, icm_optimizer, eval_envs = tr.agent, tr.optimizer, tr.icm, tr.icm_optimizer, tr.eval_envs
+    obs_dim, act_dim, run_dir, ckpt_path = tr.obs_dim, tr.act_dim, tr.run_dir, tr.ckpt_path
+    envs = VecEnv(args, args.num_envs, tr.backend, device)
+    batch_size = args.num_envs * args.num_steps
+    minibatch_size = batch_size // args.num_minibatches
+    num_iterations = math.ceil(args.total_timesteps / batch_size)
+    stage = args.curriculum[progress.stage_index]
+    if not progress.stage_changes:
+        progress.stage_changes.append((0, stage))
+    for e in (envs, eval_envs):
+        e.set_curriculum_stage(stage)
+
+    run_dir.mkdir(parents=True, exist_ok=True)
+    writer = SummaryWriter(str(run_dir))
+    if not tr.resumed:
+        writer.add_text("hyperparameters", "|param|value|\n|-|-|\n" + "\n".join(f"|{k}|{v}|" for k, v in vars(args).items()))
+    log = CSVLog(run_dir / "progress.csv", progress.global_step if tr.resumed else None)
+    checkpoint = tr.checkpoint
+
+    stop = {"now": False}
+    signal.signal(signal.SIGTERM, lambda *_: stop.update(now=True))
+
+    obs_buf = torch.zeros((args.num_steps, args.num_envs, obs_dim), device=device)
+    next_obs_buf = torch.zeros_like(obs_buf)  # s_{t+1}: the final observation where an episode ended
+    actions = torch.zeros((args.num_steps, args.num_envs, act_dim), device=device)
+    logprobs = torch.zeros((args.num_steps, args.num_envs), device=device)
+    rewards = torch.zeros_like(logprobs)
+    dones = torch.zeros_like(logprobs)
+    terminated = torch.zeros_like(logprobs)
+    values = torch.zeros_like(logprobs)
+    intrinsic_running = torch.zeros(args.num_envs, device=device)
+
+    next_obs = envs.reset(seed=args.seed + progress.iteration * 1000)
+    bar = tqdm(total=args.total_timesteps, initial=min(progress.global_step, args.total_timesteps), unit="step",
+               desc=f"{args.exp_name} [{stage}]", dynamic_ncols=True)
+    try:
+        while progress.iteration < num_iterations and not stop["now"]:
+            progress.iteration += 1
+            t0 = time.time()
+            if args.anneal_lr:
+                optimizer.param_groups[0]["lr"] = args.learning_rate * (1.0 - (progress.iteration - 1.0) / num_iterations)
+            episodes = defaultdict(list)
+
+            # ---- rollout ----
+            for step in range(args.num_steps):
+                progress.global_step += args.num_envs
+                obs_buf[step] = next_obs
+                with torch.no_grad():
+                    action, logprob, _, value = agent.get_action_and_value(next_obs)
+                values[step] = value.flatten()
+                actions[step], logprobs[step] = action, logprob
+                next_obs, reward, info = envs.step(action.clamp(-1, 1))
+                rewards[step] = reward * args.reward_scale
+                dones[step], terminated[step] = info["done"].float(), info["terminated"].float()
+                next_obs_buf[step] = torch.where(info["done"][:, None], info["final_obs"], next_obs)
+                done = info["done"]
+                if done.any():
+                    for key in ("success", "picked", "ep_return", "ep_length"):
+                        episodes[key] += info[key][done].float().tolist()
+                    episodes["env"] += done.nonzero().flatten().tolist()
+                    episodes["step"] += [step] * int(done.sum())
+
+            # ---- intrinsic reward (computed on the whole rollout) ----
+            flat = lambda x: x.reshape(-1, *x.shape[2:])  # noqa: E731
+            intrinsic = torch.zeros_like(rewards)
+            if icm is not None:
+                intrinsic = icm.intrinsic_reward(flat(obs_buf), flat(next_obs_buf), flat(actions), args.icm_strength).view_as(rewards)
+                # intrinsic return of each finished episode (carried across rollouts)
+                for step in range(args.num_steps):
+                    intrinsic_running += intrinsic[step]
+                    ended = dones[step].bool()
+                    episodes["intrinsic_return"] += intrinsic_running[ended].tolist()
+                    intrinsic_running[ended] = 0
+            total_rewards = rewards + intrinsic
+
+            # ---- GAE ----
+            with torch.no_grad():
+                next_value = agent.get_value(next_obs).flatten()
+                # value of s_{t+1} for every step: V(final obs) where an episode was cut by the time
+                # limit (finite-horizon bootstrap), 0 where it terminated
+                v_next = agent.get_value(flat(next_obs_buf)).view_as(rewards)
+                cut = (dones - terminated) if args.finite_horizon_gae else torch.zeros_like(dones)
+                v_next = v_next * cut
+                advantages = torch.zeros_like(rewards)
+                lastgaelam = torch.zeros(args.num_envs, device=device)
+                for t in reversed(range(args.num_steps)):
+                    boot = next_value if t == args.num_steps - 1 else values[t + 1]
+                    v = torch.where(dones[t].bool(), v_next[t], boot)
+                    delta = total_rewards[t] + args.gamma * v - values[t]
+                    lastgaelam = delta + args.gamma * args.gae_lambda * (1 - dones[t]) * lastgaelam
+                    advantages[t] = lastgaelam
+                returns = advantages + values
+
+            # ---- update ----
+            b_obs, b_next_obs, b_actions = flat(obs_buf), flat(next_obs_buf), flat(actions)
+            b_logprobs, b_adv, b_ret, b_val = logprobs.reshape(-1), advantages.reshape(-1), returns.reshape(-1), values.reshape(-1)
+            b_inds = np.arange(batch_size)
+            clipfracs, losses = [], defaultdict(list)
+            for _epoch in range(args.update_epochs):
+                np.random.shuffle(b_inds)
+                for start in range(0, batch_size, minibatch_size):
+                    mb = b_inds[start:start + minibatch_size]
+                    _, newlogprob, entropy, newvalue = agent.get_action_and_value(b_obs[mb], b_actions[mb])
+                    logratio = newlogprob - b_logprobs[mb]
+                    ratio = logratio.exp()
+                    with torch.no_grad():
+                        approx_kl = ((ratio - 1) - logratio).mean()
+                        clipfracs.append(((ratio - 1.0).abs() > args.clip_coef).float().mean().item())
+                    mb_adv = b_adv[mb]
+                    if args.norm_adv:
+                        mb_adv = (mb_adv - mb_adv.mean()) / (mb_adv.std() + 1e-8)
+                    pg_loss = torch.max(-mb_adv * ratio, -mb_adv * torch.clamp(ratio, 1 - args.clip_coef, 1 + args.clip_coef)).mean()
+                    newvalue = newvalue.view(-1)
+                    if args.clip_vloss:
+                        v_clipped = b_val[mb] + torch.clamp(newvalue - b_val[mb], -args.clip_coef, args.clip_coef)
+                        v_loss = 0.5 * torch.max((newvalue - b_ret[mb]) ** 2, (v_clipped - b_ret[mb]) ** 2).mean()
+                    else:
+                        v_loss = 0.5 * ((newvalue - b_ret[mb]) ** 2).mean()
+                    entropy_loss = entropy.mean()
+                    loss = pg_loss - args.ent_coef * entropy_loss + v_loss * args.vf_coef
+                    optimizer.zero_grad()
+                    loss.backward()
+                    nn.utils.clip_grad_norm_(agent.parameters(), args.max_grad_norm)
+                    optimizer.step()
+                    if icm is not None:
+                        fwd, inv = icm.losses(b_obs[mb], b_next_obs[mb], b_actions[mb])
+                        icm_loss = (1 - args.icm_forward_weight) * inv + args.icm_forward_weight * fwd
+                        icm_optimizer.zero_grad()
+                        icm_loss.backward()
+                        nn.utils.clip_grad_norm_(icm.parameters(), args.max_grad_norm)
+                        icm_optimizer.step()
+                        losses["icm_forward_loss"].append(fwd.item())
+                        losses["icm_inverse_loss"].append(inv.item())
+                    losses["value_loss"].append(v_loss.item())
+                    losses["policy_loss"].append(pg_loss.item())
+                    losses["entropy"].append(entropy_loss.item())
+                    losses["approx_kl"].append(approx_kl.item())
+                if args.target_kl is not None and approx_kl > args.target_kl:
+                    break
+
+            # ---- logs, evaluation, curriculum ----
+            sps = batch_size / (time.time() - t0)
+            row = dict(global_step=progress.global_step, iteration=progress.iteration, stage=stage, sps=round(sps, 1),
+                       learning_rate=optimizer.param_groups[0]["lr"], episodes=len(episodes["success"]))
+            row.update({k: float(np.mean(v)) for k, v in losses.items()})
+            if episodes["success"]:
+                row.update(pick_success=float(np.mean(episodes["picked"])), place_success=float(np.mean(episodes["success"])),
+                           extrinsic_return=float(np.mean(episodes["ep_return"])), episode_length=float(np.mean(episodes["ep_length"])))
+                if episodes["intrinsic_return"]:
+                    row["intrinsic_return"] = float(np.mean(episodes["intrinsic_return"]))
+            if progress.iteration % args.eval_freq == 0 or progress.iteration == num_iterations:
+                result = evaluate(agent, eval_envs, args, seed=args.seed + 10_000 + progress.iteration)
+                s, a = result["eval_place_success"], args.success_smoothing
+                if not math.isnan(s):
+                    progress.smoothed_success = s if progress.smoothed_success is None else a * s + (1 - a) * progress.smoothed_success
+                row.update(result, smoothed_eval_success=progress.smoothed_success)
+            promotion = should_promote(args, progress)
+            for key, value in row.items():
+                if isinstance(value, (int, float)) and key not in ("global_step", "iteration"):
+                    writer.add_scalar(f"charts/{key}", value, progress.global_step)
+            log.append(row)
+            if promotion:
+                progress.stage_index += 1
+                progress.stage_start_step = progress.global_step
+                progress.smoothed_success = None
+                stage = args.curriculum[progress.stage_index]
+                progress.stage_changes.append((progress.global_step, stage))
+                for e in (envs, eval_envs):
+                    e.set_curriculum_stage(stage)
+                writer.add_text("curriculum", f"step {progress.global_step}: promoted to {stage} ({promotion})", progress.global_step)
+                tqdm.write(f"step {progress.global_step}: promoted to {stage} ({promotion})")
+                bar.set_description(f"{args.exp_name} [{stage}]")
+            bar.update(min(batch_size, args.total_timesteps - bar.n))
+            bar.set_postfix(sps=f"{sps:.0f}", place=row.get("place_success", float("nan")), pick=row.get("pick_success", float("nan")))
+            if promotion or progress.iteration % args.checkpoint_freq == 0 or progress.iteration == num_iterations:
+                checkpoint()
+    except KeyboardInterrupt:
+        stop["now"] = True
+    finally:
+        bar.close()
+        if stop["now"]:
+            checkpoint()
+            print(f"interrupted at step {progress.global_step}; resume with: python baselines/ppo/ppo.py --resume {ckpt_path}")
+        envs.close()
+        eval_envs.close()
+        writer.close()
+    return progress
+
+
+if __name__ == "__main__":
+    main(tyro.cli(Args))
