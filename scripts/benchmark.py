@@ -24,7 +24,6 @@ import torch
 import tyro
 from tqdm import tqdm
 
-import ms_construction
 from ms_construction.envs import ENV_IDS
 from ms_construction.reporting import update_section
 

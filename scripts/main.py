@@ -6,7 +6,7 @@
 (Once a trained agent ships in assets/checkpoints/, this job will show it instead.)
 """
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from pathlib import Path
 
 import gymnasium as gym
@@ -15,7 +15,6 @@ import tyro
 from mani_skill.utils.wrappers import RecordEpisode
 from tqdm import tqdm
 
-import ms_construction
 from ms_construction.envs import ENV_IDS
 
 

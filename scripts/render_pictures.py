@@ -17,7 +17,6 @@ import torch
 import tyro
 from mani_skill.utils import sapien_utils
 
-import ms_construction
 from ms_construction.envs import TASK_ENV_IDS
 from ms_construction.kinematics import ArmIK
 

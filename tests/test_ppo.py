@@ -13,6 +13,7 @@ import torch
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 from baselines.ppo import ppo  # noqa: E402
+from ms_construction.curriculum import stage_tolerances  # noqa: E402
 
 TINY = dict(num_envs=2, num_eval_envs=1, num_steps=40, num_minibatches=2, update_epochs=2, eval_freq=100,
             num_eval_steps=250, checkpoint_freq=1, env_id="Flooring-v1", sim_backend="physx_cpu")
@@ -97,7 +98,7 @@ def test_vec_env_stage_change_sets_every_worker_s_tolerances():
         for stage in ("cp2", "cp3"):
             envs.set_curriculum_stage(stage)
             tol = envs.env.call("tolerances")
-            expected = ppo.stage_tolerances(stage)
+            expected = stage_tolerances(stage)
             for t in tol:
                 np.testing.assert_allclose(t, [expected["pick"], expected["place"], expected["angle_deg"]], rtol=1e-6)
     finally:
@@ -119,7 +120,7 @@ def test_promotion_in_a_run_moves_train_and_eval_envs_to_the_next_stage(tmp_path
     progress = ppo.main(args)
     assert [s for _, s in progress.stage_changes] == ["cp1", "cp2"]
     assert progress.stage_changes[1][0] == 160
-    cp2 = ppo.stage_tolerances("cp2")
+    cp2 = stage_tolerances("cp2")
     moved = [c for c in calls if c[1] == "cp2"]
     assert {c[0] for c in moved} == {args.num_envs, args.num_eval_envs}, "train and eval envs both change stage"
     for _, _, tols in moved:
@@ -213,3 +214,15 @@ def test_short_dense_run_on_the_easiest_stage_shows_a_learning_signal(tmp_path):
     after_tr.eval_envs.close()
     print(f"evaluation return {before:.1f} -> {after:.1f}")
     assert after > before + 5.0, f"evaluation return {before:.1f} -> {after:.1f}"
+
+
+def test_capture_video_writes_evaluation_videos_offscreen(tmp_path):
+    import imageio.v3 as iio
+
+    args = tiny_args(tmp_path, exp_name="video", capture_video=True, total_timesteps=80, eval_freq=1,
+                     curriculum=("cp4",), curiosity="none", save_model=False)
+    ppo.main(args)
+    videos = sorted((tmp_path / "video" / "videos").glob("*.mp4"))
+    assert videos, "no evaluation video"
+    frames = iio.imread(videos[0])
+    assert frames.shape[0] >= 200 and frames.std() > 20

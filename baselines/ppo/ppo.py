@@ -22,7 +22,6 @@ import math
 import os
 import random
 import signal
-import sys
 import time
 from collections import defaultdict
 from dataclasses import dataclass, field
@@ -40,7 +39,7 @@ from torch.utils.tensorboard import SummaryWriter
 from tqdm import tqdm
 
 import ms_construction  # noqa: F401  (registers the tasks)
-from ms_construction.curriculum import STAGE_NAMES, stage_tolerances
+from ms_construction.curriculum import STAGE_NAMES
 
 
 @dataclass
