@@ -1,4 +1,4 @@
-"""Builds the committed assets: site meshes, their coacd convex parts, the arm's URDF, a manifest.
+"""Builds the committed assets: site meshes, coacd convex parts, the arm's URDF and SRDF, a manifest.
 
 Collision: coacd approximates a concave part with convex hulls, and an approximate hull may bridge
 an opening a few centimetres wider than its element. So each part is decomposed recursively: coacd
@@ -20,7 +20,7 @@ import numpy as np
 import trimesh
 from trimesh.visual.material import PBRMaterial
 
-from ms_construction.arm_model import ArmParams, arm_urdf, effort_limits
+from ms_construction.arm_model import ArmParams, arm_srdf, arm_urdf, effort_limits
 from ms_construction.assets import ASSET_DIR, GENERATOR_VERSION, sha256
 from ms_construction.site_geometry import (
     ELEMENT_KINDS,
@@ -39,6 +39,8 @@ INTRUSION_TOL = 1e-3
 """m; how far a collision hull may enter an opening after decomposition."""
 CUT_INSET = 2e-4
 """m; cuts are made this far inside an opening's face (well under INTRUSION_TOL)."""
+MIN_PIECE_THICKNESS = 5e-3
+"""m; a cut must leave at least this much material on both sides, along the cut's normal."""
 
 
 @dataclass(frozen=True)
@@ -80,6 +82,14 @@ def _coacd(solid: manifold3d.Manifold, s: CoacdSettings) -> list[np.ndarray]:
     return [np.asarray(v, dtype=np.float64) for v, _ in parts]
 
 
+def _thickness(solid: manifold3d.Manifold, normal: np.ndarray) -> float:
+    """Extent of a solid along a direction (0 for an empty one)."""
+    if solid.is_empty():
+        return 0.0
+    heights = np.asarray(solid.to_mesh().vert_properties)[:, :3] @ np.asarray(normal)
+    return float(heights.max() - heights.min())
+
+
 def decompose(part: StaticPart, s: CoacdSettings) -> list[np.ndarray]:
     """Convex hull vertex sets covering `part.solid` and leaving its keep-free volumes free."""
 
@@ -99,12 +109,13 @@ def decompose(part: StaticPart, s: CoacdSettings) -> list[np.ndarray]:
             return hulls
         if depth >= s.max_depth:
             raise RuntimeError(f"{part.name}: a collision hull still enters an opening by {depth_in:.3f} m")
-        vol = solid.volume()
-        for normal, offset in box_planes(*box):
+        for normal, offset in box_planes(*box[:3]):
             # cut just inside the opening: a cut in the face's own plane leaves degenerate slivers,
             # and a cut outside leaves thin rims that coacd thickens into the opening
             a, b = solid.split_by_plane(list(map(float, normal)), float(offset) - CUT_INSET)
-            if min(a.volume(), b.volume()) > 1e-6 * vol:
+            # a face flush with the part's own surface would cut off a sliver a hair thick, which
+            # coacd turns into a membrane across the opening: only cuts into real thickness count
+            if min(_thickness(a, normal), _thickness(b, normal)) > MIN_PIECE_THICKNESS:
                 return rec(a, depth + 1) + rec(b, depth + 1)
         raise RuntimeError(f"{part.name}: no face plane of the entered opening cuts the solid")
 
@@ -176,11 +187,13 @@ def build_assets(
             "collision": f"site/{part.name}_collision.obj",
             "material": part.material,
             "convex_parts": len(hulls),
-            "keep_free": [{"center": c.tolist(), "half_size": h.tolist(), "yaw_deg": y} for c, h, y in part.keep_free],
+            "keep_free": [{"center": c.tolist(), "half_size": h.tolist(), "yaw_deg": y, "through_axis": a}
+                          for c, h, y, a in part.keep_free],
         }
 
-    progress("writing the arm's URDF")
+    progress("writing the arm's URDF and SRDF")
     (arm_dir / "construction_arm.urdf").write_text(arm_urdf(arm))
+    (arm_dir / "construction_arm.srdf").write_text(arm_srdf(arm))
 
     manifest = {
         "generator_version": GENERATOR_VERSION,
@@ -196,7 +209,7 @@ def build_assets(
             "size": list(site.staging_size),
             "rim": list(site.staging_rim),
         },
-        "arm": {"urdf": "arm/construction_arm.urdf", "effort_limits": effort_limits(arm)},
+        "arm": {"urdf": "arm/construction_arm.urdf", "srdf": "arm/construction_arm.srdf", "effort_limits": effort_limits(arm)},
         "materials": {k: {"rgba": list(v[0]), "metallic": v[1], "roughness": v[2]} for k, v in MATERIALS.items()},
     }
     files = [f"site/{f.name}" for f in sorted(site_dir.iterdir())] + [f"arm/{f.name}" for f in sorted(arm_dir.iterdir())]

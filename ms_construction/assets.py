@@ -19,9 +19,10 @@ from ms_construction.site_geometry import SiteParams
 ASSET_DIR = Path(__file__).resolve().parent.parent / "assets"
 MANIFEST_PATH = ASSET_DIR / "manifest.json"
 ARM_URDF_PATH = ASSET_DIR / "arm" / "construction_arm.urdf"
+ARM_SRDF_PATH = ASSET_DIR / "arm" / "construction_arm.srdf"
 REBUILD_COMMAND = "python scripts/build_assets.py"
 
-GENERATOR_VERSION = 1
+GENERATOR_VERSION = 3
 """Bump when the generator's output changes for unchanged parameters."""
 
 

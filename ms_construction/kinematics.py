@@ -43,16 +43,33 @@ class ArmIK:
         rng = np.random.default_rng(rng_seed)
         seeds = list(seeds or []) + [REST_QPOS] + [rng.uniform(self.lower, self.upper) for _ in range(n_random)]
         for seed in seeds:
-            q, ok, _ = self.model.compute_inverse_kinematics(
-                self.tcp_index, target, initial_qpos=np.asarray(seed, dtype=np.float64), max_iterations=500
-            )
-            q = self._wrap(np.asarray(q))
-            if np.any(q < self.lower - 1e-6) or np.any(q > self.upper + 1e-6):
-                continue
-            err_p, err_r = pose_error(self.fk(q), target)
-            if err_p <= pos_tol and err_r <= rot_tol_deg:
+            q = self.solve_from(target, seed, pos_tol, rot_tol_deg)
+            if q is not None:
                 return q
         return None
+
+    def solve_all(self, target: sapien.Pose, seeds: list, min_distance: float = 0.1, pos_tol: float = 1e-3,
+                  rot_tol_deg: float = 0.5) -> list[np.ndarray]:
+        """The distinct solutions (further apart than `min_distance` rad) reached from `seeds`, in
+        the order of their seeds."""
+        found: list[np.ndarray] = []
+        for seed in seeds:
+            q = self.solve_from(target, seed, pos_tol, rot_tol_deg)
+            if q is not None and all(np.abs(q - other).max() > min_distance for other in found):
+                found.append(q)
+        return found
+
+    def solve_from(self, target: sapien.Pose, seed: np.ndarray, pos_tol: float = 1e-3,
+                   rot_tol_deg: float = 0.5) -> Optional[np.ndarray]:
+        """The solution damped least squares converges to from `seed`, or None."""
+        q, _, _ = self.model.compute_inverse_kinematics(
+            self.tcp_index, target, initial_qpos=np.asarray(seed, dtype=np.float64), max_iterations=500
+        )
+        q = self._wrap(np.asarray(q))
+        if np.any(q < self.lower - 1e-6) or np.any(q > self.upper + 1e-6):
+            return None
+        err_p, err_r = pose_error(self.fk(q), target)
+        return q if err_p <= pos_tol and err_r <= rot_tol_deg else None
 
 
 def pose_error(a: sapien.Pose, b: sapien.Pose) -> tuple[float, float]:

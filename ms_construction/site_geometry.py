@@ -186,8 +186,9 @@ class StaticPart:
     name: str
     material: str
     solid: manifold3d.Manifold
-    keep_free: list[tuple[np.ndarray, np.ndarray, float]] = field(default_factory=list)
-    """oriented boxes (center, half sizes, yaw deg) no collision hull may enter: openings, tray."""
+    keep_free: list[tuple[np.ndarray, np.ndarray, float, int]] = field(default_factory=list)
+    """oriented boxes (center, half sizes, yaw deg, through axis) that no collision hull may block:
+    openings, recesses, the staging tray; elements enter them along the through axis."""
 
 
 def static_parts(p: SiteParams) -> list[StaticPart]:
@@ -202,7 +203,7 @@ def static_parts(p: SiteParams) -> list[StaticPart]:
     for x, y, yaw in p.floor_slots:
         size = (fl[0] + 2 * c, fl[1] + 2 * c, fl[2])
         ground = ground - _box((size[0], size[1], 2 * fl[2]), (x, y, 0.0), yaw)
-        recess_free.append((np.array([x, y, -fl[2] / 2]), np.array(size) / 2, yaw))
+        recess_free.append((np.array([x, y, -fl[2] / 2]), np.array(size) / 2, yaw, 2))
     parts.append(StaticPart("ground_slab", "concrete", ground, recess_free))
 
     # second-story slab with ceiling openings
@@ -214,7 +215,7 @@ def static_parts(p: SiteParams) -> list[StaticPart]:
     for x, y, yaw in p.ceiling_slots:
         size = (cl[0] + 2 * c, cl[1] + 2 * c, p.slab_thickness)
         slab = slab - _box((size[0], size[1], 3 * size[2]), (x, y, z0 + size[2] / 2), yaw)
-        openings.append((np.array([x, y, z0 + size[2] / 2]), np.array(size) / 2, yaw))
+        openings.append((np.array([x, y, z0 + size[2] / 2]), np.array(size) / 2, yaw, 2))
     parts.append(StaticPart("upper_slab", "concrete", slab, openings))
 
     # exterior wall with window openings
@@ -227,7 +228,7 @@ def static_parts(p: SiteParams) -> list[StaticPart]:
         size = (p.wall_thickness, wd[0] + 2 * c, wd[1] + 2 * c)
         center = (p.wall_x + p.wall_thickness / 2, y, p.window_sill + size[2] / 2)
         wall = wall - _box((3 * size[0], size[1], size[2]), center)
-        windows.append((np.array(center), np.array(size) / 2, 0.0))
+        windows.append((np.array(center), np.array(size) / 2, 0.0, 0))
     parts.append(StaticPart("exterior_wall", "concrete", wall, windows))
 
     # columns carrying the slab
@@ -249,7 +250,7 @@ def static_parts(p: SiteParams) -> list[StaticPart]:
     for dy in (-1, 1):
         pieces.append(_box((lx, rim_t, rim_h), (sx, sy + dy * (ly - rim_t) / 2, h + rim_h / 2)))
     table = manifold3d.Manifold.batch_boolean(pieces, manifold3d.OpType.Add)
-    tray = (np.array([sx, sy, h + rim_h]), np.array([lx / 2 - rim_t, ly / 2 - rim_t, rim_h]), 0.0)
+    tray = (np.array([sx, sy, h + rim_h]), np.array([lx / 2 - rim_t, ly / 2 - rim_t, rim_h]), 0.0, 2)
     parts.append(StaticPart("staging_table", "steel", table, [tray]))
 
     # precast Jersey barriers around the work cell (safety yellow)
@@ -281,16 +282,17 @@ def box_planes(center, half, yaw_deg) -> list[tuple[np.ndarray, float]]:
     return planes
 
 
-def hull_intrusion(vertices: np.ndarray, center, half, yaw_deg) -> float:
-    """How deep (m) a convex hull enters an oriented box: 0 if they do not overlap.
+def hull_intrusion(vertices: np.ndarray, center, half, yaw_deg, through_axis: int) -> float:
+    """How far (m) a convex hull blocks an opening: an oriented box an element passes through along
+    its `through_axis` (box frame). 0 if the hull does not reach into the box along that axis;
+    otherwise its overlap with the box across the opening (the smaller of the two lateral overlaps),
+    so a thin membrane spanning the opening counts in full.
 
-    Uses the separating-axis test on the box's face axes and the hull's extent along them; a hull
-    inside the box's slab on all three axes overlaps it by the smallest of the three overlaps.
-    (Conservative for the thin opening volumes used here: it never reports 0 for an overlap.)"""
+    Separating-axis test on the box's face axes: exact for hulls that lie on one side of each of the
+    box's face planes, as the decomposition's pieces do; conservative otherwise."""
     R = euler2mat(0, 0, np.deg2rad(yaw_deg))
     local = (np.asarray(vertices) - center) @ R
-    overlaps = []
-    for i in range(3):
-        lo, hi = local[:, i].min(), local[:, i].max()
-        overlaps.append(min(hi, half[i]) - max(lo, -half[i]))
-    return max(0.0, float(min(overlaps)))
+    overlaps = [min(local[:, i].max(), half[i]) - max(local[:, i].min(), -half[i]) for i in range(3)]
+    if overlaps[through_axis] <= 1e-6:
+        return 0.0
+    return max(0.0, float(min(o for i, o in enumerate(overlaps) if i != through_axis)))
