@@ -17,6 +17,7 @@ hull), the same shapes PhysX collides, as FCL convex objects.
 from __future__ import annotations
 
 import xml.etree.ElementTree as ET
+from pathlib import Path
 from typing import Optional
 
 import numpy as np
@@ -82,7 +83,7 @@ def planning_srdf(with_element: bool) -> str:
 def load_convex_parts(obj_path) -> list[tuple[np.ndarray, np.ndarray]]:
     """(vertices, triangles) of every convex part of a collision OBJ (one `o` object per part)."""
     verts, parts = [], []
-    for line in open(obj_path):
+    for line in Path(obj_path).read_text().splitlines():
         if line.startswith("o "):
             parts.append([])
         elif line.startswith("v "):

@@ -1,0 +1,430 @@
+"""The motion-planning expert: solves a seeded episode of any construction task, phase by phase.
+
+1. approach: RRTConnect to a pre-grasp pose facing the grasp face, just outside tau_pick;
+2. descend: a straight tcp line towards the face until the grasp triggers, then wait for the pull;
+3. lift: a straight tcp line up, clear of the table;
+4. carry: RRTConnect, the element now part of the arm's collision model at its actual hold pose,
+   to a pre-install pose backed off from the goal along the plate's axis;
+5. install: a straight tcp line into the opening, until the task reports success.
+
+Plans run on mplib 0.1.1 (OMPL RRTConnect, FCL) against the committed site collision parts with a
+safety margin; every time-parameterized trajectory is checked again, densely, before it runs.
+The install tcp pose is `goal * symmetry * hold^-1` for the element's actual hold pose, over the
+element's symmetric goal rotations, the reachable one nearest to the arm chosen.
+The env must be a single physx_cpu env in pd_joint_pos control; every action is an absolute joint
+target at the control rate, so a recorded episode replays from its actions.
+"""
+
+from __future__ import annotations
+
+import tempfile
+import time
+from contextlib import contextmanager
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+from typing import Callable, Optional
+
+import numpy as np
+import sapien
+import torch
+from transforms3d.euler import euler2quat
+
+from ms_construction.agents.construction_arm import REST_QPOS
+from ms_construction.envs.construction_env import SYMMETRIES_DEG
+from ms_construction.kinematics import ArmIK
+from ms_construction.planning.arm_planner import ArmPlanner
+from ms_construction.planning.collision_model import (
+    box_object,
+    planning_srdf,
+    planning_urdf,
+    site_collision_objects,
+)
+from ms_construction.planning.trajectory import tcp_line, time_parameterize
+from ms_construction.site_geometry import ELEMENT_KINDS
+
+
+@dataclass(frozen=True)
+class ExpertConfig:
+    arm_margin: float = 0.02
+    """m; moving links are inflated by this much for the sampled paths (tracking lag, thin parts)."""
+    element_margin: float = 0.02
+    """m; a held element is inflated by this much (but not through the plate) for the sampled paths.
+    An installed ceiling panel's corner is 3.4 cm from the exterior wall (slot 0)."""
+    exact_shrink: float = 0.002
+    """m; for the straight lines the element is this much smaller than it is, so that an element
+    flush in its opening (the floor recess's bottom, a hull's 1 mm tolerance) does not count as hit."""
+    pregrasp_clearance: float = 0.05
+    """m; the approach ends this far beyond tau_pick from the grasp face (no grasp on the way)."""
+    descend_to: float = 0.02
+    """m above the face where the descent would end; the grasp triggers long before at cp1..cp4."""
+    lift: float = 0.15
+    """m; straight up after the grasp."""
+    install_standoff: float = 0.25
+    """m; the pre-install pose is backed off from the installed one this far along the plate axis."""
+    install_overrun: float = 0.02
+    """m; the install line must be free this far past the point where the element counts as placed."""
+    speed: float = 0.8
+    """fraction of the arm's joint velocity limits for sampled paths."""
+    acceleration: float = 2.0
+    """joint acceleration limits, in (rad/s^2) per (rad/s) of velocity limit."""
+    line_speed: float = 0.35
+    """fraction of the velocity limits on straight tcp lines (descend, lift, install)."""
+    rrt_time: float = 1.0
+    """s; time limit of one RRTConnect call."""
+    rrt_attempts: int = 4
+    """RRTConnect calls per goal configuration: the quickest checked path is kept, and the next
+    candidate goal is tried only if none is found."""
+    good_enough: float = 1.5
+    """no further RRTConnect calls once a path takes at most this times the straight joint move."""
+    goal_candidates: int = 4
+    """IK solutions tried as goals of one phase, nearest first."""
+    ik_seeds: int = 48
+    """random IK restarts (besides the current and the rest configuration)."""
+    settle_tol: float = 0.01
+    """rad; after a sampled path the arm is waited for until it is this close to its target ..."""
+    settle_steps: int = 6
+    """... for at most this many control steps."""
+    pull_steps: int = 10
+    """control steps at most to wait for the grasped element to reach the plate."""
+
+
+@dataclass
+class EpisodeResult:
+    seed: int
+    task: str
+    picked: bool
+    placed: bool
+    steps: int
+    planning_time: float
+    """s of wall time spent in IK, planning, time parameterization and checks."""
+    failure: str = ""
+    """'phase: what happened' when not placed."""
+    phase_steps: dict = field(default_factory=dict)
+    """control steps spent in each phase."""
+
+    def to_dict(self) -> dict:
+        return asdict(self)
+
+
+class PhaseFailure(Exception):
+    """A phase found no way to go on."""
+
+
+class EpisodeEnded(Exception):
+    """The env terminated (success) or truncated."""
+
+
+def _pose(raw) -> sapien.Pose:
+    t = raw.detach().cpu().numpy().reshape(-1)[:7] if torch.is_tensor(raw) else np.asarray(raw).reshape(-1)
+    return sapien.Pose(t[:3], t[3:])
+
+
+def _rz(deg: float) -> sapien.Pose:
+    return sapien.Pose(q=euler2quat(0, 0, np.deg2rad(deg)))
+
+
+class MotionPlanningExpert:
+    """Solves episodes of a (RecordEpisode-wrapped) construction env; see the module docstring."""
+
+    def __init__(self, env, config: ExpertConfig = ExpertConfig()):
+        self.env, self.u, self.cfg = env, env.unwrapped, config
+        if self.u.control_mode != "pd_joint_pos" or self.u.num_envs != 1:
+            raise ValueError("the expert drives one env in pd_joint_pos control")
+        self.ik = ArmIK(self.u.agent.robot)
+        manifest = self.u.site.manifest
+        vmax = np.asarray(manifest["arm_params"]["velocity"], float)
+        self.vmax = vmax
+        self.vel, self.acc = config.speed * vmax, config.acceleration * vmax
+        self.dt = 1.0 / self.u.control_freq
+        self.grasp_in_el = {k: _pose(manifest["elements"][k]["grasp_pose"]) for k in ELEMENT_KINDS}
+        self.el_size = {k: np.asarray(manifest["elements"][k]["size"], float) for k in ELEMENT_KINDS}
+        self._tmp = tempfile.TemporaryDirectory(prefix="ms_construction_planning_")
+        self.workdir = Path(self._tmp.name)
+        self.site = site_collision_objects(manifest)
+        # the free arm: inflated for sampling, exact for the descent onto the element
+        self.free = ArmPlanner(planning_urdf(config.arm_margin), planning_srdf(False), self.workdir, "free", self.site)
+        self.free_exact = ArmPlanner(planning_urdf(0.0), planning_srdf(False), self.workdir, "free_exact", self.site)
+
+    def close(self) -> None:
+        self._tmp.cleanup()
+
+    # ------------------------------------------------------------------------------------- #
+    # episode
+    # ------------------------------------------------------------------------------------- #
+    def run(self, seed: int) -> EpisodeResult:
+        """Reset the env with `seed` and solve the episode."""
+        self.env.reset(seed=seed)
+        u = self.u
+        self.kind = ELEMENT_KINDS[int(u.task_id[0])]
+        self.steps, self.plan_time, self.info, self.phase_steps, self.phase = 0, 0.0, {}, {}, "approach"
+        self.q = u.agent.robot.get_qpos()[0].cpu().numpy().astype(np.float64)
+        self.rng = np.random.default_rng(seed)
+        failure = ""
+        try:
+            self._set_obstacles()
+            with self._phase("approach"):
+                self._approach()
+            with self._phase("descend"):
+                self._descend()
+                self._await_pull()
+            loaded, loaded_exact = self._loaded_planners()
+            with self._phase("lift"):
+                self._lift(loaded_exact)
+            with self._phase("carry"):
+                install = self._carry(loaded, loaded_exact)
+            with self._phase("install"):
+                self._install(install)
+        except PhaseFailure as e:
+            failure = str(e)
+        except EpisodeEnded:
+            if not self.info.get("success"):
+                failure = f"{self.phase}: the episode was truncated after {self.steps} steps"
+        return EpisodeResult(seed=seed, task=self.kind, picked=bool(u.picked[0]), placed=bool(self.info.get("success")),
+                             steps=self.steps, planning_time=self.plan_time, failure=failure,
+                             phase_steps=self.phase_steps)
+
+    # ------------------------------------------------------------------------------------- #
+    # phases
+    # ------------------------------------------------------------------------------------- #
+    def _approach(self) -> None:
+        cfg, u = self.cfg, self.u
+        pre = self._grasp_pose() * sapien.Pose([0, 0, -(float(u.tau_pick[0]) + cfg.pregrasp_clearance)])
+        with self._planning():
+            goals = self._pregrasp_goals(pre)
+            _, traj = self._plan(self.free, goals, "approach")
+        self._follow(traj, until=lambda: bool(u.held[0]))
+        if not bool(u.held[0]):
+            self._settle()
+
+    def _descend(self) -> None:
+        u = self.u
+        if bool(u.held[0]):  # the approach ended inside the grasp range
+            return
+        with self._planning():
+            line = tcp_line(self.ik, self.q, self._grasp_pose() * sapien.Pose([0, 0, -self.cfg.descend_to]))
+            if line is None:
+                raise PhaseFailure("descend: no IK along the line to the grasp face")
+            self._check_free(self.free_exact, line, "descend")
+            traj = time_parameterize(line, self.cfg.line_speed * self.vmax, self.acc, self.dt)
+        self._follow(traj, until=lambda: bool(u.held[0]))
+        if not bool(u.held[0]):
+            raise PhaseFailure(f"descend: no grasp (ray distance {float(u.grasp_ray()[0][0]):.3f} m)")
+
+    def _await_pull(self) -> None:
+        """Hold still while the grasped element is pulled onto the plate."""
+        u = self.u
+        for _ in range(self.cfg.pull_steps):
+            held_at = _pose(u.agent.tcp_pose.raw_pose) * _pose(u.hold_pose_in_tcp)
+            if np.linalg.norm(held_at.p - _pose(u.obj.pose.raw_pose).p) < 0.005:
+                return
+            self._step(self.q)
+
+    def _lift(self, loaded_exact: ArmPlanner) -> None:
+        tcp = self.ik.fk(self.q)
+        with self._planning():
+            line = tcp_line(self.ik, self.q, sapien.Pose(tcp.p + [0, 0, self.cfg.lift], tcp.q))
+            if line is None:
+                raise PhaseFailure("lift: no IK along the line up")
+            self._check_free(loaded_exact, line, "lift")
+            traj = time_parameterize(line, self.cfg.line_speed * self.vmax, self.acc, self.dt)
+        self._follow(traj)
+
+    def _carry(self, loaded: ArmPlanner, loaded_exact: ArmPlanner) -> np.ndarray:
+        """Carry to the pre-install pose; returns the joint targets of the install line from there."""
+        with self._planning():
+            lines = self._install_lines(loaded, loaded_exact)
+            installs = [time_parameterize(line, self.cfg.line_speed * self.vmax, self.acc, self.dt) for line in lines]
+            # what is left of the episode once the install line and the waits are done
+            budget = self.u.MAX_EPISODE_STEPS - self.steps - max(map(len, installs)) - 2 * self.cfg.settle_steps
+            i, traj = self._plan(loaded, [line[0] for line in lines], "carry", max_steps=budget)
+        self._follow(traj)
+        self._settle()
+        return installs[i]
+
+    def _install(self, traj: np.ndarray) -> None:
+        self._follow(traj)
+        self._settle()
+        raise PhaseFailure(f"install: no success at the end of the line (element {self.info['place_dist']:.3f} m, "
+                           f"{self.info['place_angle_deg']:.1f} deg from the goal, held {self.info['is_grasped']})")
+
+    # ------------------------------------------------------------------------------------- #
+    # goals
+    # ------------------------------------------------------------------------------------- #
+    def _seeds(self, ref: np.ndarray) -> list[np.ndarray]:
+        return [ref, REST_QPOS] + [self.rng.uniform(self.ik.lower, self.ik.upper) for _ in range(self.cfg.ik_seeds)]
+
+    def _turns(self, q: np.ndarray, joint: int) -> list[np.ndarray]:
+        """`q` and its copies with `joint` turned by whole turns, within the joint's limits."""
+        out = []
+        for k in (-2, -1, 0, 1, 2):
+            v = q.copy()
+            v[joint] += 2 * np.pi * k
+            if self.ik.lower[joint] <= v[joint] <= self.ik.upper[joint]:
+                out.append(v)
+        return out
+
+    def _nearest_turns(self, q: np.ndarray, ref: np.ndarray) -> np.ndarray:
+        """`q` with every joint turned by whole turns to lie nearest `ref` (same arm pose)."""
+        q = q.copy()
+        for j in range(len(q)):
+            q[j] = min(self._turns(q, j), key=lambda v: abs(v[j] - ref[j]))[j]
+        return q
+
+    def _travel(self, a: np.ndarray, b: np.ndarray, joints=slice(None)) -> float:
+        """s a joint move takes at the velocity limits (the slowest joint's time)."""
+        return float(np.max(np.abs(a - b)[joints] / self.vel[joints]))
+
+    def _pregrasp_goals(self, pre: sapien.Pose) -> list[np.ndarray]:
+        """Collision-free configurations at `pre` up to the rotation about the plate axis (joint 6
+        stays where it is, which fixes the grasp's yaw), ranked by the time to reach them plus the
+        time from them to the installation (whose joints 1-5 do not depend on that yaw)."""
+        goal = _pose(self.u.goal_pose.raw_pose)
+        installs = self.ik.solve_all(goal * self.grasp_in_el[self.kind], self._seeds(self.q))
+        goals = []
+        for sol in self.ik.solve_all(pre, self._seeds(self.q)):
+            sol[5] = self.q[5]
+            for g in self._turns(sol, 0):
+                if self.free.collides(g):
+                    continue
+                onward = min((self._travel(g, self._nearest_turns(i, g), slice(0, 5)) for i in installs), default=0.0)
+                goals.append((self._travel(self.q, g) + onward, g))
+        return [g for _, g in sorted(goals, key=lambda t: t[0])]
+
+    def _install_lines(self, loaded: ArmPlanner, loaded_exact: ArmPlanner) -> list[np.ndarray]:
+        """Joint paths of the straight install approach (pre-install first), over the element's
+        symmetric goal rotations and IK branches, for the actual hold pose; nearest first."""
+        u, cfg = self.u, self.cfg
+        hold = _pose(u.hold_pose_in_tcp)
+        goal = _pose(u.goal_pose.raw_pose)
+        # the episode ends once the element is within tau_place of its goal: the line beyond that
+        # is never driven (but for the arm's lag), so it need not be free
+        driven_to = float(u.tau_place[0]) - cfg.install_overrun
+        lines, rejected = [], set()
+        for sym in SYMMETRIES_DEG[self.kind]:
+            at_goal = goal * _rz(sym) * hold.inv()
+            back = at_goal * sapien.Pose([0, 0, -cfg.install_standoff])
+            sols = [self._nearest_turns(sol, self.q) for sol in self.ik.solve_all(at_goal, self._seeds(self.q))]
+            for i, sol in enumerate(sols):
+                if any(np.allclose(sol, other) for other in sols[:i]):
+                    continue
+                line = tcp_line(self.ik, sol, back)
+                if line is None:
+                    rejected.add("no IK along the line")
+                elif loaded.collides(line[-1]):
+                    rejected.add(f"pre-install pose hits {', '.join(loaded.contacts(line[-1]))}")
+                elif (hit := loaded_exact.collision_on(
+                        line[np.linspace(0.0, cfg.install_standoff, len(line)) >= driven_to])) is not None:
+                    rejected.add(f"line hits {', '.join(loaded_exact.contacts(hit))}")
+                else:
+                    lines.append(line[::-1])
+        if not lines:
+            raise PhaseFailure(f"carry: no install approach ({'; '.join(sorted(rejected)) or 'no IK at the goal'})")
+        return sorted(lines, key=lambda line: self._travel(self.q, line[0]))
+
+    # ------------------------------------------------------------------------------------- #
+    # planning
+    # ------------------------------------------------------------------------------------- #
+    @contextmanager
+    def _phase(self, name: str):
+        start, self.phase = self.steps, name
+        try:
+            yield
+        finally:
+            self.phase_steps[name] = self.steps - start
+
+    @contextmanager
+    def _planning(self):
+        t = time.perf_counter()
+        try:
+            yield
+        finally:
+            self.plan_time += time.perf_counter() - t
+
+    def _plan(self, planner: ArmPlanner, goals: list[np.ndarray], phase: str,
+              max_steps: Optional[int] = None) -> tuple[int, np.ndarray]:
+        """(index of the goal, joint targets at the control rate) along an RRTConnect path to the
+        first reachable of `goals`, checked densely for collisions after time parameterization and
+        taking at most `max_steps` control steps."""
+        if planner.collides(self.q):
+            raise PhaseFailure(f"{phase}: start in collision ({', '.join(planner.contacts(self.q))})")
+        if not goals:
+            raise PhaseFailure(f"{phase}: no collision-free goal configuration")
+        for i, goal in enumerate(goals[: self.cfg.goal_candidates]):
+            best, direct = None, len(time_parameterize(np.array([self.q, goal]), self.vel, self.acc, self.dt))
+            for _ in range(self.cfg.rrt_attempts):
+                path = planner.rrt_connect(self.q, goal, self.cfg.rrt_time)
+                if path is None:
+                    continue
+                path = planner.shortcut(path)
+                traj = time_parameterize(path, self.vel, self.acc, self.dt)
+                if planner.path_collides(np.vstack([self.q, traj])):
+                    continue
+                if best is None or len(traj) < len(best):
+                    best = traj
+                if len(best) <= min(self.cfg.good_enough * direct, max_steps or np.inf):
+                    break
+            if best is not None and len(best) <= (max_steps or np.inf):
+                return i, best
+        raise PhaseFailure(f"{phase}: RRTConnect found no collision-free path"
+                           + (f" within {max_steps} steps" if max_steps is not None else ""))
+
+    def _check_free(self, planner: ArmPlanner, path: np.ndarray, phase: str) -> None:
+        hit = planner.collision_on(path)
+        if hit is not None:
+            raise PhaseFailure(f"{phase}: the straight line collides ({', '.join(planner.contacts(hit))})")
+
+    def _set_obstacles(self) -> None:
+        """Every element where it lies: on the table (this episode's, but not for the descent, whose
+        plate meets it) or in storage (the general task's others)."""
+        for kind, actor in self.u.elements.items():
+            key, box = f"element_{kind}", box_object(self.el_size[kind], _pose(actor.pose.raw_pose))
+            self.free.set_obstacle(key, box)
+            if kind == self.kind:
+                self.free_exact.remove_obstacle(key)
+            else:
+                self.free_exact.set_obstacle(key, box)
+
+    def _loaded_planners(self) -> tuple[ArmPlanner, ArmPlanner]:
+        """The arm with the element at its actual hold pose: inflated and exact."""
+        hold, size = _pose(self.u.hold_pose_in_tcp), self.el_size[self.kind]
+        obstacles = dict(self.site)
+        for kind, actor in self.u.elements.items():
+            if kind != self.kind:
+                obstacles[f"element_{kind}"] = box_object(self.el_size[kind], _pose(actor.pose.raw_pose))
+        cfg = self.cfg
+        with self._planning():
+            loaded = ArmPlanner(planning_urdf(cfg.arm_margin, size, hold, cfg.element_margin), planning_srdf(True),
+                                self.workdir, "loaded", obstacles)
+            exact = ArmPlanner(planning_urdf(0.0, size, hold, -cfg.exact_shrink), planning_srdf(True),
+                               self.workdir, "loaded_exact", obstacles)
+        return loaded, exact
+
+    def _grasp_pose(self) -> sapien.Pose:
+        """The tcp pose at the centre of the element's grasp face, facing it (yaw 0)."""
+        return _pose(self.u.obj.pose.raw_pose) * self.grasp_in_el[self.kind]
+
+    # ------------------------------------------------------------------------------------- #
+    # execution
+    # ------------------------------------------------------------------------------------- #
+    def _step(self, target: np.ndarray) -> None:
+        self.q = np.asarray(target, np.float64)
+        _, _, terminated, truncated, info = self.env.step(torch.as_tensor(self.q[None], dtype=torch.float32))
+        self.steps += 1
+        self.info = {k: v.reshape(-1)[0].item() for k, v in info.items() if torch.is_tensor(v)}
+        if bool(terminated) or bool(truncated):
+            raise EpisodeEnded
+
+    def _follow(self, traj: np.ndarray, until: Optional[Callable[[], bool]] = None) -> None:
+        """Send the targets one per control step, stopping early once `until()` holds."""
+        for target in traj:
+            self._step(target)
+            if until is not None and until():
+                return
+
+    def _settle(self) -> None:
+        """Hold the last target until the arm has caught up with it."""
+        for _ in range(self.cfg.settle_steps):
+            qpos = self.u.agent.robot.get_qpos()[0].cpu().numpy()
+            if np.abs(qpos - self.q).max() <= self.cfg.settle_tol:
+                return
+            self._step(self.q)
