@@ -536,6 +536,9 @@ def setup(args: Args) -> Trainer:
     torch.manual_seed(args.seed)
     torch.backends.cudnn.deterministic = args.torch_deterministic
     device = torch.device("cuda" if torch.cuda.is_available() and args.cuda else "cpu")
+    if backend == "physx_cpu":
+        # the env processes own the cores; a multi-threaded learner would fight them for every step
+        torch.set_num_threads(1)
 
     eval_video = run_dir / "videos" if args.capture_video else None
     eval_envs = VecEnv(args, args.num_eval_envs, backend, device, eval_mode=True, video_dir=eval_video)
