@@ -53,8 +53,9 @@ class ConstructionSiteSceneBuilder(SceneBuilder):
 
     def initialize(self, env_idx: torch.Tensor):
         b = len(env_idx)
-        noise = self.env._episode_rng.normal(0, self.robot_init_qpos_noise, (b, len(REST_QPOS)))
-        qpos = torch.as_tensor(REST_QPOS[None] + noise, dtype=torch.float32, device=self.env.device)
+        # torch's generator: ManiSkill seeds it per reset, for CPU and GPU alike
+        rest = torch.as_tensor(REST_QPOS, dtype=torch.float32, device=self.env.device)
+        qpos = rest + torch.randn(b, len(REST_QPOS), device=self.env.device) * self.robot_init_qpos_noise
         self.env.agent.reset(qpos)
         self.env.agent.robot.set_pose(sapien.Pose())
 

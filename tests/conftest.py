@@ -1,4 +1,4 @@
-"""Shared helpers: making envs, IK-driven joint-space moves, pose conversions."""
+"""Shared helpers: making envs, IK-driven joint-space moves, a step recorder, pose conversions."""
 
 from __future__ import annotations
 
@@ -72,18 +72,19 @@ class JointMover:
         return tcp_at_goal * sapien.Pose([0, 0, -standoff]), tcp_at_goal
 
 
-def pick_and_place(env, seed: int, lift: float = 0.5) -> JointMover:
-    """Scripted solution of a seeded episode (joint-space moves between IK poses)."""
-    env.reset(seed=seed)
-    m = JointMover(env)
-    m.move_to(m.solve(m.grasp_pose_above(0.15)), 30)
-    assert bool(m.u.held[0]), "the scripted approach did not grasp"
-    tcp = to_sapien(m.u.agent.tcp.pose.raw_pose)
-    m.move_to(m.solve(sapien.Pose(tcp.p + np.array([0, 0, lift]), tcp.q)), 20)
-    pre, at = m.install_targets()
-    if not m.move_to(m.solve(pre), 40):
-        m.move_to(m.solve(at), 30)
-    return m
+class StepLog(gym.Wrapper):
+    """Records every step's reward, termination and info of a single env."""
+
+    def reset(self, **kwargs):
+        self.rewards, self.terminated, self.infos = [], [], []
+        return self.env.reset(**kwargs)
+
+    def step(self, action):
+        obs, reward, terminated, truncated, info = self.env.step(action)
+        self.rewards.append(float(reward[0]))
+        self.terminated.append(bool(terminated[0]))
+        self.infos.append({k: v.reshape(-1)[0].item() for k, v in info.items() if torch.is_tensor(v)})
+        return obs, reward, terminated, truncated, info
 
 
 @pytest.fixture
