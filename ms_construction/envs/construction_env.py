@@ -57,6 +57,12 @@ SYMMETRIES_DEG = {
 }
 
 
+def _bearing(a: torch.Tensor, b: torch.Tensor) -> torch.Tensor:
+    """(1 + cos of the angle between two horizontal directions from the arm's axis) / 2, in [0, 1]."""
+    cos = (a * b).sum(-1) / (torch.linalg.norm(a, dim=-1) * torch.linalg.norm(b, dim=-1)).clamp(min=1e-6)
+    return (1 + cos) / 2
+
+
 def _clip_norm(v: torch.Tensor, max_norm: float) -> torch.Tensor:
     n = torch.linalg.norm(v, dim=-1, keepdim=True)
     return v * torch.clamp(max_norm / n.clamp(min=1e-9), max=1.0)
@@ -400,11 +406,14 @@ class ConstructionTaskEnv(BaseEnv):
         placed: 5."""
         tcp = self.agent.tcp.pose.raw_pose
         grasp = self._grasp_frame()
+        el, goal = self.obj.pose.raw_pose, self._goal_table[self.task_id, self.goal_slot]
         # tanh(d), not tanh(3d): the element starts about 2 m from the plate and must still pull
         reach = 1 - torch.tanh(torch.linalg.norm(grasp[:, :3] - tcp[:, :3], dim=-1))
         face = (1 + (qaxis(tcp[:, 3:], 2) * qaxis(grasp[:, 3:], 2)).sum(-1)) / 2
-        approach = 0.5 * reach + 0.5 * reach * face
-        carry = 1 - torch.tanh(info["place_dist"])
+        # bearing around the pedestal: straight-line distance alone pulls the plate over the
+        # pedestal (a dead end) when the target is behind the arm; turning the turret must pay
+        approach = 0.25 * _bearing(tcp[:, :2], grasp[:, :2]) + 0.75 * reach * (0.5 + 0.5 * face)
+        carry = 0.25 * _bearing(el[:, :2], goal[:, :2]) + 0.75 * (1 - torch.tanh(info["place_dist"]))
         orient = 1 - info["place_angle_deg"] / 180
         held = info["is_grasped"].float()
         reward = (1 - held) * approach + held * (2 + carry + orient)
