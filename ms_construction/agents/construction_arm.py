@@ -89,13 +89,16 @@ class ConstructionArm(BaseAgent):
         )
         pd_ee_target_delta_pose = deepcopy(pd_ee_delta_pose)
         pd_ee_target_delta_pose.use_target = True
+        # every mode is a dict of parts, one part "arm", as ManiSkill's own robots declare them: its
+        # trajectory tools (control mode conversion) read `controller.controllers["arm"]` and
+        # `to_action_dict`; the action space stays the arm's flat Box
         return deepcopy_dict(
             dict(
-                pd_joint_delta_pos=pd_joint_delta_pos,
-                pd_joint_pos=pd_joint_pos,
-                pd_joint_target_delta_pos=pd_joint_target_delta_pos,
-                pd_ee_delta_pos=pd_ee_delta_pos,
-                pd_ee_delta_pose=pd_ee_delta_pose,
-                pd_ee_target_delta_pose=pd_ee_target_delta_pose,
+                pd_joint_delta_pos=dict(arm=pd_joint_delta_pos),
+                pd_joint_pos=dict(arm=pd_joint_pos),
+                pd_joint_target_delta_pos=dict(arm=pd_joint_target_delta_pos),
+                pd_ee_delta_pos=dict(arm=pd_ee_delta_pos),
+                pd_ee_delta_pose=dict(arm=pd_ee_delta_pose),
+                pd_ee_target_delta_pose=dict(arm=pd_ee_target_delta_pose),
             )
         )

@@ -426,25 +426,46 @@ class ConstructionTaskEnv(BaseEnv):
     # state
     # ------------------------------------------------------------------------------------- #
     def get_state_dict(self):
+        """ManiSkill's state plus the task state under "task"; every task leaf is [num_envs, k]
+        (task_id, goal_slot, held, picked: k = 1), as ManiSkill's trajectory tools expect."""
         state = super().get_state_dict()
         state["task"] = dict(
-            task_id=self.task_id.clone(),
-            goal_slot=self.goal_slot.clone(),
-            held=self.held.clone(),
-            picked=self.picked.clone(),
+            task_id=self.task_id[:, None].clone(),
+            goal_slot=self.goal_slot[:, None].clone(),
+            held=self.held[:, None].clone(),
+            picked=self.picked[:, None].clone(),
             hold_pose_in_tcp=self.hold_pose_in_tcp.clone(),
             tolerances=self.tolerances.clone(),
         )
         return state
 
     def set_state_dict(self, state: dict, env_idx: Optional[torch.Tensor] = None):
+        """Restore a state from `get_state_dict`. A task leaf may be [b, k] (as saved), one env's
+        row [k] (a trajectory step as ManiSkill's replay tool passes it), or, for the one-column
+        leaves, the earlier 1-D layout [b] (or a scalar)."""
         state = dict(state)
         task = state.pop("task", None)
         if task is not None:
             idx = slice(None) if env_idx is None else env_idx
             for key in ("task_id", "goal_slot", "held", "picked", "hold_pose_in_tcp", "tolerances"):
-                value = torch.as_tensor(task[key], device=self.device)
-                getattr(self, key)[idx] = value[idx] if env_idx is not None and len(value) == self.num_envs else value
+                dest = getattr(self, key)
+                k = dest.shape[1] if dest.ndim == 2 else 1
+                value = task[key]
+                value = torch.as_tensor(value if torch.is_tensor(value) else np.asarray(value), device=self.device)
+                if value.ndim == 2 and value.shape[1] == k:
+                    pass
+                elif value.ndim == 1 and k == 1:  # the earlier 1-D layout [b]
+                    value = value[:, None]
+                elif value.ndim == 1 and value.shape[0] == k:  # one env's row
+                    value = value[None]
+                elif value.ndim == 0 and k == 1:
+                    value = value.reshape(1, 1)
+                else:
+                    raise ValueError(f"task state {key!r} has shape {tuple(value.shape)}; expected [num_envs, {k}]")
+                value = value.to(dest.dtype)
+                if dest.ndim == 1:
+                    value = value[:, 0]
+                dest[idx] = value[idx] if env_idx is not None and len(value) == self.num_envs else value
             if len(self.TASKS) > 1:
                 self._select_active_elements()
         super().set_state_dict(state, env_idx)
