@@ -4,10 +4,15 @@ In the shape of ManiSkill's PPO baseline (CleanRL style: one file, read top to b
 dataclass). Additions: `--curiosity icm` (Pathak et al. 2017), `--curriculum cp1 cp2 cp3 cp4`
 (Table I of the paper, each stage inheriting every parameter of the previous one), sparse reward by
 default (the paper's Algorithm 1), atomic checkpoints and exact `--resume`, a CSV log per run.
+Observations are normalized (running mean and variance, in the checkpoint) and their quaternions
+fed as rotation-matrix columns. Fine-tuning a warm start (our recipe for the general agent,
+scripts/train_general_agent.py): `--checkpoint` from baselines/ppo/bc.py, `--freeze-obs-norm`,
+`--critic-warmup-iterations`, and a behaviour-cloning term on demonstrations (`--demos`, `--bc-coef`).
 
     python baselines/ppo/ppo.py --env-id ConstructionPickPlace-v1 --curriculum cp1 cp2 cp3 cp4 --curiosity icm
     python baselines/ppo/ppo.py --resume runs/<run>/checkpoint.pt            # continue an interrupted run
     python baselines/ppo/ppo.py --evaluate --checkpoint runs/<run>/checkpoint.pt --env-id Flooring-v1
+    python scripts/evaluate.py --checkpoint runs/<run>/checkpoint.pt --all     # the full evaluation
 
 CPU path (physx_cpu, one env per process): a gymnasium AsyncVectorEnv of CPUGymWrapper envs, one
 process per core by default. GPU path (physx_cuda): ManiSkillVectorEnv. `--sim-backend auto` picks
@@ -40,6 +45,8 @@ from tqdm import tqdm
 
 import ms_construction  # noqa: F401  (registers the tasks)
 from ms_construction.curriculum import STAGE_NAMES
+from ms_construction.envs.construction_env import STATE_QUATERNION_STARTS
+from ms_construction.rotations import qmat
 
 
 @dataclass
@@ -122,6 +129,23 @@ class Args:
     not end there); off treats truncation like termination."""
     hidden_size: int = 256
     """width of the policy, value and ICM networks."""
+    norm_obs: bool = True
+    """normalize observations by their running mean and variance (kept in the checkpoint), as
+    ManiSkill's and CleanRL's continuous-control PPO do."""
+    rotation_features: bool = True
+    """feed the networks each quaternion of the state (plate, goal, element) as the first two columns
+    of its rotation matrix: a quaternion's sign can flip mid-episode, the matrix cannot."""
+    freeze_obs_norm: bool = False
+    """keep the normalization statistics as they are (those of a --checkpoint's behaviour cloning)."""
+    demos: tuple[str, ...] = ()
+    """demonstration files (scripts/collect_demos.py) for a behaviour-cloning term in the policy loss
+    (as DAPG, Rajeswaran et al. 2018): keeps a warm-started policy near the expert while PPO refines it."""
+    bc_coef: float = 0.0
+    """weight of that term: mean squared error of the policy's mean on a demonstration minibatch."""
+    critic_warmup_iterations: int = 0
+    """the first iterations of a run (counted from 1) update the value function only: with a warm-started policy
+    (--checkpoint), the critic first learns that policy's returns, so the policy's first steps follow
+    advantages that mean something."""
     checkpoint_freq: int = 10
     """write a checkpoint every this many iterations (and at stage changes, the end, and Ctrl-C)."""
 
@@ -273,23 +297,71 @@ def mlp(n_in: int, n_out: int, hidden: int, out_std: float = np.sqrt(2), act=nn.
     )
 
 
-class Agent(nn.Module):
-    def __init__(self, obs_dim: int, act_dim: int, hidden: int):
+class RunningMeanStd(nn.Module):
+    """Running mean and variance (parallel algorithm) of samples of `shape` (a scalar by default),
+    kept as buffers so checkpoints hold them."""
+
+    def __init__(self, shape: tuple[int, ...] = ()):
         super().__init__()
-        self.critic = mlp(obs_dim, 1, hidden, out_std=1.0)
-        self.actor_mean = mlp(obs_dim, act_dim, hidden, out_std=0.01 * np.sqrt(2))
+        self.register_buffer("mean", torch.zeros(shape))
+        self.register_buffer("var", torch.ones(shape))
+        self.register_buffer("count", torch.tensor(1e-4))
+
+    def update(self, x: torch.Tensor) -> None:
+        x = x.reshape(-1, *self.mean.shape)
+        batch_mean, batch_var, n = x.mean(0), x.var(0, unbiased=False), x.shape[0]
+        delta, total = batch_mean - self.mean, self.count + n
+        self.mean += delta * n / total
+        self.var = (self.var * self.count + batch_var * n + delta**2 * self.count * n / total) / total
+        self.count = total
+
+
+def rotation_features(x: torch.Tensor, quat_starts: tuple[int, ...]) -> torch.Tensor:
+    """`x` [..., obs_dim] with each quaternion [w, x, y, z] starting at one of `quat_starts` replaced
+    by the first two columns of its rotation matrix: 6 numbers that change continuously with the
+    rotation, where a quaternion jumps between q and -q (the plate's flips about w = 0 when it
+    faces down; Zhou et al. 2019, on the continuity of rotation representations)."""
+    parts, last = [], 0
+    for s in quat_starts:
+        parts += [x[..., last:s], qmat(x[..., s:s + 4])[..., :, :2].flatten(-2)]
+        last = s + 4
+    return torch.cat(parts + [x[..., last:]], -1)
+
+
+class Agent(nn.Module):
+    """Gaussian policy and value on observation features (`rotation_features` for the quaternions
+    at `quat_starts`) normalized by `obs_rms` (running mean and variance, clipped to +-10 as
+    gymnasium's NormalizeObservation does; raw until it has seen data)."""
+
+    def __init__(self, obs_dim: int, act_dim: int, hidden: int, quat_starts: tuple[int, ...] = ()):
+        super().__init__()
+        self.quat_starts = tuple(quat_starts)
+        feature_dim = obs_dim + 2 * len(self.quat_starts)
+        self.obs_rms = RunningMeanStd((feature_dim,))
+        self.critic = mlp(feature_dim, 1, hidden, out_std=1.0)
+        self.actor_mean = mlp(feature_dim, act_dim, hidden, out_std=0.01 * np.sqrt(2))
         self.actor_logstd = nn.Parameter(torch.ones(1, act_dim) * -0.5)
 
+    def features(self, x):
+        return rotation_features(x, self.quat_starts) if self.quat_starts else x
+
+    def normalize(self, x):
+        x = self.features(x)
+        if float(self.obs_rms.count) < 1:
+            return x
+        return ((x - self.obs_rms.mean) / torch.sqrt(self.obs_rms.var + 1e-8)).clamp(-10, 10)
+
     def get_value(self, x):
-        return self.critic(x)
+        return self.critic(self.normalize(x))
 
     def get_action(self, x, deterministic=False):
-        mean = self.actor_mean(x)
+        mean = self.actor_mean(self.normalize(x))
         if deterministic:
             return mean
         return Normal(mean, torch.exp(self.actor_logstd.expand_as(mean))).sample()
 
     def get_action_and_value(self, x, action=None):
+        x = self.normalize(x)
         mean = self.actor_mean(x)
         probs = Normal(mean, torch.exp(self.actor_logstd.expand_as(mean)))
         if action is None:
@@ -297,21 +369,11 @@ class Agent(nn.Module):
         return action, probs.log_prob(action).sum(1), probs.entropy().sum(1), self.critic(x)
 
 
-class RunningMeanStd(nn.Module):
-    """Running mean and variance (parallel algorithm), kept as buffers so checkpoints hold them."""
-
-    def __init__(self):
-        super().__init__()
-        self.register_buffer("mean", torch.zeros(()))
-        self.register_buffer("var", torch.ones(()))
-        self.register_buffer("count", torch.tensor(1e-4))
-
-    def update(self, x: torch.Tensor) -> None:
-        batch_mean, batch_var, n = x.mean(), x.var(unbiased=False), x.numel()
-        delta, total = batch_mean - self.mean, self.count + n
-        self.mean += delta * n / total
-        self.var = (self.var * self.count + batch_var * n + delta**2 * self.count * n / total) / total
-        self.count = total
+def make_agent(args: "Args | dict", obs_dim: int, act_dim: int) -> Agent:
+    """The Agent that `args` (an Args or a checkpoint's saved dict of them) describes."""
+    get = args.get if isinstance(args, dict) else lambda k, d=None: getattr(args, k, d)
+    starts = STATE_QUATERNION_STARTS if get("rotation_features", False) else ()
+    return Agent(obs_dim, act_dim, get("hidden_size"), starts)
 
 
 class ICM(nn.Module):
@@ -364,7 +426,7 @@ CSV_FIELDS = [
     "global_step", "iteration", "stage", "episodes", "pick_success", "place_success", "extrinsic_return",
     "intrinsic_return", "episode_length", "eval_pick_success", "eval_place_success", "eval_extrinsic_return",
     "smoothed_eval_success", "sps", "learning_rate", "value_loss", "policy_loss", "entropy", "approx_kl",
-    "icm_forward_loss", "icm_inverse_loss",
+    "icm_forward_loss", "icm_inverse_loss", "bc_loss",
 ]
 
 
@@ -436,6 +498,9 @@ def should_promote(args: Args, progress: Progress) -> Optional[str]:
 
 
 def validate(args: Args) -> None:
+    missing = [p for p in args.demos if not Path(p).is_file()]
+    if missing:
+        raise SystemExit(f"--demos: no such file(s): {', '.join(missing)} (record them with scripts/collect_demos.py)")
     bad = [s for s in args.curriculum if s not in STAGE_NAMES]
     if bad or not args.curriculum:
         raise SystemExit(f"--curriculum {' '.join(args.curriculum)}: stages must be among {', '.join(STAGE_NAMES)}")
@@ -545,7 +610,7 @@ def setup(args: Args) -> Trainer:
     obs_dim = int(np.prod(eval_envs.single_observation_space.shape))
     act_dim = int(np.prod(eval_envs.single_action_space.shape))
 
-    agent = Agent(obs_dim, act_dim, args.hidden_size).to(device)
+    agent = make_agent(args, obs_dim, act_dim).to(device)
     optimizer = optim.Adam(agent.parameters(), lr=args.learning_rate, eps=1e-5)
     icm = icm_optimizer = None
     if args.curiosity == "icm":
@@ -613,6 +678,12 @@ def train(tr: Trainer) -> Progress:
 
     stop = {"now": False}
     signal.signal(signal.SIGTERM, lambda *_: stop.update(now=True))
+
+    demo_obs = demo_actions = None
+    if args.demos:
+        files = [np.load(path) for path in args.demos]
+        demo_obs = torch.as_tensor(np.concatenate([f["obs"] for f in files]), dtype=torch.float32, device=device)
+        demo_actions = torch.as_tensor(np.concatenate([f["actions"] for f in files]), dtype=torch.float32, device=device)
 
     obs_buf = torch.zeros((args.num_steps, args.num_envs, obs_dim), device=device)
     next_obs_buf = torch.zeros_like(obs_buf)  # s_{t+1}: the final observation where an episode ended
@@ -712,6 +783,13 @@ def train(tr: Trainer) -> Progress:
                         v_loss = 0.5 * ((newvalue - b_ret[mb]) ** 2).mean()
                     entropy_loss = entropy.mean()
                     loss = pg_loss - args.ent_coef * entropy_loss + v_loss * args.vf_coef
+                    if demo_obs is not None and args.bc_coef > 0:
+                        d = torch.randint(len(demo_obs), (len(mb),), device=device)
+                        bc_loss = ((agent.actor_mean(agent.normalize(demo_obs[d])) - demo_actions[d]) ** 2).mean()
+                        loss = loss + args.bc_coef * bc_loss
+                        losses["bc_loss"].append(bc_loss.item())
+                    if progress.iteration <= args.critic_warmup_iterations:
+                        loss = v_loss * args.vf_coef
                     optimizer.zero_grad()
                     loss.backward()
                     nn.utils.clip_grad_norm_(agent.parameters(), args.max_grad_norm)
@@ -731,6 +809,9 @@ def train(tr: Trainer) -> Progress:
                     losses["approx_kl"].append(approx_kl.item())
                 if args.target_kl is not None and approx_kl > args.target_kl:
                     break
+            # statistics change after the update, so that each update sees its rollout's normalization
+            if args.norm_obs and not args.freeze_obs_norm:
+                agent.obs_rms.update(agent.features(b_obs))
 
             # ---- logs, evaluation, curriculum ----
             sps = batch_size / (time.time() - t0)

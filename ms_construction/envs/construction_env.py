@@ -55,6 +55,10 @@ SYMMETRIES_DEG = {
     "window": (0.0,),  # head up and inside face in: no symmetry
     "flooring": (0.0, 90.0, 180.0, 270.0),  # a square, finish up
 }
+STATE_QUATERNION_STARTS = (16, 23, 33)
+"""Where the quaternions [w, x, y, z] of the plate (tcp_pose), the goal and the element start in the
+flat `state` observation (qpos 6, qvel 6, is_grasped 1, tcp_pose 7, goal_pose 7, task 3, obj_pose 7,
+tcp_to_grasp_pos 3, obj_to_goal_pos 3: 43 numbers)."""
 
 
 def _bearing(a: torch.Tensor, b: torch.Tensor) -> torch.Tensor:

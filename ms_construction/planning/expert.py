@@ -12,7 +12,8 @@ safety margin; every time-parameterized trajectory is checked again, densely, be
 The install tcp pose is `goal * symmetry * hold^-1` for the element's actual hold pose, over the
 element's symmetric goal rotations, the reachable one nearest to the arm chosen.
 The env must be a single physx_cpu env in pd_joint_pos control; every action is an absolute joint
-target at the control rate, so a recorded episode replays from its actions.
+target at the control rate, so a recorded episode replays from its actions. (`planning/demos.py`
+puts it in front of a pd_joint_delta_pos env to record the learner's actions.)
 """
 
 from __future__ import annotations
@@ -128,8 +129,10 @@ class MotionPlanningExpert:
 
     def __init__(self, env, config: ExpertConfig = ExpertConfig()):
         self.env, self.u, self.cfg = env, env.unwrapped, config
-        if self.u.control_mode != "pd_joint_pos" or self.u.num_envs != 1:
-            raise ValueError("the expert drives one env in pd_joint_pos control")
+        takes_targets = self.u.control_mode == "pd_joint_pos" or getattr(env, "accepts_joint_targets", False)
+        if not takes_targets or self.u.num_envs != 1:
+            raise ValueError("the expert drives one env in pd_joint_pos control (or one wrapped by "
+                             "ms_construction.planning.demos.JointTargetsAsDeltas)")
         self.ik = ArmIK(self.u.agent.robot)
         manifest = self.u.site.manifest
         vmax = np.asarray(manifest["arm_params"]["velocity"], float)

@@ -1,0 +1,132 @@
+"""Behaviour-cloning warm start for PPO: the planning expert's demonstrations -> a ppo.py checkpoint.
+
+    python scripts/collect_demos.py --episodes 1200 --out outputs/demos/general.npz
+    python baselines/ppo/bc.py --demos outputs/demos/general.npz --out runs/bc/checkpoint.pt
+    python baselines/ppo/ppo.py --checkpoint runs/bc/checkpoint.pt --freeze-obs-norm ...   # fine-tune
+
+The actor's mean is regressed onto the expert's clean delta actions (MSE); the observation
+normalization is the demonstrations' mean and variance; the critic is regressed onto the
+demonstrations' discounted sparse returns (Algorithm 1's reward), so that PPO's first advantages
+come from a value that already knows where placements happen instead of from noise. The result
+is an ordinary ppo.py checkpoint (Agent weights, obs normalization, args): `ppo.py --checkpoint`
+fine-tunes it, `scripts/evaluate.py` evaluates it.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import time
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+import torch
+import tyro
+from tqdm import tqdm
+
+from baselines.ppo.ppo import Args as PPOArgs, Progress, make_agent, save_checkpoint
+
+
+@dataclass
+class Args:
+    demos: tuple[Path, ...] = (Path("outputs/demos/general.npz"),)
+    """demonstration files from scripts/collect_demos.py (one or more)."""
+    out: Path = Path("runs/bc/checkpoint.pt")
+    """the checkpoint to write (ppo.py format)."""
+    env_id: str = "ConstructionPickPlace-v1"
+    """the env the checkpoint is for (the demonstrations' observation layout)."""
+    seed: int = 1
+    """seed of initialization and minibatch order."""
+    epochs: int = 40
+    """passes over the demonstrations."""
+    batch_size: int = 1024
+    """samples per gradient step."""
+    learning_rate: float = 1e-3
+    """Adam learning rate, cosine-annealed to 0."""
+    hidden_size: int = 256
+    """width of the networks (as ppo.py's --hidden-size)."""
+    rotation_features: bool = True
+    """quaternions as rotation-matrix columns (as ppo.py's --rotation-features)."""
+    val_fraction: float = 0.05
+    """fraction of episodes held out to report the validation loss."""
+    gamma: float = 0.99
+    """discount of the critic's return targets (as ppo.py's --gamma)."""
+    init_logstd: float = -2.3
+    """the policy's log std in the checkpoint (std 0.1, the DART noise of the demonstrations): small, so
+    that PPO's sampled episodes stay close to the clone's."""
+    max_episodes: int = 0
+    """use only the first this many episodes, in file order (0: all)."""
+
+
+def discounted_returns(rewards: np.ndarray, episode: np.ndarray, gamma: float) -> np.ndarray:
+    out = np.zeros_like(rewards)
+    running = 0.0
+    for t in range(len(rewards) - 1, -1, -1):
+        if t == len(rewards) - 1 or episode[t + 1] != episode[t]:
+            running = 0.0  # every demonstration ends in a placement: terminal
+        running = rewards[t] + gamma * running
+        out[t] = running
+    return out
+
+
+def main(args: Args) -> Path:
+    torch.manual_seed(args.seed)
+    files = [np.load(path) for path in args.demos]
+    offsets = np.cumsum([0] + [int(f["episode"].max()) + 1 for f in files[:-1]])
+    episode = np.concatenate([f["episode"] + o for f, o in zip(files, offsets)])
+    keep = episode < args.max_episodes if args.max_episodes else np.ones_like(episode, bool)
+    obs, act = (np.concatenate([f[k] for f in files])[keep] for k in ("obs", "actions"))
+    ep = episode[keep]
+    ret = discounted_returns(np.concatenate([f["rewards"] for f in files])[keep], ep, args.gamma)
+    episodes = np.unique(ep)
+    rng = np.random.default_rng(args.seed)
+    val_eps = rng.choice(episodes, max(1, int(len(episodes) * args.val_fraction)), replace=False)
+    val = np.isin(ep, val_eps)
+    obs_t, act_t, ret_t = (torch.as_tensor(x, dtype=torch.float32) for x in (obs, act, ret))
+    print(f"{len(episodes)} demonstrations, {len(obs)} steps ({int((~val).sum())} train, {int(val.sum())} validation)")
+
+    ppo_args = PPOArgs(env_id=args.env_id, control_mode="pd_joint_delta_pos", hidden_size=args.hidden_size,
+                       rotation_features=args.rotation_features, seed=args.seed, exp_name=args.out.parent.name)
+    agent = make_agent(ppo_args, obs.shape[1], act.shape[1])
+    agent.obs_rms.update(agent.features(obs_t[torch.as_tensor(~val)]))
+    with torch.no_grad():
+        agent.actor_logstd.fill_(args.init_logstd)
+    params = list(agent.actor_mean.parameters()) + list(agent.critic.parameters())
+    optimizer = torch.optim.Adam(params, lr=args.learning_rate)
+    train_idx = np.flatnonzero(~val)
+    steps_per_epoch = int(np.ceil(len(train_idx) / args.batch_size))
+    sched = torch.optim.lr_scheduler.CosineAnnealingLR(optimizer, args.epochs * steps_per_epoch)
+
+    def losses(idx):
+        x = agent.normalize(obs_t[idx])
+        return ((agent.actor_mean(x) - act_t[idx]) ** 2).mean(), ((agent.critic(x).squeeze(-1) - ret_t[idx]) ** 2).mean()
+
+    t0 = time.time()
+    bar = tqdm(range(args.epochs), desc="behaviour cloning", unit="epoch", dynamic_ncols=True)
+    for _ in bar:
+        rng.shuffle(train_idx)
+        for start in range(0, len(train_idx), args.batch_size):
+            idx = torch.as_tensor(train_idx[start:start + args.batch_size])
+            a_loss, v_loss = losses(idx)
+            optimizer.zero_grad()
+            (a_loss + 0.5 * v_loss).backward()
+            optimizer.step()
+            sched.step()
+        with torch.no_grad():
+            va, vv = losses(torch.as_tensor(np.flatnonzero(val)))
+        bar.set_postfix(train_action_mse=f"{a_loss.item():.4f}", val_action_mse=f"{va.item():.4f}", val_value_mse=f"{vv.item():.4f}")
+    print(f"validation action MSE {va.item():.5f}, value MSE {vv.item():.5f}, {time.time() - t0:.0f} s")
+
+    optimizer_stub = torch.optim.Adam(agent.parameters())
+    save_checkpoint(args.out, ppo_args, Progress(), agent, optimizer_stub, None, None, obs.shape[1], act.shape[1])
+    ckpt = torch.load(args.out, weights_only=False)
+    ckpt["bc"] = {k: [str(p) for p in v] if k == "demos" else str(v) if isinstance(v, Path) else v
+                  for k, v in dataclasses.asdict(args).items()}
+    ckpt["bc"].update(demonstrations=len(episodes), steps=len(obs), val_action_mse=va.item())
+    torch.save(ckpt, args.out)
+    print(f"wrote {args.out}")
+    return args.out
+
+
+if __name__ == "__main__":
+    main(tyro.cli(Args))

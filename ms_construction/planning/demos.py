@@ -1,0 +1,185 @@
+"""Expert demonstrations in the learner's control mode (pd_joint_delta_pos), with DART noise.
+
+    record_demos(Path("outputs/demos/general.npz"), episodes=1200)   # scripts/collect_demos.py
+
+The planning expert sends absolute joint targets. `JointTargetsAsDeltas` puts it in front of a
+pd_joint_delta_pos env: each target becomes the delta action that sets the same PD target from the
+arm's measured joints, `a = (target - qpos) / 0.1` (clipped to [-1, 1]), which is exactly what the
+learner's policy must output in that state. Recorded: (observation, that clean action).
+
+DART (Laskey et al. 2017): with `noise > 0` the action *executed* is the clean one plus Gaussian
+noise, while the clean one is recorded, so the data show how to return to the expert's path from
+states a policy's small errors lead to; the expert tracks its planned targets in closed loop, so
+it corrects the noise itself. Joint targets then lag slightly, which the expert's settle steps
+absorb; a demonstration is kept only if it placed.
+"""
+
+from __future__ import annotations
+
+import multiprocessing as mp
+import os
+import time
+from dataclasses import dataclass
+from pathlib import Path
+
+import gymnasium as gym
+import numpy as np
+import torch
+from tqdm import tqdm
+
+from ms_construction.planning.expert import ExpertConfig, MotionPlanningExpert
+from ms_construction.site_geometry import ELEMENT_KINDS
+
+DELTA_CONTROL_MODE = "pd_joint_delta_pos"
+DEMO_EXPERT_CONFIG = ExpertConfig(speed=0.55)
+"""The expert slowed so that no joint moves more than 0.1 rad (one full delta action) per step."""
+
+
+class JointTargetsAsDeltas(gym.Wrapper):
+    """Takes absolute joint targets [1, 6], steps a pd_joint_delta_pos env, records (obs, action)."""
+
+    accepts_joint_targets = True
+
+    def __init__(self, env: gym.Env, noise: float = 0.0, seed: int = 0):
+        super().__init__(env)
+        u = env.unwrapped
+        if u.control_mode != DELTA_CONTROL_MODE or u.num_envs != 1:
+            raise ValueError(f"JointTargetsAsDeltas wraps one physx_cpu env in {DELTA_CONTROL_MODE}, "
+                             f"got {u.control_mode} with {u.num_envs} envs")
+        ctrl = u.agent.controller.controllers["arm"] if hasattr(u.agent.controller, "controllers") else u.agent.controller
+        self.delta_scale = float(np.asarray(ctrl.config.upper).reshape(-1)[0])
+        self.noise = noise
+        self.rng = np.random.default_rng(seed)
+        self.obs: list[np.ndarray] = []
+        self.actions: list[np.ndarray] = []
+        self.rewards: list[float] = []
+        self._last_obs = None
+
+    def reset(self, **kwargs):
+        obs, info = self.env.reset(**kwargs)
+        self.obs, self.actions, self.rewards = [], [], []
+        self._last_obs = obs
+        return obs, info
+
+    def step(self, target):
+        qpos = self.env.unwrapped.agent.robot.get_qpos()
+        clean = ((torch.as_tensor(target, dtype=qpos.dtype) - qpos) / self.delta_scale).clamp(-1, 1)
+        self.obs.append(self._last_obs[0].cpu().numpy().astype(np.float32))
+        self.actions.append(clean[0].cpu().numpy().astype(np.float32))
+        executed = clean
+        if self.noise > 0:
+            executed = (clean + torch.as_tensor(self.rng.normal(0, self.noise, clean.shape), dtype=clean.dtype)).clamp(-1, 1)
+        obs, reward, terminated, truncated, info = self.env.step(executed)
+        self._last_obs = obs
+        self.rewards.append(float(reward.reshape(-1)[0]))
+        return obs, reward, terminated, truncated, info
+
+
+@dataclass
+class Demo:
+    obs: np.ndarray
+    """[T, obs_dim] observations the actions were taken in."""
+    actions: np.ndarray
+    """[T, 6] clean delta actions in [-1, 1]."""
+    rewards: np.ndarray
+    """[T] the env's sparse reward (Algorithm 1) of each step."""
+    placed: bool
+    task: str
+    seed: int
+    noise: float
+
+
+class DemoCollector:
+    """One env and one expert; `collect(seed, noise)` solves a seeded episode and returns its demo."""
+
+    def __init__(self, env_id: str, curriculum_stage: str = "cp4", config: ExpertConfig = DEMO_EXPERT_CONFIG):
+        env = gym.make(env_id, num_envs=1, obs_mode="state", control_mode=DELTA_CONTROL_MODE, reward_mode="sparse",
+                       sim_backend="physx_cpu", curriculum_stage=curriculum_stage)
+        self.env = JointTargetsAsDeltas(env)
+        self.expert = MotionPlanningExpert(self.env, config)
+
+    def collect(self, seed: int, noise: float) -> Demo:
+        self.env.noise, self.env.rng = noise, np.random.default_rng(seed + 7919)
+        result = self.expert.run(seed)
+        return Demo(obs=np.stack(self.env.obs), actions=np.stack(self.env.actions),
+                    rewards=np.array(self.env.rewards, np.float32), placed=result.placed,
+                    task=result.task, seed=seed, noise=noise)
+
+    def close(self) -> None:
+        self.expert.close()
+        self.env.close()
+
+
+_collector = None
+
+
+def _collect(job: tuple[str, str, int, float]) -> dict:
+    """One episode in a worker process (its collector kept for the next)."""
+    global _collector
+    env_id, stage, seed, noise = job
+    if _collector is None:
+        _collector = DemoCollector(env_id, stage)
+    d = _collector.collect(seed, noise)
+    return dict(obs=d.obs, actions=d.actions, rewards=d.rewards, placed=d.placed, task=d.task, seed=d.seed, noise=d.noise)
+
+
+def save_demos(path: Path, demos: list[dict], tried: int, wall_s: float = 0.0) -> None:
+    """Write atomically (a temporary file, then a rename); `wall_s`: the recording's wall time so far."""
+    lens = [len(d["actions"]) for d in demos]
+    data = dict(
+        obs=np.concatenate([d["obs"] for d in demos]), actions=np.concatenate([d["actions"] for d in demos]),
+        rewards=np.concatenate([d["rewards"] for d in demos]),
+        episode=np.repeat(np.arange(len(demos)), lens),
+        task=np.repeat([ELEMENT_KINDS.index(d["task"]) for d in demos], lens),
+        seed=np.repeat([d["seed"] for d in demos], lens), noise=np.repeat([d["noise"] for d in demos], lens),
+        tried=np.array(tried), wall_s=np.array(wall_s),
+    )
+    path.parent.mkdir(parents=True, exist_ok=True)
+    tmp = path.with_name(path.name + ".tmp.npz")
+    np.savez_compressed(tmp, **data)
+    os.replace(tmp, path)
+
+
+def load_demos(path: Path) -> tuple[list[dict], int, float]:
+    """The episodes of a demonstrations file, how many episodes were tried for it, and the wall time
+    its recording took."""
+    with np.load(path) as f:
+        data = {k: f[k] for k in f.files}  # an npz decompresses an array at every access: once here
+    starts = np.flatnonzero(np.diff(data["episode"], prepend=-1))
+    demos = []
+    for s, e in zip(starts, np.append(starts[1:], len(data["episode"]))):
+        demos.append(dict(obs=data["obs"][s:e], actions=data["actions"][s:e], rewards=data["rewards"][s:e], placed=True,
+                          task=ELEMENT_KINDS[int(data["task"][s])], seed=int(data["seed"][s]), noise=float(data["noise"][s])))
+    return demos, int(data["tried"]), float(data.get("wall_s", 0.0))
+
+
+def tried_episodes(path: Path) -> int:
+    """How many episodes the demonstrations file `path` has tried (0 if it does not exist)."""
+    if not Path(path).exists():
+        return 0
+    with np.load(path) as f:
+        return int(f["tried"])
+
+
+def record_demos(out: Path, episodes: int, env_id: str = "ConstructionPickPlace-v1", seed: int = 100_000,
+                 noise: float = 0.1, curriculum_stage: str = "cp4", workers: int = 2, save_every: int = 50,
+                 resume: bool = False) -> Path:
+    """Episodes seed, seed + 1, ... (every other one with DART noise `noise`); the placed ones are
+    written to `out` every `save_every` episodes and at the end; `resume` continues `out`."""
+    demos, tried, wall_s = load_demos(out) if resume and out.exists() else ([], 0, 0.0)
+    start = time.time() - wall_s
+    jobs = [(env_id, curriculum_stage, seed + i, noise if i % 2 else 0.0) for i in range(tried, episodes)]
+    bar = tqdm(total=episodes, initial=tried, desc="expert demos", unit="ep", dynamic_ncols=True)
+    with mp.get_context("spawn").Pool(workers) as pool:
+        for d in pool.imap(_collect, jobs):
+            tried += 1
+            if d["placed"]:
+                demos.append(d)
+            bar.update()
+            bar.set_postfix(kept=len(demos), steps=sum(len(x["actions"]) for x in demos))
+            if tried % save_every == 0:
+                save_demos(out, demos, tried, time.time() - start)
+    bar.close()
+    save_demos(out, demos, tried, time.time() - start)
+    print(f"{len(demos)} placed of {tried} episodes, {sum(len(x['actions']) for x in demos)} steps -> {out}")
+    return out

@@ -1,0 +1,53 @@
+"""Record the planning expert's demonstrations in the learner's control mode (pd_joint_delta_pos).
+
+    python scripts/collect_demos.py --episodes 600 --workers 2 --out outputs/demos/general.npz
+
+Seeds seed, seed + 1, ... of the general task (each episode draws ceiling, window or flooring); every
+other episode runs with DART noise (`--noise`) on the executed actions, the clean ones recorded
+(ms_construction/planning/demos.py, which does the work). Only placed episodes are kept. The file (numpy .npz: obs,
+actions, sparse rewards, episode index, task, seed, noise per step) is rewritten atomically every `--save-every`
+episodes, so an interrupted collection keeps what it had; `--resume` continues it.
+Seeds used for demonstrations must not overlap the evaluation seeds (scripts/evaluate.py).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+
+import tyro
+
+from ms_construction.planning.demos import record_demos
+
+
+@dataclass
+class Args:
+    env_id: str = "ConstructionPickPlace-v1"
+    """task the expert solves (the general task draws the three types)."""
+    episodes: int = 600
+    """episodes to run (failed ones are counted and dropped)."""
+    seed: int = 100_000
+    """seed of the first episode (scripts/evaluate.py uses seeds from 1000000 on)."""
+    noise: float = 0.1
+    """std of the DART noise on the executed delta actions (in action units: 0.1 = 0.01 rad) of every
+    other episode; the rest run clean."""
+    curriculum_stage: str = "cp4"
+    """tolerance stage the expert places at."""
+    workers: int = 2
+    """processes, one env and expert each."""
+    out: Path = Path("outputs/demos/general.npz")
+    """the demonstrations file."""
+    save_every: int = 50
+    """rewrite the file after this many episodes."""
+    resume: bool = False
+    """continue the seeds of an existing --out file."""
+
+
+def main(args: Args) -> None:
+    record_demos(args.out, args.episodes, env_id=args.env_id, seed=args.seed, noise=args.noise,
+                 curriculum_stage=args.curriculum_stage, workers=args.workers, save_every=args.save_every,
+                 resume=args.resume)
+
+
+if __name__ == "__main__":
+    main(tyro.cli(Args))

@@ -1,0 +1,146 @@
+"""Train the general agent with our recipe, end to end and resumable: expert demonstrations ->
+behaviour-cloning warm start -> PPO fine-tuning on the general task at cp4 -> the shipped checkpoint.
+
+    python scripts/train_general_agent.py --ship                # the recipe of docs/RESULTS.md
+    python scripts/train_general_agent.py --ppo-timesteps 0     # behaviour cloning only
+
+Each stage writes into --run-dir and is skipped when its output is there, so an interrupted
+campaign continues when the same command runs again (PPO resumes from its checkpoint):
+  1. demos/*.npz     the planning expert in pd_joint_delta_pos with DART noise
+                     (ms_construction/planning/demos.py): the general task, plus extra episodes of
+                     the two tasks the clone found hardest (window, flooring)
+  2. bc/checkpoint.pt baselines/ppo/bc.py: actor on the expert's actions, critic on their returns
+  3. ppo/checkpoint.pt baselines/ppo/ppo.py --checkpoint bc/checkpoint.pt: sparse reward
+                     (Algorithm 1), cp4, critic warmed up first, frozen observation normalization, a
+                     behaviour-cloning term on the demonstrations beside the PPO loss
+  4. --ship          the final checkpoint, with the campaign's record (env steps, wall time,
+                     hardware), to assets/checkpoints/general_agent.pt
+Wall time of every stage accumulates across interruptions (in the demonstration files and in
+<run-dir>/campaign.json).
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import platform
+import shlex
+import shutil
+import sys
+import time
+from dataclasses import dataclass
+from pathlib import Path
+
+import torch
+import tyro
+
+from baselines.ppo import bc, ppo
+from ms_construction.planning.demos import load_demos, record_demos, tried_episodes
+
+SHIPPED = Path("assets/checkpoints/general_agent.pt")
+
+
+@dataclass
+class Args:
+    run_dir: Path = Path("runs/general_agent")
+    """where the campaign's stages write."""
+    demos: int = 1200
+    """expert episodes of the general task (seeds 100000 on; failed ones are dropped)."""
+    extra_demos: int = 300
+    """extra expert episodes of WindowInstallation-v1 (seeds 200000 on) and of Flooring-v1 (300000 on)."""
+    workers: int = 2
+    """processes recording demonstrations."""
+    bc_epochs: int = 40
+    """behaviour-cloning epochs."""
+    ppo_timesteps: int = 400_000
+    """env steps of PPO fine-tuning (0: ship the behaviour clone)."""
+    ppo_num_envs: int = 4
+    """env processes of PPO (physx_cpu); more than the cores keeps them busy while the learner works."""
+    ppo_learning_rate: float = 3e-5
+    """small: the clone already places, PPO refines it."""
+    ppo_target_kl: float = 0.02
+    """stops an update that would move the policy far from the one that collected the data."""
+    bc_coef: float = 0.5
+    """weight of the behaviour-cloning term during PPO."""
+    critic_warmup_iterations: int = 3
+    """first PPO iterations that train only the value function."""
+    seed: int = 1
+    """seed of behaviour cloning and PPO."""
+    ship: bool = False
+    """copy the result, with the campaign's record, to assets/checkpoints/general_agent.pt."""
+
+
+DEMO_SETS = (("general", "ConstructionPickPlace-v1", 100_000), ("window", "WindowInstallation-v1", 200_000),
+             ("flooring", "Flooring-v1", 300_000))
+
+
+def main(args: Args) -> Path:
+    args.run_dir.mkdir(parents=True, exist_ok=True)
+    record_path = args.run_dir / "campaign.json"
+    record = json.loads(record_path.read_text()) if record_path.exists() else {"wall_s": {}}
+
+    def timed(stage: str, fn):
+        t = time.time()
+        try:
+            return fn()
+        finally:
+            record["wall_s"][stage] = record["wall_s"].get(stage, 0.0) + time.time() - t
+            record_path.write_text(json.dumps(record, indent=1) + "\n")
+
+    demo_files = []
+    for name, env_id, seed in DEMO_SETS:
+        path, wanted = args.run_dir / "demos" / f"{name}.npz", args.demos if name == "general" else args.extra_demos
+        if wanted <= 0:
+            continue
+        if tried_episodes(path) < wanted:
+            record_demos(path, wanted, env_id=env_id, seed=seed, workers=args.workers, save_every=100, resume=True)
+        demo_files.append(path)
+    bc_ckpt, ppo_ckpt = args.run_dir / "bc" / "checkpoint.pt", args.run_dir / "ppo" / "checkpoint.pt"
+    if not bc_ckpt.exists():
+        timed("behaviour cloning", lambda: bc.main(bc.Args(demos=tuple(demo_files), out=bc_ckpt, epochs=args.bc_epochs,
+                                                           seed=args.seed)))
+    final = bc_ckpt
+    if args.ppo_timesteps > 0:
+        if ppo_ckpt.exists():
+            timed("PPO", lambda: ppo.main(ppo.Args(resume=str(ppo_ckpt))))
+        else:
+            timed("PPO", lambda: ppo.main(ppo.Args(
+                checkpoint=str(bc_ckpt), env_id="ConstructionPickPlace-v1", reward_mode="sparse", curriculum=("cp4",),
+                curiosity="none", freeze_obs_norm=True, critic_warmup_iterations=args.critic_warmup_iterations,
+                demos=tuple(map(str, demo_files)), bc_coef=args.bc_coef, total_timesteps=args.ppo_timesteps,
+                num_envs=args.ppo_num_envs, num_steps=250, num_minibatches=4, learning_rate=args.ppo_learning_rate,
+                target_kl=args.ppo_target_kl, seed=args.seed, log_dir=str(args.run_dir), exp_name="ppo",
+                sim_backend="physx_cpu")))
+        final = ppo_ckpt
+    if args.ship:
+        ship(args, final, demo_files, record)
+    return final
+
+
+def ship(args: Args, final: Path, demo_files: list[Path], record: dict) -> None:
+    """Copy `final` to assets/checkpoints/ with the campaign's record; its CSV beside it."""
+    demos = [load_demos(p) for p in demo_files]
+    kept = sum(len(d) for d, _, _ in demos)
+    demo_steps = sum(len(e["actions"]) for d, _, _ in demos for e in d)
+    wall = {"demonstrations": sum(w for _, _, w in demos), **record["wall_s"]}
+    ckpt = torch.load(final, map_location="cpu", weights_only=False)
+    ppo_steps = ckpt["progress"]["global_step"] if final.parent.name == "ppo" else 0
+    ckpt["campaign"] = dict(command="python scripts/train_general_agent.py " + " ".join(shlex.quote(a) for a in sys.argv[1:]),
+                            record={
+        "expert demonstrations": f"{kept} placed episodes kept of {sum(t for _, t, _ in demos)} tried, {demo_steps} env steps",
+        "PPO fine-tuning": f"{ppo_steps} env steps",
+        "env steps in all": f"{demo_steps + ppo_steps} (budget: 8,000,000)",
+        "wall time": ", ".join(f"{k} {v / 60:.0f} min" for k, v in wall.items())
+        + f"; {sum(wall.values()) / 3600:.2f} h in all (budget: 6 h)",
+        "hardware": f"{platform.machine()}, {os.cpu_count()} CPU cores, no GPU; physx_cpu",
+    })
+    SHIPPED.parent.mkdir(parents=True, exist_ok=True)
+    torch.save(ckpt, SHIPPED)
+    csv = final.parent / "progress.csv"
+    if csv.exists():
+        shutil.copyfile(csv, SHIPPED.with_name("general_agent_progress.csv"))
+    print(f"shipped {final} -> {SHIPPED}")
+
+
+if __name__ == "__main__":
+    main(tyro.cli(Args))

@@ -1,0 +1,147 @@
+"""Expert demonstrations in the learner's control mode, behaviour cloning, and the PPO pieces of the
+recipe (observation normalization, critic warm-up)."""
+
+import gymnasium as gym
+import numpy as np
+import pytest
+import torch
+
+from baselines.ppo import bc, evaluation, ppo
+from ms_construction.planning.demos import DemoCollector, load_demos, save_demos
+
+
+@pytest.fixture(scope="module")
+def flooring_demos():
+    collector = DemoCollector("Flooring-v1")
+    try:
+        demos = []
+        for seed, noise in ((3, 0.0), (4, 0.1)):
+            for _ in range(3):  # OMPL seeds itself from the clock: a rare unlucky plan is tried again
+                d = collector.collect(seed, noise)
+                if d.placed:
+                    break
+            demos.append(d)
+    finally:
+        collector.close()
+    return demos
+
+
+def test_demonstrations_place_and_their_clean_actions_replay_to_a_placement(flooring_demos):
+    clean, noisy = flooring_demos
+    for d in flooring_demos:
+        assert d.placed and d.obs.shape == (len(d.actions), 43) and d.actions.shape[1] == 6
+        assert np.abs(d.actions).max() <= 1.0 and d.rewards.shape == (len(d.actions),)
+        assert d.rewards[-1] == pytest.approx(2.0) and (d.rewards == 1.0).sum() == 1, "Algorithm 1: grasp once, place"
+    # without noise the recorded actions are the executed ones: replayed open loop, they place again
+    env = gym.make("Flooring-v1", obs_mode="state", control_mode="pd_joint_delta_pos", num_envs=1)
+    obs, _ = env.reset(seed=clean.seed)
+    np.testing.assert_allclose(obs[0].numpy(), clean.obs[0], atol=1e-6)
+    for a in clean.actions:
+        obs, _, terminated, truncated, info = env.step(torch.as_tensor(a[None]))
+    assert bool(info["success"][0]) and bool(terminated[0])
+    env.close()
+    # with DART noise the executed actions differ, so the clean labels do not replay the episode
+    assert noisy.noise > 0
+
+
+def test_demos_file_round_trip(tmp_path, flooring_demos):
+    dicts = [dict(obs=d.obs, actions=d.actions, rewards=d.rewards, placed=True, task=d.task, seed=d.seed, noise=d.noise)
+             for d in flooring_demos]
+    save_demos(tmp_path / "d.npz", dicts, tried=5, wall_s=12.5)
+    back, tried, wall_s = load_demos(tmp_path / "d.npz")
+    assert tried == 5 and wall_s == 12.5 and [b["seed"] for b in back] == [3, 4]
+    np.testing.assert_array_equal(back[1]["actions"], flooring_demos[1].actions)
+
+
+def test_behaviour_cloning_fits_the_demonstrations_and_writes_a_ppo_checkpoint(tmp_path, flooring_demos):
+    dicts = [dict(obs=d.obs, actions=d.actions, rewards=d.rewards, placed=True, task=d.task, seed=d.seed, noise=d.noise)
+             for d in flooring_demos * 10]
+    save_demos(tmp_path / "d.npz", dicts, tried=20)
+    out = bc.main(bc.Args(demos=(tmp_path / "d.npz",), out=tmp_path / "bc" / "checkpoint.pt", epochs=30, hidden_size=64,
+                          val_fraction=0.1, env_id="Flooring-v1"))
+    ckpt = torch.load(out, weights_only=False)
+    assert ckpt["bc"]["val_action_mse"] < 0.5 * float(np.var(np.concatenate([d.actions for d in flooring_demos])))
+    agent, control_mode = evaluation.load_policy(out, "Flooring-v1")
+    assert control_mode == "pd_joint_delta_pos"
+    obs = torch.as_tensor(flooring_demos[0].obs)
+    features = agent.features(torch.as_tensor(np.concatenate([d.obs for d in flooring_demos])))
+    np.testing.assert_allclose(agent.obs_rms.mean.numpy(), features.mean(0).numpy(), atol=0.2)  # train split only
+    with torch.no_grad():
+        err = ((agent.get_action(obs, deterministic=True) - torch.as_tensor(flooring_demos[0].actions)) ** 2).mean()
+    assert float(err) < 0.05
+    assert float(agent.actor_logstd.detach().mean()) == pytest.approx(bc.Args.init_logstd)
+
+
+def test_discounted_returns_restart_at_every_demonstration():
+    r = np.array([-0.1, 1.0, 2.0, -0.1, 2.0], np.float32)
+    ret = bc.discounted_returns(r, np.array([0, 0, 0, 1, 1]), gamma=0.5)
+    np.testing.assert_allclose(ret, [-0.1 + 0.5 * (1 + 0.5 * 2), 1 + 0.5 * 2, 2, -0.1 + 0.5 * 2, 2], rtol=1e-6)
+
+
+def test_running_mean_std_matches_the_data_it_has_seen():
+    rms = ppo.RunningMeanStd((3,))
+    x = torch.randn(1000, 3) * torch.tensor([1.0, 5.0, 0.1]) + torch.tensor([2.0, -1.0, 0.0])
+    for chunk in x.split(250):
+        rms.update(chunk)
+    np.testing.assert_allclose(rms.mean.numpy(), x.mean(0).numpy(), atol=1e-4)
+    np.testing.assert_allclose(rms.var.numpy(), x.var(0, unbiased=False).numpy(), rtol=1e-3)
+    agent = ppo.Agent(3, 2, 16)
+    raw = agent.normalize(x[:5])
+    assert torch.equal(raw, x[:5]), "an agent that has seen no data passes observations through"
+    agent.obs_rms.load_state_dict(rms.state_dict())
+    z = agent.normalize(x)
+    np.testing.assert_allclose(z.mean(0).numpy(), 0, atol=1e-3)
+
+
+def test_critic_warmup_moves_the_value_only_and_obs_norm_is_kept_in_the_checkpoint(tmp_path):
+    args = ppo.Args(num_envs=2, num_eval_envs=1, num_steps=40, num_minibatches=2, update_epochs=2, eval_freq=100,
+                    checkpoint_freq=1, env_id="Flooring-v1", sim_backend="physx_cpu", log_dir=str(tmp_path),
+                    exp_name="warm", total_timesteps=80, curriculum=("cp4",), curiosity="none",
+                    critic_warmup_iterations=1)
+    tr = ppo.setup(args)
+    before = {k: v.clone() for k, v in tr.agent.state_dict().items()}
+    ppo.train(tr)
+    after = torch.load(tmp_path / "warm" / "checkpoint.pt", weights_only=False)["agent"]
+    assert all(torch.equal(after[k], before[k]) for k in before if k.startswith("actor")), "the policy stays"
+    assert not torch.equal(after["critic.0.weight"], before["critic.0.weight"])
+    assert float(after["obs_rms.count"]) >= 80 and not torch.equal(after["obs_rms.mean"], before["obs_rms.mean"])
+
+
+def test_rotation_features_are_the_same_for_q_and_minus_q_and_sit_where_the_state_has_quaternions():
+    from ms_construction.envs.construction_env import STATE_QUATERNION_STARTS
+
+    env = gym.make("ConstructionPickPlace-v1", obs_mode="state_dict", num_envs=1)
+    obs_dict, _ = env.reset(seed=0)
+    flat, _ = gym.make("ConstructionPickPlace-v1", obs_mode="state", num_envs=1).reset(seed=0)
+    extra = obs_dict["extra"]
+    for start, key in zip(STATE_QUATERNION_STARTS, ("tcp_pose", "goal_pose", "obj_pose")):
+        np.testing.assert_allclose(flat[0, start:start + 4].numpy(), extra[key][0, 3:].numpy(), atol=1e-6)
+    x = flat.repeat(2, 1)
+    for s in STATE_QUATERNION_STARTS:
+        x[1, s:s + 4] *= -1
+    f = ppo.rotation_features(x, STATE_QUATERNION_STARTS)
+    assert f.shape == (2, 43 + 6) and torch.allclose(f[0], f[1], atol=1e-6)
+    assert not torch.allclose(x[0], x[1])
+    env.close()
+
+
+def test_sparse_reward_pays_the_expert_s_placement_more_than_grasping_and_holding_still(flooring_demos):
+    """Algorithm 1 along the expert's trajectory: its placed episode returns about 3 - T/250; taking the
+    same trajectory up to the grasp and then holding still until the time limit returns about 0."""
+    clean = flooring_demos[0]
+    expert_return = float(clean.rewards.sum())
+    grasp_step = int(np.flatnonzero(clean.rewards == 1.0)[0])
+    env = gym.make("Flooring-v1", obs_mode="state", control_mode="pd_joint_delta_pos", reward_mode="sparse", num_envs=1)
+    env.reset(seed=clean.seed)
+    hold_return, steps = 0.0, 0
+    while True:
+        a = clean.actions[steps] if steps <= grasp_step else np.zeros(6, np.float32)
+        _, r, terminated, truncated, info = env.step(torch.as_tensor(a[None]))
+        hold_return, steps = hold_return + float(r[0]), steps + 1
+        if bool(terminated[0]) or bool(truncated[0]):
+            break
+    env.close()
+    assert bool(info["is_grasped"][0]) and not bool(info["success"][0]) and steps == 250
+    assert hold_return == pytest.approx(1.0 - 249 / 250, abs=1e-3)
+    assert expert_return == pytest.approx(3.0 - (len(clean.rewards) - 2) / 250, abs=1e-3)
+    assert expert_return > hold_return + 1.5
