@@ -37,7 +37,7 @@ class Args:
     """the env the checkpoint is for (the demonstrations' observation layout)."""
     seed: int = 1
     """seed of initialization and minibatch order."""
-    epochs: int = 40
+    epochs: int = 100
     """passes over the demonstrations."""
     batch_size: int = 1024
     """samples per gradient step."""
@@ -54,6 +54,9 @@ class Args:
     init_logstd: float = -2.3
     """the policy's log std in the checkpoint (std 0.1, the DART noise of the demonstrations): small, so
     that PPO's sampled episodes stay close to the clone's."""
+    obs_noise: float = 0.0
+    """std of Gaussian noise added to the normalized observation features in training (a regularizer
+    for the states a clone's own small errors lead to)."""
     max_episodes: int = 0
     """use only the first this many episodes, in file order (0: all)."""
 
@@ -97,8 +100,9 @@ def main(args: Args) -> Path:
     steps_per_epoch = int(np.ceil(len(train_idx) / args.batch_size))
     sched = torch.optim.lr_scheduler.CosineAnnealingLR(optimizer, args.epochs * steps_per_epoch)
 
-    def losses(idx):
+    def losses(idx, noise=0.0):
         x = agent.normalize(obs_t[idx])
+        x = x + noise * torch.randn_like(x) if noise else x
         return ((agent.actor_mean(x) - act_t[idx]) ** 2).mean(), ((agent.critic(x).squeeze(-1) - ret_t[idx]) ** 2).mean()
 
     t0 = time.time()
@@ -107,7 +111,7 @@ def main(args: Args) -> Path:
         rng.shuffle(train_idx)
         for start in range(0, len(train_idx), args.batch_size):
             idx = torch.as_tensor(train_idx[start:start + args.batch_size])
-            a_loss, v_loss = losses(idx)
+            a_loss, v_loss = losses(idx, args.obs_noise)
             optimizer.zero_grad()
             (a_loss + 0.5 * v_loss).backward()
             optimizer.step()

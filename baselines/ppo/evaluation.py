@@ -197,16 +197,30 @@ def pct(p: float, ci: tuple[float, float]) -> str:
     return f"{100 * p:.1f} [{100 * ci[0]:.1f}, {100 * ci[1]:.1f}]"
 
 
-def table(results: dict[str, dict]) -> str:
-    """Table II's shape: per task, ours (pick, place with 95% intervals) beside the paper's general agent."""
-    lines = ["| task | episodes | pick success % [95% CI] | place success % [95% CI] | paper pick % | paper place % | "
-             "mean return | mean length |", "|---|---|---|---|---|---|---|---|"]
+def table(results: dict[str, dict], expert: Optional[dict[str, str]] = None) -> str:
+    """Table II's shape: per task, ours (pick, place with 95% intervals) beside the paper's general
+    agent (and the planning expert's place success, when given)."""
+    extra = " expert place |" if expert else ""
+    lines = ["| task | episodes | pick success % [95% CI] | place success % [95% CI] | paper pick % | paper place % |"
+             + extra + " mean return | mean length |", "|---|---|---|---|---|---|---|---|" + ("---|" if expert else "")]
     for env_id, r in results.items():
         paper = PAPER_TABLE_II.get(env_id, ("-", "-"))
         lines.append(f"| {env_id} | {r['episodes']} | {pct(r['pick_success'], r['pick_success_ci95'])} | "
-                     f"{pct(r['place_success'], r['place_success_ci95'])} | {paper[0]} | {paper[1]} | "
-                     f"{r['mean_return']:.2f} | {r['mean_length']:.0f} |")
+                     f"{pct(r['place_success'], r['place_success_ci95'])} | {paper[0]} | {paper[1]} |"
+                     + (f" {expert.get(env_id, '-')} |" if expert else "")
+                     + f" {r['mean_return']:.2f} | {r['mean_length']:.0f} |")
     return "\n".join(lines)
+
+
+def expert_place_success() -> dict[str, str]:
+    """The planning expert's place success per task, from its generated table in docs/RESULTS.md."""
+    text = RESULTS_PATH.read_text() if RESULTS_PATH.exists() else ""
+    out = {}
+    for line in text.splitlines():
+        cells = [c.strip() for c in line.strip("|").split("|")]
+        if len(cells) >= 4 and cells[0] in PAPER_TABLE_II and cells[3].endswith("%"):
+            out[cells[0]] = f"{cells[3]} of {cells[1]}"
+    return out
 
 
 def main(args: Args) -> dict[str, dict]:
@@ -247,10 +261,12 @@ def write_results(args: Args, results: dict[str, dict]) -> None:
              f"One policy (`{args.checkpoint}`, {args.checkpoint.stat().st_size / 1e6:.1f} MB) on the three tasks at "
              f"{args.curriculum_stage}; deterministic actions; ordinary seeded resets, seeds {args.seed} on "
              "(never used in training); physx_cpu, pd_joint_delta_pos at 20 Hz, at most 250 steps per episode. "
-             "The paper's columns are its general agent at cp4 (Table II).", "", table(results), ""]
+             "The paper's columns are its general agent at cp4 (Table II); the expert's, the motion-planning "
+             "expert's (its own section on this page).", "", table(results, expert_place_success()), ""]
     policy_ms = 1000 * np.mean([r["policy_time_per_episode_s"] for r in results.values()])
     lines += [f"Compute per episode: the policy's forward passes take {policy_ms:.0f} ms per episode on one CPU "
-              "thread, against the planning expert's 0.8-1.1 s of planning per episode (table above).", ""]
+              "thread (mean over the three tasks), against the planning expert's planning time per episode in "
+              "the table above; both also spend the same simulation time.", ""]
     if campaign:
         lines += ["Training (`" + campaign["command"] + "`):", ""]
         lines += [f"- {k}: {v}" for k, v in campaign["record"].items()]

@@ -143,9 +143,9 @@ class Args:
     bc_coef: float = 0.0
     """weight of that term: mean squared error of the policy's mean on a demonstration minibatch."""
     critic_warmup_iterations: int = 0
-    """the first iterations of a run (counted from 1) update the value function only: with a warm-started policy
-    (--checkpoint), the critic first learns that policy's returns, so the policy's first steps follow
-    advantages that mean something."""
+    """the first iterations of a run (counted from 1) update the value function only: with a
+    warm-started policy (--checkpoint), the critic first learns that policy's returns, so the policy's
+    first steps follow advantages that mean something."""
     checkpoint_freq: int = 10
     """write a checkpoint every this many iterations (and at stage changes, the end, and Ctrl-C)."""
 

@@ -1,0 +1,59 @@
+"""scripts/evaluate.py on the shipped general agent: the JSON it writes, the places it makes, its errors."""
+
+import json
+
+import pytest
+import torch
+
+from baselines.ppo import evaluation
+from baselines.ppo.ppo import Agent, Args as PPOArgs, Progress, save_checkpoint
+
+
+def test_shipped_general_agent_places_on_every_task(tmp_path):
+    out = tmp_path / "eval.json"
+    results = evaluation.main(evaluation.Args(all=True, episodes=10, seed=1_000_000, json=out))
+    data = json.loads(out.read_text())
+    assert set(data["tasks"]) == {"CeilingInstallation-v1", "WindowInstallation-v1", "Flooring-v1"}
+    for env_id, r in data["tasks"].items():
+        assert r["episodes"] == 10 and len(r["episode_results"]) == 10
+        for key in ("pick_success", "place_success"):
+            assert 0.0 <= r[key] <= 1.0
+            lo, hi = r[f"{key}_ci95"]
+            assert 0.0 <= lo <= r[key] <= hi <= 1.0
+        assert r["mean_length"] <= 250 and isinstance(r["mean_return"], float)
+        # a broken checkpoint or a task regression fails here
+        assert r["place_success"] >= 0.8, (env_id, r["place_success"])
+        assert r["pick_success"] >= r["place_success"]
+    assert results["Flooring-v1"]["place_success"] == data["tasks"]["Flooring-v1"]["place_success"]
+
+
+def test_single_task_json_has_the_fields_at_top_level(tmp_path):
+    out = tmp_path / "eval.json"
+    evaluation.main(evaluation.Args(env_id="Flooring-v1", episodes=2, seed=1_000_000, json=out, workers=1))
+    data = json.loads(out.read_text())
+    for key in ("pick_success", "place_success", "episodes", "mean_return", "mean_length",
+                "pick_success_ci95", "place_success_ci95"):
+        assert key in data
+    assert data["episodes"] == 2 and [e["seed"] for e in data["episode_results"]] == [1_000_000, 1_000_001]
+
+
+def test_a_checkpoint_of_the_wrong_shape_is_a_clear_error(tmp_path):
+    path = tmp_path / "wrong.pt"
+    agent = Agent(40, 6, 32)
+    save_checkpoint(path, PPOArgs(hidden_size=32, control_mode="pd_joint_delta_pos"), Progress(), agent,
+                    torch.optim.Adam(agent.parameters()), None, None, 40, 6)
+    with pytest.raises(SystemExit, match=r"does not fit Flooring-v1.*observations of size 40.*has 43"):
+        evaluation.main(evaluation.Args(checkpoint=path, env_id="Flooring-v1", episodes=1))
+
+
+def test_bad_arguments_are_refused_with_the_allowed_values(tmp_path):
+    with pytest.raises(SystemExit, match="allowed: ConstructionPickPlace-v1"):
+        evaluation.main(evaluation.Args(env_id="Roofing-v1"))
+    with pytest.raises(SystemExit, match="checkpoint not found"):
+        evaluation.main(evaluation.Args(checkpoint=tmp_path / "none.pt", env_id="Flooring-v1"))
+
+
+@pytest.mark.parametrize("k,n", [(0, 10), (10, 10), (7, 10), (95, 100)])
+def test_wilson_interval_holds_the_estimate(k, n):
+    lo, hi = evaluation.wilson(k, n)
+    assert 0 <= lo <= k / n <= hi <= 1 and hi - lo < 0.5
