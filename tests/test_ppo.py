@@ -11,9 +11,8 @@ import numpy as np
 import pytest
 import torch
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
-from baselines.ppo import ppo  # noqa: E402
-from ms_construction.curriculum import stage_tolerances  # noqa: E402
+from baselines.ppo import ppo
+from ms_construction.curriculum import stage_tolerances
 
 TINY = dict(num_envs=2, num_eval_envs=1, num_steps=40, num_minibatches=2, update_epochs=2, eval_freq=100,
             num_eval_steps=250, checkpoint_freq=1, env_id="Flooring-v1", sim_backend="physx_cpu")
