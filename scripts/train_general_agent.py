@@ -47,7 +47,7 @@ SHIPPED = Path("assets/checkpoints/general_agent.pt")
 class Args:
     run_dir: Path = Path("runs/general_agent")
     """where the campaign's stages write."""
-    demos: int = 1200
+    demos: int = 2200
     """expert episodes of the general task (seeds 100000 on; failed ones are dropped)."""
     extra_demos: int = 300
     """extra expert episodes of WindowInstallation-v1 (seeds 200000 on) and of Flooring-v1 (300000 on)."""
