@@ -12,7 +12,6 @@ evaluation left out; no checkpoints.
 import csv
 import os
 import statistics
-import sys
 import tempfile
 from dataclasses import dataclass
 from pathlib import Path
@@ -20,9 +19,8 @@ from pathlib import Path
 import torch
 import tyro
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
-from baselines.ppo import ppo  # noqa: E402
-from ms_construction.reporting import update_section  # noqa: E402
+from baselines.ppo import ppo
+from ms_construction.reporting import update_section
 
 
 @dataclass

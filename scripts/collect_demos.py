@@ -7,6 +7,10 @@ other episode runs with DART noise (`--noise`) on the executed actions, the clea
 (ms_construction/planning/demos.py, which does the work). Only placed episodes are kept. The file (numpy .npz: obs,
 actions, sparse rewards, episode index, task, seed, noise per step) is rewritten atomically every `--save-every`
 episodes, so an interrupted collection keeps what it had; `--resume` continues it.
+With `--policy CHECKPOINT` the policy runs each episode first; where it fails, the expert takes over
+from the states it led to, and those takeovers are recorded (DAgger-style data on the policy's own states):
+    python scripts/collect_demos.py --policy runs/general_agent/bc/checkpoint.pt --env-id WindowInstallation-v1 \
+        --seed 400000 --episodes 500 --out outputs/demos/window_takeovers.npz
 Seeds used for demonstrations must not overlap the evaluation seeds (scripts/evaluate.py).
 """
 
@@ -14,6 +18,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Optional
 
 import tyro
 
@@ -41,12 +46,15 @@ class Args:
     """rewrite the file after this many episodes."""
     resume: bool = False
     """continue the seeds of an existing --out file."""
+    policy: Optional[Path] = None
+    """a policy checkpoint (ppo.py / bc.py): record instead the expert's takeovers of the episodes this
+    policy fails, from the states it led to (DAgger-style; ms_construction/planning/demos.py)."""
 
 
 def main(args: Args) -> None:
     record_demos(args.out, args.episodes, env_id=args.env_id, seed=args.seed, noise=args.noise,
                  curriculum_stage=args.curriculum_stage, workers=args.workers, save_every=args.save_every,
-                 resume=args.resume)
+                 resume=args.resume, policy=args.policy)
 
 
 if __name__ == "__main__":

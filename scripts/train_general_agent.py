@@ -1,8 +1,9 @@
 """Train the general agent with our recipe, end to end and resumable: expert demonstrations ->
-behaviour cloning -> (optionally) PPO fine-tuning on the general task at cp4 -> the shipped checkpoint.
+behaviour cloning -> the expert's takeovers where the clone fails -> cloning again -> (optionally)
+PPO fine-tuning on the general task at cp4 -> the shipped checkpoint.
 
     python scripts/train_general_agent.py --ship                      # the shipped agent (docs/RESULTS.md)
-    python scripts/train_general_agent.py --ppo-timesteps 400000      # the clone, then PPO fine-tuning
+    python scripts/train_general_agent.py --ppo-timesteps 400000      # then PPO fine-tuning as well
 
 The shipped agent is the behaviour clone: PPO fine-tuning of it, as far as it was tried (probe 5 in
 docs/RESULTS.md), lowered its success, so `--ppo-timesteps` is 0 by default.
@@ -12,11 +13,15 @@ campaign continues when the same command runs again (PPO resumes from its checkp
   1. demos/*.npz     the planning expert in pd_joint_delta_pos with DART noise
                      (ms_construction/planning/demos.py): the general task, plus extra episodes of
                      the two tasks the clone found hardest (window, flooring)
-  2. bc/checkpoint.pt baselines/ppo/bc.py: actor on the expert's actions, critic on their returns
-  3. ppo/checkpoint.pt baselines/ppo/ppo.py --checkpoint bc/checkpoint.pt: sparse reward
+  2. bc0/checkpoint.pt baselines/ppo/bc.py on them: actor on the expert's actions, critic on their returns
+  3. demos/*_takeovers.npz  one DAgger round: the first clone runs window and flooring episodes of
+                     its own; where it fails, the expert takes over from the states it led to
+                     (DemoCollector.takeovers), and those takeovers are recorded
+  4. bc/checkpoint.pt the clone of all of them, the takeovers weighted --takeover-repeats times
+  5. ppo/checkpoint.pt baselines/ppo/ppo.py --checkpoint bc/checkpoint.pt: sparse reward
                      (Algorithm 1), cp4, critic warmed up first, frozen observation normalization, a
                      behaviour-cloning term on the demonstrations beside the PPO loss
-  4. --ship          the final checkpoint, with the campaign's record (env steps, wall time,
+  6. --ship          the final checkpoint, with the campaign's record (env steps, wall time,
                      hardware), to assets/checkpoints/general_agent.pt
 Wall time of every stage accumulates across interruptions (in the demonstration files and in
 <run-dir>/campaign.json).
@@ -38,7 +43,7 @@ import torch
 import tyro
 
 from baselines.ppo import bc, ppo
-from ms_construction.planning.demos import load_demos, record_demos, tried_episodes
+from ms_construction.planning.demos import load_demos, policy_steps, record_demos, tried_episodes
 
 SHIPPED = Path("assets/checkpoints/general_agent.pt")
 
@@ -49,8 +54,16 @@ class Args:
     """where the campaign's stages write."""
     demos: int = 2200
     """expert episodes of the general task (seeds 100000 on; failed ones are dropped)."""
-    extra_demos: int = 300
-    """extra expert episodes of WindowInstallation-v1 (seeds 200000 on) and of Flooring-v1 (300000 on)."""
+    window_demos: int = 1500
+    """extra expert episodes of WindowInstallation-v1 (seeds 200000 on)."""
+    flooring_demos: int = 300
+    """extra expert episodes of Flooring-v1 (seeds 300000 on)."""
+    window_takeovers: int = 1000
+    """WindowInstallation-v1 episodes (seeds 400000 on) the first clone runs for the expert's takeovers."""
+    flooring_takeovers: int = 400
+    """Flooring-v1 episodes (seeds 450000 on) the first clone runs for the expert's takeovers."""
+    takeover_repeats: int = 5
+    """how many times each takeover step counts in the second cloning (bc.py --repeats)."""
     workers: int = 2
     """processes recording demonstrations."""
     bc_epochs: int = 100
@@ -75,8 +88,11 @@ class Args:
     """copy the result, with the campaign's record, to assets/checkpoints/general_agent.pt."""
 
 
-DEMO_SETS = (("general", "ConstructionPickPlace-v1", 100_000), ("window", "WindowInstallation-v1", 200_000),
-             ("flooring", "Flooring-v1", 300_000))
+DEMO_SETS = (("general", "ConstructionPickPlace-v1", 100_000, "demos"),
+             ("window", "WindowInstallation-v1", 200_000, "window_demos"),
+             ("flooring", "Flooring-v1", 300_000, "flooring_demos"))
+TAKEOVER_SETS = (("window_takeovers", "WindowInstallation-v1", 400_000, "window_takeovers"),
+                 ("flooring_takeovers", "Flooring-v1", 450_000, "flooring_takeovers"))
 
 
 def main(args: Args) -> Path:
@@ -92,18 +108,30 @@ def main(args: Args) -> Path:
             record["wall_s"][stage] = record["wall_s"].get(stage, 0.0) + time.time() - t
             record_path.write_text(json.dumps(record, indent=1) + "\n")
 
-    demo_files = []
-    for name, env_id, seed in DEMO_SETS:
-        path, wanted = args.run_dir / "demos" / f"{name}.npz", args.demos if name == "general" else args.extra_demos
-        if wanted <= 0:
-            continue
-        if tried_episodes(path) < wanted:
-            record_demos(path, wanted, env_id=env_id, seed=seed, workers=args.workers, save_every=100, resume=True)
-        demo_files.append(path)
+    def collect(sets, policy=None) -> list[Path]:
+        files = []
+        for name, env_id, seed, count in sets:
+            path, wanted = args.run_dir / "demos" / f"{name}.npz", getattr(args, count)
+            if wanted <= 0:
+                continue
+            if tried_episodes(path) < wanted:
+                record_demos(path, wanted, env_id=env_id, seed=seed, workers=args.workers, save_every=100, resume=True,
+                             policy=policy)
+            files.append(path)
+        return files
+
+    def clone(out: Path, files: list[Path], repeats: tuple[int, ...] = ()) -> None:
+        if not out.exists():
+            timed("behaviour cloning", lambda: bc.main(bc.Args(demos=tuple(files), out=out, epochs=args.bc_epochs,
+                                                               obs_noise=args.bc_obs_noise, seed=args.seed,
+                                                               repeats=repeats)))
+
+    demo_files = collect(DEMO_SETS)
+    bc0_ckpt = args.run_dir / "bc0" / "checkpoint.pt"
+    clone(bc0_ckpt, demo_files)
+    takeover_files = collect(TAKEOVER_SETS, policy=bc0_ckpt)
     bc_ckpt, ppo_ckpt = args.run_dir / "bc" / "checkpoint.pt", args.run_dir / "ppo" / "checkpoint.pt"
-    if not bc_ckpt.exists():
-        timed("behaviour cloning", lambda: bc.main(bc.Args(demos=tuple(demo_files), out=bc_ckpt, epochs=args.bc_epochs,
-                                                           obs_noise=args.bc_obs_noise, seed=args.seed)))
+    clone(bc_ckpt, demo_files + takeover_files, (1,) * len(demo_files) + (args.takeover_repeats,) * len(takeover_files))
     final = bc_ckpt
     if args.ppo_timesteps > 0:
         if ppo_ckpt.exists():
@@ -112,30 +140,36 @@ def main(args: Args) -> Path:
             timed("PPO", lambda: ppo.main(ppo.Args(
                 checkpoint=str(bc_ckpt), env_id="ConstructionPickPlace-v1", reward_mode="sparse", curriculum=("cp4",),
                 curiosity="none", freeze_obs_norm=True, critic_warmup_iterations=args.critic_warmup_iterations,
-                demos=tuple(map(str, demo_files)), bc_coef=args.bc_coef, total_timesteps=args.ppo_timesteps,
+                demos=tuple(map(str, demo_files + takeover_files)), bc_coef=args.bc_coef, total_timesteps=args.ppo_timesteps,
                 num_envs=args.ppo_num_envs, num_steps=250, num_minibatches=4, learning_rate=args.ppo_learning_rate,
                 target_kl=args.ppo_target_kl, seed=args.seed, log_dir=str(args.run_dir), exp_name="ppo",
                 sim_backend="physx_cpu")))
         final = ppo_ckpt
     if args.ship:
-        ship(args, final, demo_files, record)
+        ship(args, final, demo_files, takeover_files, record)
     return final
 
 
-def ship(args: Args, final: Path, demo_files: list[Path], record: dict) -> None:
+def ship(args: Args, final: Path, demo_files: list[Path], takeover_files: list[Path], record: dict) -> None:
     """Copy `final` to assets/checkpoints/ with the campaign's record; its CSV beside it."""
-    demos = [load_demos(p) for p in demo_files]
-    kept = sum(len(d) for d, _, _ in demos)
+    demos, takeovers = ([load_demos(p) for p in files] for files in (demo_files, takeover_files))
+    kept, tried = sum(len(d) for d, _, _ in demos), sum(t for _, t, _ in demos)
     demo_steps = sum(len(e["actions"]) for d, _, _ in demos for e in d)
-    wall = {"demonstrations": sum(w for _, _, w in demos), **record["wall_s"]}
+    takeover_steps = sum(len(e["actions"]) for d, _, _ in takeovers for e in d)
+    clone_steps = sum(map(policy_steps, takeover_files))
+    wall = {"demonstrations": sum(w for _, _, w in demos), "takeovers": sum(w for _, _, w in takeovers),
+            **record["wall_s"]}
     ckpt = torch.load(final, map_location="cpu", weights_only=False)
     ppo_steps = ckpt["progress"]["global_step"] if final.parent.name == "ppo" else 0
+    total = demo_steps + takeover_steps + clone_steps + ppo_steps
     ckpt["campaign"] = dict(command="python scripts/train_general_agent.py " + " ".join(shlex.quote(a) for a in sys.argv[1:]),
                             record={
-        "expert demonstrations": f"{kept} placed episodes kept of {sum(t for _, t, _ in demos)} tried; "
-                                 f"{demo_steps} env steps in the kept ones",
+        "expert demonstrations": f"{kept} placed episodes kept of {tried} tried; {demo_steps} env steps in the kept ones",
+        "expert takeovers": f"{sum(len(d) for d, _, _ in takeovers)} placed takeovers where the first clone failed, "
+                            f"in {sum(t for _, t, _ in takeovers)} episodes of it; {clone_steps} env steps of the "
+                            f"clone, {takeover_steps} of the expert in the kept takeovers",
         "PPO fine-tuning": f"{ppo_steps} env steps" if ppo_steps else "none (the shipped agent is the clone)",
-        "env steps in all": f"{demo_steps + ppo_steps}, the failed demonstration episodes not counted (budget: 8,000,000)",
+        "env steps in all": f"{total}, the failed demonstration episodes not counted (budget: 8,000,000)",
         "wall time": ", ".join(f"{k} {v / 60:.0f} min" for k, v in wall.items())
         + f"; {sum(wall.values()) / 3600:.2f} h in all (budget: 6 h)",
         "hardware": f"{platform.machine()}, {os.cpu_count()} CPU cores, no GPU; physx_cpu",

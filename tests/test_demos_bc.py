@@ -72,6 +72,44 @@ def test_behaviour_cloning_fits_the_demonstrations_and_writes_a_ppo_checkpoint(t
     assert float(agent.actor_logstd.detach().mean()) == pytest.approx(bc.Args.init_logstd)
 
 
+class _ReplayThenStop:
+    """A stand-in policy: the expert's recorded actions for its first `stop` steps, then still."""
+
+    def __init__(self, actions: np.ndarray, stop: int):
+        self.actions, self.stop, self.t = torch.as_tensor(actions), stop, 0
+
+    def get_action(self, obs, deterministic=True):
+        a = self.actions[self.t] if self.t < self.stop else torch.zeros(6)
+        self.t += 1
+        return a[None]
+
+
+def test_the_expert_takes_over_where_a_policy_stalls_with_the_element_held(flooring_demos):
+    clean = flooring_demos[0]
+    grasped_at = int(np.flatnonzero(clean.rewards == 1.0)[0])
+    stop = grasped_at + (len(clean.actions) - grasped_at) // 2  # halfway through the carry
+    collector = DemoCollector("Flooring-v1")
+    try:
+        takeovers, steps = collector.takeovers(clean.seed, 0.0, _ReplayThenStop(clean.actions, stop))
+        assert steps == collector.env.unwrapped.MAX_EPISODE_STEPS, "the stalled policy ran out of time"
+        assert takeovers, "the expert placed from none of the stalled policy's states"
+        for d in takeovers:
+            assert d.placed and d.seed == clean.seed and len(d.actions) < steps
+            assert (d.rewards == 1.0).sum() <= 1 and d.rewards[-1] == pytest.approx(2.0)
+        # those after the stall start with the element held: no first-grasp reward again
+        assert any((d.rewards == 1.0).sum() == 0 for d in takeovers)
+        # a policy that places needs no takeover
+        placed, steps = collector.takeovers(clean.seed, 0.0, _ReplayThenStop(clean.actions, len(clean.actions)))
+        assert placed == [] and steps == len(clean.actions)
+    finally:
+        collector.close()
+
+
+def test_behaviour_cloning_repeats_refuses_more_weights_than_files(tmp_path):
+    with pytest.raises(SystemExit, match="--repeats"):
+        bc.main(bc.Args(demos=(tmp_path / "a.npz",), repeats=(1, 5), out=tmp_path / "x.pt"))
+
+
 def test_discounted_returns_restart_at_every_demonstration():
     r = np.array([-0.1, 1.0, 2.0, -0.1, 2.0], np.float32)
     ret = bc.discounted_returns(r, np.array([0, 0, 0, 1, 1]), gamma=0.5)

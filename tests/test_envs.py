@@ -115,8 +115,19 @@ def test_general_task_yields_all_three_task_types():
         assert float(env.unwrapped.obj.pose.p[0, 2]) > 0.4
         if len(seen) == 3:
             break
-    env.close()
     assert seen == {0, 1, 2}
+    # a state of another task type: the handles follow its task_id
+    u = env.unwrapped
+    env.reset(seed=0)
+    other = u.get_state_dict()
+    for seed in range(1, 40):
+        env.reset(seed=seed)
+        if int(u.task_id[0]) != int(other["task"]["task_id"][0, 0]):
+            break
+    u.set_state_dict(other)
+    tid = int(u.task_id[0])
+    assert u.obj._objs[0].name.endswith(f"{ELEMENT_KINDS[tid]}_element") and float(u.obj.pose.p[0, 2]) > 0.4
+    env.close()
 
 
 def test_curriculum_stage_sets_table_one_and_changes_nothing_else():
@@ -224,6 +235,91 @@ def test_symmetric_placements_count_as_placed():
     for angle, expect in ((90, 0.0), (180, 0.0), (45, 45.0)):
         u.obj.set_pose(goal * sapien.Pose(q=quat_z(angle)))
         assert math.isclose(float(u.evaluate()["place_angle_deg"][0]), expect, abs_tol=0.05)
+    env.close()
+
+
+@pytest.mark.parametrize("env_id, turn", [
+    ("WindowInstallation-v1", sapien.Pose(q=[0, 0, 0, 1])),                 # 180 deg about z: inside face out
+    ("CeilingInstallation-v1", sapien.Pose(q=quat_z(90))),                  # a rectangle across its opening
+    ("Flooring-v1", sapien.Pose(q=[0, 1, 0, 0])),                           # upside down: finish face down
+    ("CeilingInstallation-v1", sapien.Pose(q=[np.cos(np.pi / 12), np.sin(np.pi / 12), 0, 0])),  # tilted 30 deg
+])
+def test_turned_upside_down_or_tilted_elements_at_the_goal_are_not_placed(env_id, turn):
+    env = make_env(env_id)
+    env.reset(seed=0)
+    u = env.unwrapped
+    state = u.get_state_dict()
+    state["task"]["held"][:] = True
+    u.set_state_dict(state)
+    goal = to_sapien(u.goal_pose.raw_pose)
+    u.obj.set_pose(goal)
+    assert bool(u.evaluate()["success"][0]), "the goal pose itself is placed"
+    u.obj.set_pose(goal * turn)
+    info = u.evaluate()
+    assert float(info["place_angle_deg"][0]) > float(u.tau_angle_deg[0]) and float(info["place_dist"][0]) < 1e-4
+    assert not bool(info["success"][0])
+    env.close()
+
+
+def test_grasp_ray_needs_the_face_in_front_within_the_incidence_limit():
+    """The plate's ray (its z axis) must meet the grasp face from outside, within 60 degrees of the
+    face normal and inside the face's rectangle."""
+    env = make_env("Flooring-v1")
+    env.reset(seed=0)
+    u = env.unwrapped
+    size = u._el_size[u.task_id[0]]
+    face_z, half_x = float(size[2]) / 2, float(size[0]) / 2
+
+    def ray(tilt_deg: float, height: float = 0.05, x: float = 0.0):
+        """tcp in the element frame: `height` above the face, its ray tilted about x, aimed at (x, 0)."""
+        a = np.deg2rad(180 + tilt_deg)
+        y = -height * np.tan(np.deg2rad(tilt_deg))
+        pose = torch.tensor([[x, y, face_z + height, np.cos(a / 2), np.sin(a / 2), 0, 0]], dtype=torch.float32)
+        dist, hit = u.grasp_ray(pose)
+        return float(dist[0]), bool(hit[0])
+
+    dist, hit = ray(0)
+    assert hit and math.isclose(dist, 0.05, abs_tol=1e-5)
+    dist, hit = ray(59)
+    assert hit and math.isclose(dist, 0.05 / np.cos(np.deg2rad(59)), rel_tol=1e-4)
+    assert ray(61) == (math.inf, False), "beyond the 60 degree incidence limit"
+    assert ray(0, x=half_x + 0.01) == (math.inf, False), "the ray misses the face"
+    assert ray(0, height=-0.02) == (math.inf, False), "the plate behind the face"
+    env.close()
+
+
+def test_sparse_reward_of_an_episode_that_runs_out_of_time():
+    env = make_env("WindowInstallation-v1", control_mode="pd_joint_delta_pos")
+    env.reset(seed=0)
+    rewards, terminated, truncated = [], [], []
+    for _ in range(env.unwrapped.MAX_EPISODE_STEPS):
+        _, r, term, trunc, info = env.step(torch.zeros(1, 6))
+        rewards.append(float(r[0])), terminated.append(bool(term[0])), truncated.append(bool(trunc[0]))
+    assert not any(terminated) and truncated[-1] and not any(truncated[:-1])
+    np.testing.assert_allclose(rewards, PENALTY)
+    assert math.isclose(sum(rewards), -1.0, abs_tol=1e-4) and not bool(info["picked"][0])
+    env.close()
+
+
+@pytest.mark.parametrize("env_id", ["CeilingInstallation-v1", "ConstructionPickPlace-v1"])
+def test_cpu_hold_computes_the_same_velocities_as_the_batched_hold(env_id):
+    """physx_cpu's hold (numpy on SAPIEN poses) and the batched one (torch, as on the GPU) agree."""
+    env = make_env(env_id, control_mode="pd_joint_delta_pos")
+    env.reset(seed=3)
+    u = env.unwrapped
+    state = u.get_state_dict()
+    state["task"]["held"][:] = True
+    u.set_state_dict(state)
+    gen = torch.Generator().manual_seed(0)
+    checked = 0
+    for i in range(12):
+        env.step(torch.rand(1, 6, generator=gen) * 2 - 1)
+        v, w = u._hold_velocities()
+        v_cpu, w_cpu = u._hold_velocities_cpu()
+        np.testing.assert_allclose(v_cpu, v[0].numpy(), atol=2e-3, rtol=1e-3)
+        np.testing.assert_allclose(w_cpu, w[0].numpy(), atol=2e-3, rtol=1e-3)
+        checked += float(torch.linalg.norm(v)) > 0.01  # the arm moving, the element being pulled
+    assert checked >= 6
     env.close()
 
 

@@ -83,6 +83,10 @@ def test_promotion_rules():
     assert ppo.should_promote(args, p) == "steps"
     p = ppo.Progress(global_step=400, smoothed_success=0.85)
     assert ppo.should_promote(args, p) == "success"
+    p = ppo.Progress(global_step=400, smoothed_success=0.75)
+    assert ppo.should_promote(args, p) is None, "success below promote_success does not promote"
+    p = ppo.Progress(global_step=400, smoothed_success=None)
+    assert ppo.should_promote(args, p) is None, "no success measured yet"
     p = ppo.Progress(global_step=200, smoothed_success=0.95)
     assert ppo.should_promote(args, p) is None, "not before the minimum stage length"
     p = ppo.Progress(global_step=5000, stage_index=1, stage_start_step=0)

@@ -59,6 +59,9 @@ class Args:
     for the states a clone's own small errors lead to)."""
     max_episodes: int = 0
     """use only the first this many episodes, in file order (0: all)."""
+    repeats: tuple[int, ...] = ()
+    """how many times each --demos file's steps count per epoch, in order (missing: 1): weighs the
+    few, short takeover demonstrations (collect_demos.py --policy) against the many full episodes."""
 
 
 def discounted_returns(rewards: np.ndarray, episode: np.ndarray, gamma: float) -> np.ndarray:
@@ -74,12 +77,17 @@ def discounted_returns(rewards: np.ndarray, episode: np.ndarray, gamma: float) -
 
 def main(args: Args) -> Path:
     torch.manual_seed(args.seed)
-    files = [np.load(path) for path in args.demos]
+    if len(args.repeats) > len(args.demos) or any(r < 1 for r in args.repeats):
+        raise SystemExit(f"--repeats: at most one whole number >= 1 per --demos file ({len(args.demos)}), got {args.repeats}")
+    repeats = list(args.repeats) + [1] * (len(args.demos) - len(args.repeats))
+    loaded = [(np.load(path), r) for path, r in zip(args.demos, repeats)]
+    files = [f for f, _ in loaded if len(f["episode"])]
     offsets = np.cumsum([0] + [int(f["episode"].max()) + 1 for f in files[:-1]])
     episode = np.concatenate([f["episode"] + o for f, o in zip(files, offsets)])
+    weight = np.concatenate([np.full(len(f["episode"]), r) for f, r in loaded if len(f["episode"])])
     keep = episode < args.max_episodes if args.max_episodes else np.ones_like(episode, bool)
     obs, act = (np.concatenate([f[k] for f in files])[keep] for k in ("obs", "actions"))
-    ep = episode[keep]
+    ep, weight = episode[keep], weight[keep]
     ret = discounted_returns(np.concatenate([f["rewards"] for f in files])[keep], ep, args.gamma)
     episodes = np.unique(ep)
     rng = np.random.default_rng(args.seed)
@@ -96,7 +104,7 @@ def main(args: Args) -> Path:
         agent.actor_logstd.fill_(args.init_logstd)
     params = list(agent.actor_mean.parameters()) + list(agent.critic.parameters())
     optimizer = torch.optim.Adam(params, lr=args.learning_rate)
-    train_idx = np.flatnonzero(~val)
+    train_idx = np.repeat(np.flatnonzero(~val), weight[~val])
     steps_per_epoch = int(np.ceil(len(train_idx) / args.batch_size))
     sched = torch.optim.lr_scheduler.CosineAnnealingLR(optimizer, args.epochs * steps_per_epoch)
 

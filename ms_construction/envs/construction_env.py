@@ -72,6 +72,11 @@ def _clip_norm(v: torch.Tensor, max_norm: float) -> torch.Tensor:
     return v * torch.clamp(max_norm / n.clamp(min=1e-9), max=1.0)
 
 
+def _clip_norm_np(v: np.ndarray, max_norm: float) -> np.ndarray:
+    n = float(np.linalg.norm(v))
+    return v * min(1.0, max_norm / max(n, 1e-9))
+
+
 class ConstructionTaskEnv(BaseEnv):
     """Base of the construction tasks; see ms_construction/envs/tasks.py for the task cards."""
 
@@ -176,8 +181,10 @@ class ConstructionTaskEnv(BaseEnv):
         self.hold_pose_in_tcp[:, 3] = 1
         self.tolerances = torch.tensor([[self._tol_init[k] for k in TOLERANCE_KEYS]], **f32).repeat(n, 1)
         self.obj = self.elements[self.TASKS[0]]
+        self._element_body_index: Optional[torch.Tensor] = None  # [kinds, num_envs], GPU only
         self._task_onehot = torch.eye(len(kinds), **f32)
         self._gravity = torch.tensor(self.sim_config.scene_config.gravity, **f32)
+        self._gravity_np = np.asarray(self.sim_config.scene_config.gravity, np.float32)
         self._cos_max_incidence = float(np.cos(np.deg2rad(MAX_GRASP_INCIDENCE_DEG)))
 
     def _build_goal_marker(self, kind: str, manifest: dict) -> Actor:
@@ -236,11 +243,24 @@ class ConstructionTaskEnv(BaseEnv):
         return pose.repeat(b, 1)
 
     def _select_active_elements(self):
-        """Point `self.obj` at each env's element of its task type (one view, no rebuild)."""
-        kinds = [ELEMENT_KINDS[i] for i in self.task_id.tolist()]
-        entities = [self.elements[k]._objs[i] for i, k in enumerate(kinds)]
-        self.obj = Actor.create_from_entities(entities, self.scene, torch.arange(self.num_envs, device=self.device))
-        self.obj.name = "element"
+        """Point `self.obj` at each env's element of its task type. physx_cpu has one env: its
+        kind's actor. On the GPU, one view built once whose rigid-body index is gathered by task_id
+        on the device at every (partial) reset: no loop over envs, no host sync. The view's entity
+        list stays the first kind's; ManiSkill's GPU paths (poses, velocities, setters) read the
+        rigid bodies through that index alone."""
+        if not self.gpu_sim_enabled:
+            self.obj = self.elements[ELEMENT_KINDS[int(self.task_id[0])]]
+            return
+        envs = torch.arange(self.num_envs, device=self.device)
+        if self._element_body_index is None:
+            kinds = [k for k in ELEMENT_KINDS if k in self.elements]
+            self._element_body_index = torch.full((len(ELEMENT_KINDS), self.num_envs), -1, dtype=torch.long,
+                                                  device=self.device)
+            for k in kinds:
+                self._element_body_index[ELEMENT_KINDS.index(k)] = self.elements[k]._body_data_index
+            self.obj = Actor.create_from_entities(list(self.elements[kinds[0]]._objs), self.scene, envs)
+            self.obj.name = "element"
+        self.obj._body_data_index_internal = self._element_body_index[self.task_id, envs]
 
     # ------------------------------------------------------------------------------------- #
     # tolerances (curriculum)
@@ -332,13 +352,29 @@ class ConstructionTaskEnv(BaseEnv):
         self._substep += 1
 
     def _before_simulation_step(self):
-        if not self.gpu_sim_enabled and not bool(self.held.any()):
+        """The hold: before every physics substep, set the held element's velocities so that it
+        reaches its pose on the plate by the substep's end (it stays a dynamic body: it collides)."""
+        if not self.gpu_sim_enabled:
+            if bool(self.held[0]):
+                body = self.obj._bodies[0]
+                v, w = self._hold_velocities_cpu()
+                body.set_linear_velocity(v)
+                body.set_angular_velocity(w)
             return
-        if self.gpu_sim_enabled and self._substep > 0:
+        if self._substep > 0:
             self.scene._gpu_fetch_all()
+        el = self.obj
+        v, w = self._hold_velocities()
+        held = self.held[:, None]
+        el.set_linear_velocity(torch.where(held, v, el.linear_velocity))
+        el.set_angular_velocity(torch.where(held, w, el.angular_velocity))
+        self.scene.px.gpu_apply_rigid_dynamic_data()
+
+    def _hold_velocities(self) -> tuple[torch.Tensor, torch.Tensor]:
+        """Linear and angular velocities [n, 3] that take each element to its held pose this substep."""
         dt = 1.0 / self.sim_freq
-        tcp, el = self.agent.tcp, self.obj
-        tcp_pose, el_pose = tcp.pose.raw_pose, el.pose.raw_pose
+        tcp = self.agent.tcp
+        tcp_pose, el_pose = tcp.pose.raw_pose, self.obj.pose.raw_pose
         target = pose_mul(tcp_pose, self.hold_pose_in_tcp)
         # feed-forward: the held point moves with the plate; feedback: close the error this substep;
         # PhysX adds g*dt to the velocity before integrating the position
@@ -346,14 +382,27 @@ class ConstructionTaskEnv(BaseEnv):
         v = tcp.linear_velocity + torch.cross(w_tcp, target[:, :3] - tcp_pose[:, :3], dim=-1)
         v = v + (target[:, :3] - el_pose[:, :3]) / dt - self._gravity * dt
         w = w_tcp + quat_to_rotvec(qmul(target[:, 3:], qconj(el_pose[:, 3:]))) / dt
-        v, w = _clip_norm(v, HOLD_MAX_SPEED), _clip_norm(w, HOLD_MAX_ANGULAR_SPEED)
-        if self.gpu_sim_enabled:  # (on CPU the one env is held, or we returned above)
-            held = self.held[:, None]
-            v, w = torch.where(held, v, el.linear_velocity), torch.where(held, w, el.angular_velocity)
-        el.set_linear_velocity(v)
-        el.set_angular_velocity(w)
-        if self.gpu_sim_enabled:
-            self.scene.px.gpu_apply_rigid_dynamic_data()
+        return _clip_norm(v, HOLD_MAX_SPEED), _clip_norm(w, HOLD_MAX_ANGULAR_SPEED)
+
+    def _hold_velocities_cpu(self) -> tuple[np.ndarray, np.ndarray]:
+        """`_hold_velocities` of the one physx_cpu env, computed on SAPIEN's own poses and numpy
+        vectors: the same formula without a tensor round trip, which made the hold cost several
+        times the physics substep it precedes (docs/BENCHMARKS.md, the "held" column)."""
+        dt = 1.0 / self.sim_freq
+        link, body = self.agent.tcp._objs[0], self.obj._bodies[0]
+        tcp, el = link.entity_pose, body.entity.pose
+        h = self.hold_pose_in_tcp[0].numpy()
+        target = tcp * sapien.Pose(h[:3], h[3:])
+        w_tcp = link.angular_velocity
+        r = target.p - tcp.p
+        lever = np.array([w_tcp[1] * r[2] - w_tcp[2] * r[1], w_tcp[2] * r[0] - w_tcp[0] * r[2],
+                          w_tcp[0] * r[1] - w_tcp[1] * r[0]])  # w x r (np.cross costs more than the physics here)
+        v = link.linear_velocity + lever + (target.p - el.p) / dt - self._gravity_np * dt
+        q = (sapien.Pose(q=target.q) * sapien.Pose(q=el.q).inv()).q  # target rotation * element rotation^-1
+        q = -q if q[0] < 0 else q
+        s = float(np.linalg.norm(q[1:]))
+        w = w_tcp + (q[1:] * (2 * np.arctan2(s, q[0]) / s if s > 1e-8 else 2.0)) / dt
+        return _clip_norm_np(v, HOLD_MAX_SPEED), _clip_norm_np(w, HOLD_MAX_ANGULAR_SPEED)
 
     # ------------------------------------------------------------------------------------- #
     # evaluation, observations, rewards

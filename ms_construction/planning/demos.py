@@ -21,6 +21,7 @@ import os
 import time
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Optional
 
 import gymnasium as gym
 import numpy as np
@@ -61,6 +62,12 @@ class JointTargetsAsDeltas(gym.Wrapper):
         self._last_obs = obs
         return obs, info
 
+    def restore(self, state: dict) -> None:
+        """Set the episode (just reset) to `state` (from `get_state_dict`), observed from there on."""
+        u = self.env.unwrapped
+        u.set_state_dict(state)
+        self._last_obs = u.get_obs()
+
     def step(self, target):
         qpos = self.env.unwrapped.agent.robot.get_qpos()
         clean = ((torch.as_tensor(target, dtype=qpos.dtype) - qpos) / self.delta_scale).clamp(-1, 1)
@@ -96,43 +103,89 @@ class DemoCollector:
         env = gym.make(env_id, num_envs=1, obs_mode="state", control_mode=DELTA_CONTROL_MODE, reward_mode="sparse",
                        sim_backend="physx_cpu", curriculum_stage=curriculum_stage)
         self.env = JointTargetsAsDeltas(env)
+        self.obs_dim = env.observation_space.shape[-1]
         self.expert = MotionPlanningExpert(self.env, config)
 
-    def collect(self, seed: int, noise: float) -> Demo:
+    def collect(self, seed: int, noise: float, start_state: Optional[dict] = None) -> Demo:
+        """The expert's episode `seed`, from its reset or, given `start_state`, from that state of it."""
         self.env.noise, self.env.rng = noise, np.random.default_rng(seed + 7919)
-        result = self.expert.run(seed)
-        return Demo(obs=np.stack(self.env.obs), actions=np.stack(self.env.actions),
-                    rewards=np.array(self.env.rewards, np.float32), placed=result.placed,
+        self.env.reset(seed=seed)
+        if start_state is not None:
+            self.env.restore(start_state)
+        result = self.expert.solve(seed)
+        return Demo(obs=np.stack(self.env.obs) if self.env.obs else np.zeros((0, self.obs_dim), np.float32),
+                    actions=np.stack(self.env.actions) if self.env.actions else np.zeros((0, 6), np.float32),
+                    rewards=np.array(self.env.rewards, np.float32), placed=result.placed and bool(self.env.actions),
                     task=result.task, seed=seed, noise=noise)
+
+    def takeovers(self, seed: int, noise: float, policy, offsets: tuple[int, ...] = (-30, -10, 15)
+                  ) -> tuple[list[Demo], int]:
+        """DAgger-style data where `policy` fails: its deterministic episode `seed`; if it does not
+        place, the expert takes over from the policy's states `offsets` steps from the one where the
+        element came closest to its goal (before: where the policy went wrong; after: where it was
+        stuck). Returns the expert's placed takeovers and the env steps the policy took."""
+        env, u = self.env.env, self.env.unwrapped
+        obs, _ = env.reset(seed=seed)
+        states, dists = [], []
+        while True:
+            states.append(u.get_state_dict())
+            with torch.no_grad():
+                action = policy.get_action(obs.float(), deterministic=True).clamp(-1, 1)
+            obs, _, terminated, truncated, info = env.step(action)
+            dists.append(float(info["place_dist"][0]))
+            if bool(terminated[0]) or bool(truncated[0]):
+                break
+        if bool(info["success"][0]):
+            return [], len(states)
+        closest = int(np.argmin(dists))
+        demos = []
+        for t in sorted({min(max(0, closest + k), len(states) - 1) for k in offsets}):
+            demo = self.collect(seed, noise, start_state=states[t])
+            if demo.placed:
+                demos.append(demo)
+        return demos, len(states)
 
     def close(self) -> None:
         self.expert.close()
         self.env.close()
 
 
-_collector = None
+_collector, _policy = None, None
 
 
-def _collect(job: tuple[str, str, int, float]) -> dict:
-    """One episode in a worker process (its collector kept for the next)."""
-    global _collector
-    env_id, stage, seed, noise = job
+def _collect(job: tuple[str, str, int, float, Optional[str]]) -> tuple[list[dict], int]:
+    """One episode in a worker process (its collector kept for the next): the expert's, or with a
+    policy checkpoint, the expert's takeovers where that policy fails. Returns the placed
+    demonstrations and the env steps the policy took."""
+    global _collector, _policy
+    env_id, stage, seed, noise, policy_path = job
+    torch.set_num_threads(1)
     if _collector is None:
         _collector = DemoCollector(env_id, stage)
-    d = _collector.collect(seed, noise)
-    return dict(obs=d.obs, actions=d.actions, rewards=d.rewards, placed=d.placed, task=d.task, seed=d.seed, noise=d.noise)
+    if policy_path is None:
+        demos, policy_steps = [_collector.collect(seed, noise)], 0
+    else:
+        if _policy is None:
+            from baselines.ppo.evaluation import load_policy
+
+            _policy, _ = load_policy(Path(policy_path), env_id)
+        demos, policy_steps = _collector.takeovers(seed, noise, _policy)
+    return [dict(obs=d.obs, actions=d.actions, rewards=d.rewards, placed=d.placed, task=d.task, seed=d.seed,
+                 noise=d.noise) for d in demos if d.placed], policy_steps
 
 
-def save_demos(path: Path, demos: list[dict], tried: int, wall_s: float = 0.0) -> None:
-    """Write atomically (a temporary file, then a rename); `wall_s`: the recording's wall time so far."""
+def save_demos(path: Path, demos: list[dict], tried: int, wall_s: float = 0.0, policy_steps: int = 0) -> None:
+    """Write atomically (a temporary file, then a rename); `wall_s`: the recording's wall time so far;
+    `policy_steps`: env steps a policy took to find the takeover states (not in the demos)."""
     lens = [len(d["actions"]) for d in demos]
+    cat = lambda key, empty: np.concatenate([d[key] for d in demos]) if demos else empty  # noqa: E731
     data = dict(
-        obs=np.concatenate([d["obs"] for d in demos]), actions=np.concatenate([d["actions"] for d in demos]),
-        rewards=np.concatenate([d["rewards"] for d in demos]),
+        obs=cat("obs", np.zeros((0, 0), np.float32)), actions=cat("actions", np.zeros((0, 0), np.float32)),
+        rewards=cat("rewards", np.zeros(0, np.float32)),
         episode=np.repeat(np.arange(len(demos)), lens),
         task=np.repeat([ELEMENT_KINDS.index(d["task"]) for d in demos], lens),
         seed=np.repeat([d["seed"] for d in demos], lens), noise=np.repeat([d["noise"] for d in demos], lens),
-        tried=np.array(tried), wall_s=np.array(wall_s),
+        tried=np.array(tried), wall_s=np.array(wall_s), policy_steps=np.array(policy_steps),
     )
     path.parent.mkdir(parents=True, exist_ok=True)
     tmp = path.with_name(path.name + ".tmp.npz")
@@ -161,25 +214,36 @@ def tried_episodes(path: Path) -> int:
         return int(f["tried"])
 
 
+def policy_steps(path: Path) -> int:
+    """Env steps the policy took to find the takeover states of the file `path` (0 for the expert's own)."""
+    with np.load(path) as f:
+        return int(f["policy_steps"]) if "policy_steps" in f.files else 0
+
+
 def record_demos(out: Path, episodes: int, env_id: str = "ConstructionPickPlace-v1", seed: int = 100_000,
                  noise: float = 0.1, curriculum_stage: str = "cp4", workers: int = 2, save_every: int = 50,
-                 resume: bool = False) -> Path:
+                 resume: bool = False, policy: Optional[Path] = None) -> Path:
     """Episodes seed, seed + 1, ... (every other one with DART noise `noise`); the placed ones are
-    written to `out` every `save_every` episodes and at the end; `resume` continues `out`."""
+    written to `out` every `save_every` episodes and at the end; `resume` continues `out`.
+    With a `policy` checkpoint: the expert's takeovers where that policy fails (`DemoCollector.takeovers`)."""
     demos, tried, wall_s = load_demos(out) if resume and out.exists() else ([], 0, 0.0)
+    steps_of_policy = policy_steps(out) if resume and out.exists() else 0
     start = time.time() - wall_s
-    jobs = [(env_id, curriculum_stage, seed + i, noise if i % 2 else 0.0) for i in range(tried, episodes)]
-    bar = tqdm(total=episodes, initial=tried, desc="expert demos", unit="ep", dynamic_ncols=True)
+    jobs = [(env_id, curriculum_stage, seed + i, noise if i % 2 else 0.0, None if policy is None else str(policy))
+            for i in range(tried, episodes)]
+    desc = "expert demos" if policy is None else "expert takeovers"
+    bar = tqdm(total=episodes, initial=tried, desc=desc, unit="ep", dynamic_ncols=True)
     with mp.get_context("spawn").Pool(workers) as pool:
-        for d in pool.imap(_collect, jobs):
+        for kept, steps in pool.imap(_collect, jobs):
             tried += 1
-            if d["placed"]:
-                demos.append(d)
+            demos.extend(kept)
+            steps_of_policy += steps
             bar.update()
             bar.set_postfix(kept=len(demos), steps=sum(len(x["actions"]) for x in demos))
             if tried % save_every == 0:
-                save_demos(out, demos, tried, time.time() - start)
+                save_demos(out, demos, tried, time.time() - start, steps_of_policy)
     bar.close()
-    save_demos(out, demos, tried, time.time() - start)
-    print(f"{len(demos)} placed of {tried} episodes, {sum(len(x['actions']) for x in demos)} steps -> {out}")
+    save_demos(out, demos, tried, time.time() - start, steps_of_policy)
+    print(f"{len(demos)} placed {'takeovers' if policy else 'episodes'} of {tried} episodes, "
+          f"{sum(len(x['actions']) for x in demos)} steps -> {out}")
     return out

@@ -157,22 +157,35 @@ class MotionPlanningExpert:
     def run(self, seed: int) -> EpisodeResult:
         """Reset the env with `seed` and solve the episode."""
         self.env.reset(seed=seed)
+        return self.solve(seed)
+
+    def solve(self, seed: int) -> EpisodeResult:
+        """Solve the episode from the env's current state: a fresh reset, or a state a policy led to
+        (a takeover). With the element already held, the approach and descent are skipped, and the
+        lift is skipped where its straight line up is not free (a policy may be carrying it already)."""
         u = self.u
         self.kind = ELEMENT_KINDS[int(u.task_id[0])]
         self.steps, self.plan_time, self.info, self.phase_steps, self.phase = 0, 0.0, {}, {}, "approach"
         self.q = u.agent.robot.get_qpos()[0].cpu().numpy().astype(np.float64)
         self.rng = np.random.default_rng(seed)
+        held_at_start = bool(u.held[0])
         failure = ""
         try:
             self._set_obstacles()
-            with self._phase("approach"):
-                self._approach()
+            if not held_at_start:
+                with self._phase("approach"):
+                    self._approach()
             with self._phase("descend"):
-                self._descend()
+                if not held_at_start:
+                    self._descend()
                 self._await_pull()
             loaded, loaded_exact = self._loaded_planners()
             with self._phase("lift"):
-                self._lift(loaded_exact)
+                try:
+                    self._lift(loaded_exact)
+                except PhaseFailure:
+                    if not held_at_start:
+                        raise
             with self._phase("carry"):
                 install = self._carry(loaded, loaded_exact)
             with self._phase("install"):
