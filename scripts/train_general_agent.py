@@ -14,11 +14,13 @@ campaign continues when the same command runs again (PPO resumes from its checkp
                      (ms_construction/planning/demos.py): the general task, plus extra episodes of
                      the two tasks the clone found hardest (window, flooring)
   2. bc0/checkpoint.pt baselines/ppo/bc.py on them: actor on the expert's actions, critic on their returns
-  3. demos/*_takeovers.npz  one DAgger round: the first clone runs window and flooring episodes of
-                     its own; where it fails, the expert takes over from the states it led to
-                     (DemoCollector.takeovers), and those takeovers are recorded
-  4. bc/checkpoint.pt the clone of all of them, the takeovers weighted --takeover-repeats times
-  5. ppo/checkpoint.pt baselines/ppo/ppo.py --checkpoint bc/checkpoint.pt: sparse reward
+  3. demos/*_takeovers<r>.npz  DAgger round r: the latest clone runs episodes of its own; where it
+                     fails, the expert takes over from the states it led to (DemoCollector.takeovers)
+  4. bc<r>/checkpoint.pt the clone of all data so far, the takeovers weighted --takeover-repeats
+                     times; steps 3 and 4 repeat for each round
+     val<N>_bc<r>.json every clone evaluated on validation seeds (500000 on); their rows make
+                     <run-dir>/progress.csv, the campaign's curve (scripts/plot_training.py)
+  5. ppo/checkpoint.pt baselines/ppo/ppo.py --checkpoint <the last clone>: sparse reward
                      (Algorithm 1), cp4, critic warmed up first, frozen observation normalization, a
                      behaviour-cloning term on the demonstrations beside the PPO loss
   6. --ship          the final checkpoint, with the campaign's record (env steps, wall time,
@@ -29,6 +31,7 @@ Wall time of every stage accumulates across interruptions (in the demonstration 
 
 from __future__ import annotations
 
+import csv
 import json
 import os
 import platform
@@ -42,10 +45,12 @@ from pathlib import Path
 import torch
 import tyro
 
-from baselines.ppo import bc, ppo
+from baselines.ppo import bc, evaluation, ppo
 from ms_construction.planning.demos import load_demos, policy_steps, record_demos, tried_episodes
 
 SHIPPED = Path("assets/checkpoints/general_agent.pt")
+VALIDATION_SEED = 500_000
+"""first seed of the validation episodes (training seeds lie below, the test seeds from 1000000 on)."""
 
 
 @dataclass
@@ -58,12 +63,18 @@ class Args:
     """extra expert episodes of WindowInstallation-v1 (seeds 200000 on)."""
     flooring_demos: int = 300
     """extra expert episodes of Flooring-v1 (seeds 300000 on)."""
-    window_takeovers: int = 1000
-    """WindowInstallation-v1 episodes (seeds 400000 on) the first clone runs for the expert's takeovers."""
-    flooring_takeovers: int = 400
-    """Flooring-v1 episodes (seeds 450000 on) the first clone runs for the expert's takeovers."""
+    window_takeovers: tuple[int, ...] = (1000, 1200)
+    """WindowInstallation-v1 episodes the clone runs for the expert's takeovers, one number per DAgger
+    round (round r: seeds 400000 + 10000 (r - 1) on)."""
+    flooring_takeovers: tuple[int, ...] = (400, 600)
+    """the same for Flooring-v1 (round r: seeds 450000 + 10000 (r - 1) on)."""
+    ceiling_takeovers: tuple[int, ...] = (0, 600)
+    """the same for CeilingInstallation-v1 (round r: seeds 480000 + 5000 (r - 1) on)."""
     takeover_repeats: int = 5
-    """how many times each takeover step counts in the second cloning (bc.py --repeats)."""
+    """how many times each takeover step counts in the cloning (bc.py --repeats)."""
+    validation_episodes: int = 200
+    """episodes per task on which every clone is evaluated (seeds 500000 on, never trained on), for
+    <run-dir>/progress.csv: the campaign's curve (scripts/plot_training.py)."""
     workers: int = 2
     """processes recording demonstrations."""
     bc_epochs: int = 100
@@ -91,8 +102,9 @@ class Args:
 DEMO_SETS = (("general", "ConstructionPickPlace-v1", 100_000, "demos"),
              ("window", "WindowInstallation-v1", 200_000, "window_demos"),
              ("flooring", "Flooring-v1", 300_000, "flooring_demos"))
-TAKEOVER_SETS = (("window_takeovers", "WindowInstallation-v1", 400_000, "window_takeovers"),
-                 ("flooring_takeovers", "Flooring-v1", 450_000, "flooring_takeovers"))
+TAKEOVER_SETS = (("window_takeovers", "WindowInstallation-v1", 400_000, 10_000, "window_takeovers"),
+                 ("flooring_takeovers", "Flooring-v1", 450_000, 10_000, "flooring_takeovers"),
+                 ("ceiling_takeovers", "CeilingInstallation-v1", 480_000, 5_000, "ceiling_takeovers"))
 
 
 def main(args: Args) -> Path:
@@ -108,10 +120,15 @@ def main(args: Args) -> Path:
             record["wall_s"][stage] = record["wall_s"].get(stage, 0.0) + time.time() - t
             record_path.write_text(json.dumps(record, indent=1) + "\n")
 
-    def collect(sets, policy=None) -> list[Path]:
+    def collect(sets, policy=None, dagger_round: int = 0) -> list[Path]:
+        """The demonstrations of `sets` (or, in DAgger round r >= 1, the expert's takeovers of `policy`)."""
         files = []
-        for name, env_id, seed, count in sets:
+        for name, env_id, seed, *per_round, count in sets:
             path, wanted = args.run_dir / "demos" / f"{name}.npz", getattr(args, count)
+            if dagger_round:
+                wanted = wanted[dagger_round - 1] if dagger_round <= len(wanted) else 0
+                seed += per_round[0] * (dagger_round - 1)
+                path = path.with_name(f"{name}{dagger_round}.npz")
             if wanted <= 0:
                 continue
             if tried_episodes(path) < wanted:
@@ -126,12 +143,39 @@ def main(args: Args) -> Path:
                                                                obs_noise=args.bc_obs_noise, seed=args.seed,
                                                                repeats=repeats)))
 
+    curve = []
+
+    def validate(ckpt: Path, r: int, files: list[Path]) -> None:
+        """Evaluate clone `r` on the validation seeds (once) and add its row to the campaign's curve."""
+        path = args.run_dir / f"val{args.validation_episodes}_bc{r}.json"
+        if not path.exists():
+            timed("validation", lambda: evaluation.main(evaluation.Args(
+                checkpoint=ckpt, all=True, episodes=args.validation_episodes, seed=VALIDATION_SEED, json=path)))
+        tasks = json.loads(path.read_text())["tasks"].values()
+        steps = sum(len(e["actions"]) for f in files for e in load_demos(f)[0]) + sum(map(policy_steps, files))
+        curve.append(dict(global_step=steps, stage="clone" if r == 0 else f"DAgger round {r}",
+                          pick_success=min(t["pick_success"] for t in tasks),
+                          place_success=min(t["place_success"] for t in tasks),
+                          extrinsic_return=sum(t["mean_return"] for t in tasks) / 3,
+                          eval_place_success=sum(t["place_success"] for t in tasks) / 3))
+
     demo_files = collect(DEMO_SETS)
-    bc0_ckpt = args.run_dir / "bc0" / "checkpoint.pt"
-    clone(bc0_ckpt, demo_files)
-    takeover_files = collect(TAKEOVER_SETS, policy=bc0_ckpt)
-    bc_ckpt, ppo_ckpt = args.run_dir / "bc" / "checkpoint.pt", args.run_dir / "ppo" / "checkpoint.pt"
-    clone(bc_ckpt, demo_files + takeover_files, (1,) * len(demo_files) + (args.takeover_repeats,) * len(takeover_files))
+    bc_ckpt = args.run_dir / "bc0" / "checkpoint.pt"
+    clone(bc_ckpt, demo_files)
+    validate(bc_ckpt, 0, demo_files)
+    takeover_files: list[Path] = []
+    rounds = max(len(args.window_takeovers), len(args.flooring_takeovers), len(args.ceiling_takeovers))
+    for r in range(1, rounds + 1):  # DAgger: the latest clone's failures, taken over; all data cloned again
+        takeover_files += collect(TAKEOVER_SETS, policy=bc_ckpt, dagger_round=r)
+        bc_ckpt = args.run_dir / f"bc{r}" / "checkpoint.pt"
+        clone(bc_ckpt, demo_files + takeover_files,
+              (1,) * len(demo_files) + (args.takeover_repeats,) * len(takeover_files))
+        validate(bc_ckpt, r, demo_files + takeover_files)
+    with open(args.run_dir / "progress.csv", "w", newline="") as f:
+        writer = csv.DictWriter(f, fieldnames=list(curve[0]))
+        writer.writeheader()
+        writer.writerows(curve)
+    ppo_ckpt = args.run_dir / "ppo" / "checkpoint.pt"
     final = bc_ckpt
     if args.ppo_timesteps > 0:
         if ppo_ckpt.exists():
@@ -165,9 +209,10 @@ def ship(args: Args, final: Path, demo_files: list[Path], takeover_files: list[P
     ckpt["campaign"] = dict(command="python scripts/train_general_agent.py " + " ".join(shlex.quote(a) for a in sys.argv[1:]),
                             record={
         "expert demonstrations": f"{kept} placed episodes kept of {tried} tried; {demo_steps} env steps in the kept ones",
-        "expert takeovers": f"{sum(len(d) for d, _, _ in takeovers)} placed takeovers where the first clone failed, "
-                            f"in {sum(t for _, t, _ in takeovers)} episodes of it; {clone_steps} env steps of the "
-                            f"clone, {takeover_steps} of the expert in the kept takeovers",
+        "expert takeovers": f"{sum(len(d) for d, _, _ in takeovers)} placed takeovers where a clone failed, in "
+                            f"{sum(t for _, t, _ in takeovers)} episodes of the clones ({len(takeover_files)} "
+                            f"files of DAgger rounds); {clone_steps} env steps of the clones, {takeover_steps} of "
+                            f"the expert in the kept takeovers",
         "PPO fine-tuning": f"{ppo_steps} env steps" if ppo_steps else "none (the shipped agent is the clone)",
         "env steps in all": f"{total}, the failed demonstration episodes not counted (budget: 8,000,000)",
         "wall time": ", ".join(f"{k} {v / 60:.0f} min" for k, v in wall.items())
@@ -176,9 +221,9 @@ def ship(args: Args, final: Path, demo_files: list[Path], takeover_files: list[P
     })
     SHIPPED.parent.mkdir(parents=True, exist_ok=True)
     torch.save(ckpt, SHIPPED)
-    csv = final.parent / "progress.csv"
-    if csv.exists():
-        shutil.copyfile(csv, SHIPPED.with_name("general_agent_progress.csv"))
+    progress = final.parent / "progress.csv" if final.parent.name == "ppo" else args.run_dir / "progress.csv"
+    if progress.exists():
+        shutil.copyfile(progress, SHIPPED.with_name("general_agent_progress.csv"))
     print(f"shipped {final} -> {SHIPPED}")
 
 

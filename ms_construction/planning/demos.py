@@ -12,6 +12,11 @@ noise, while the clean one is recorded, so the data show how to return to the ex
 states a policy's small errors lead to; the expert tracks its planned targets in closed loop, so
 it corrects the noise itself. Joint targets then lag slightly, which the expert's settle steps
 absorb; a demonstration is kept only if it placed.
+
+Takeovers (DAgger-style, Ross et al. 2011): `DemoCollector.takeovers` runs a policy (a clone of
+these demonstrations) on an episode; where it fails, the episode is restored to the policy's own
+states around where it went wrong and the expert solves it from there (`MotionPlanningExpert.solve`),
+so the data cover the states the policy actually reaches, not only the expert's.
 """
 
 from __future__ import annotations
@@ -123,7 +128,10 @@ class DemoCollector:
         """DAgger-style data where `policy` fails: its deterministic episode `seed`; if it does not
         place, the expert takes over from the policy's states `offsets` steps from the one where the
         element came closest to its goal (before: where the policy went wrong; after: where it was
-        stuck). Returns the expert's placed takeovers and the env steps the policy took."""
+        stuck). Where the element was never nearer its goal than at the start (a floor panel is
+        carried away from its recess first), that is the start, and the takeovers are the expert's
+        episode from the policy's first steps. Returns the expert's placed takeovers and the env
+        steps the policy took."""
         env, u = self.env.env, self.env.unwrapped
         obs, _ = env.reset(seed=seed)
         states, dists = [], []
