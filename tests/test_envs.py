@@ -15,7 +15,7 @@ from ms_construction.curriculum import STAGES
 from ms_construction.envs import ENV_IDS
 from ms_construction.site_geometry import ELEMENT_KINDS
 
-from conftest import JointMover, StepLog, make_env, quat_z, to_sapien
+from conftest import JointMover, StepLog, make_env, quat_z, set_held, to_sapien
 
 OBS_MODES = ("state", "state_dict", "rgb", "depth", "rgbd", "pointcloud", "none")
 REWARD_MODES = ("sparse", "dense", "normalized_dense", "none")
@@ -200,9 +200,7 @@ def test_placement_succeeds_just_inside_and_fails_just_outside_the_tolerances(en
     env = make_env(env_id)
     env.reset(seed=0)
     u = env.unwrapped
-    state = u.get_state_dict()
-    state["task"]["held"][:] = True
-    u.set_state_dict(state)
+    set_held(u)
     goal = to_sapien(u.goal_pose.raw_pose)
     tau_place, tau_angle = float(u.tau_place[0]), float(u.tau_angle_deg[0])
 
@@ -248,9 +246,7 @@ def test_turned_upside_down_or_tilted_elements_at_the_goal_are_not_placed(env_id
     env = make_env(env_id)
     env.reset(seed=0)
     u = env.unwrapped
-    state = u.get_state_dict()
-    state["task"]["held"][:] = True
-    u.set_state_dict(state)
+    set_held(u)
     goal = to_sapien(u.goal_pose.raw_pose)
     u.obj.set_pose(goal)
     assert bool(u.evaluate()["success"][0]), "the goal pose itself is placed"
@@ -307,9 +303,7 @@ def test_cpu_hold_computes_the_same_velocities_as_the_batched_hold(env_id):
     env = make_env(env_id, control_mode="pd_joint_delta_pos")
     env.reset(seed=3)
     u = env.unwrapped
-    state = u.get_state_dict()
-    state["task"]["held"][:] = True
-    u.set_state_dict(state)
+    set_held(u)
     gen = torch.Generator().manual_seed(0)
     checked = 0
     for i in range(12):
@@ -368,9 +362,7 @@ def test_state_round_trip_continues_identically(env_id):
     for a in actions[:4]:
         env.step(a)
     # a held element is part of the task state
-    state = u.get_state_dict()
-    state["task"]["held"][:] = True
-    u.set_state_dict(state)
+    set_held(u)
     saved = u.get_state_dict()
 
     def rollout():
