@@ -13,8 +13,7 @@ import hashlib
 import json
 from pathlib import Path
 
-from ms_construction.arm_model import ArmParams
-from ms_construction.site_geometry import SiteParams
+from ms_construction.parameters import ArmParams, SiteParams
 
 ASSET_DIR = Path(__file__).resolve().parent.parent / "assets"
 MANIFEST_PATH = ASSET_DIR / "manifest.json"

@@ -83,7 +83,9 @@ def main() -> int:
         return 1
     ok = _check("assets", check_assets)
     if not ok:
-        print("Rebuild the assets with: python scripts/build_assets.py")
+        from ms_construction.assets import REBUILD_COMMAND
+
+        print(f"Rebuild the assets with: {REBUILD_COMMAND}")
         return 1
     ok = _check("physics", check_physics) and _check("rendering", check_render)
     print("all good" if ok else "see the failures above; rerun with -v for tracebacks")

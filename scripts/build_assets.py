@@ -11,7 +11,7 @@ from pathlib import Path
 
 import tyro
 
-from ms_construction.asset_builder import CoacdSettings, build_assets
+from ms_construction.build.asset_builder import CoacdSettings, build_assets
 from ms_construction.assets import ASSET_DIR
 
 

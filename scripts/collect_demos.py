@@ -22,6 +22,7 @@ from typing import Optional
 
 import tyro
 
+from baselines.ppo.evaluation import load_policy
 from ms_construction.planning.demos import record_demos
 
 
@@ -54,7 +55,7 @@ class Args:
 def main(args: Args) -> None:
     record_demos(args.out, args.episodes, env_id=args.env_id, seed=args.seed, noise=args.noise,
                  curriculum_stage=args.curriculum_stage, workers=args.workers, save_every=args.save_every,
-                 resume=args.resume, policy=args.policy)
+                 resume=args.resume, policy=args.policy, load_policy=load_policy)
 
 
 if __name__ == "__main__":

@@ -30,9 +30,9 @@ from tqdm import tqdm
 
 import ms_construction  # noqa: F401  (registration)
 from ms_construction.envs import ENV_IDS
-from ms_construction.planning import MotionPlanningExpert
+from ms_construction.planning import ExpertConfig, MotionPlanningExpert
 from ms_construction.reporting import update_section
-from ms_construction.site_geometry import ELEMENT_KINDS
+from ms_construction.parameters import ELEMENT_KINDS
 
 RESULTS_PATH = Path("docs/RESULTS.md")
 
@@ -59,6 +59,9 @@ class Args:
     """processes solving episodes in parallel (one env each); recording needs 1."""
     write_results: bool = False
     """write the table into the 'Motion-planning expert' section of docs/RESULTS.md."""
+    expert: ExpertConfig = ExpertConfig()
+    """the expert's settings (margins, speeds, planning time limits); the defaults are what
+    docs/RESULTS.md reports."""
 
 
 def make_env(env_id: str, stage: str, render: bool = False):
@@ -69,11 +72,11 @@ def make_env(env_id: str, stage: str, render: bool = False):
 _worker_experts: dict = {}
 
 
-def _solve(job: tuple[str, str, int]) -> dict:
+def _solve(job: tuple[str, str, int, ExpertConfig]) -> dict:
     """One episode in a worker process, its env and expert kept for the next one."""
-    env_id, stage, seed = job
+    env_id, stage, seed, config = job
     if env_id not in _worker_experts:
-        _worker_experts[env_id] = MotionPlanningExpert(make_env(env_id, stage))
+        _worker_experts[env_id] = MotionPlanningExpert(make_env(env_id, stage), config)
     return _worker_experts[env_id].run(seed).to_dict()
 
 
@@ -83,7 +86,7 @@ def run_env(args: Args, env_id: str) -> list[dict]:
     results = []
     if args.workers > 1:
         with mp.get_context("spawn").Pool(args.workers) as pool:
-            for r in pool.imap(_solve, [(env_id, args.curriculum_stage, s) for s in seeds]):
+            for r in pool.imap(_solve, [(env_id, args.curriculum_stage, s, args.expert) for s in seeds]):
                 results.append(r)
                 bar.update()
                 bar.set_postfix(placed=sum(x["placed"] for x in results))
@@ -95,7 +98,7 @@ def run_env(args: Args, env_id: str) -> list[dict]:
                                 trajectory_name=f"{env_id}.expert", video_fps=env.unwrapped.control_freq,
                                 save_on_reset=False, source_type="motionplanning",
                                 source_desc="ms_construction mplib RRTConnect expert")
-        expert = MotionPlanningExpert(env)
+        expert = MotionPlanningExpert(env, args.expert)
         for s in seeds:
             results.append(expert.run(s).to_dict())
             if args.save_trajectory:

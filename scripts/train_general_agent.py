@@ -133,7 +133,7 @@ def main(args: Args) -> Path:
                 continue
             if tried_episodes(path) < wanted:
                 record_demos(path, wanted, env_id=env_id, seed=seed, workers=args.workers, save_every=100, resume=True,
-                             policy=policy)
+                             policy=policy, load_policy=evaluation.load_policy)
             files.append(path)
         return files
 

@@ -9,9 +9,9 @@ import torch
 from ms_construction.agents.construction_arm import REST_QPOS
 from ms_construction.assets import load_manifest
 from ms_construction.kinematics import ArmIK, pose_error
-from ms_construction.site_geometry import ELEMENT_KINDS
+from ms_construction.parameters import ELEMENT_KINDS
 
-from conftest import make_env, quat_z
+from tests.helpers import make_env, quat_z
 
 CONTROL_MODES = ("pd_joint_delta_pos", "pd_joint_pos", "pd_ee_delta_pos", "pd_ee_delta_pose")
 

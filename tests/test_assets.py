@@ -9,9 +9,9 @@ import sapien
 import trimesh
 from transforms3d.quaternions import quat2mat
 
-from ms_construction.asset_builder import build_assets
+from ms_construction.build.asset_builder import build_assets
 from ms_construction.assets import ARM_URDF_PATH, ASSET_DIR, AssetError, REBUILD_COMMAND, check_manifest, load_manifest
-from ms_construction.site_geometry import ELEMENT_KINDS, SiteParams
+from ms_construction.parameters import ELEMENT_KINDS, SiteParams
 
 
 def _hulls(obj_path):

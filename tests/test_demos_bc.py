@@ -1,22 +1,28 @@
 """Expert demonstrations in the learner's control mode, behaviour cloning, and the PPO pieces of the
 recipe (observation normalization, critic warm-up)."""
 
+import dataclasses
+
 import gymnasium as gym
 import numpy as np
 import pytest
 import torch
 
 from baselines.ppo import bc, evaluation, ppo
-from ms_construction.planning.demos import DemoCollector, load_demos, save_demos
+from ms_construction.planning.demos import DEMO_EXPERT_CONFIG, DemoCollector, load_demos, save_demos
+
+from tests.helpers import PLAN_TRIES, SLOW_MACHINE_RRT_TIME
+
+EXPERT = dataclasses.replace(DEMO_EXPERT_CONFIG, rrt_time=SLOW_MACHINE_RRT_TIME)
 
 
 @pytest.fixture(scope="module")
 def flooring_demos():
-    collector = DemoCollector("Flooring-v1")
+    collector = DemoCollector("Flooring-v1", config=EXPERT)
     try:
         demos = []
         for seed, noise in ((3, 0.0), (4, 0.1)):
-            for _ in range(3):  # OMPL seeds itself from the clock: a rare unlucky plan is tried again
+            for _ in range(PLAN_TRIES):  # OMPL seeds itself from the clock: a rare unlucky plan is tried again
                 d = collector.collect(seed, noise)
                 if d.placed:
                     break
@@ -90,7 +96,7 @@ def test_the_expert_takes_over_where_a_policy_stalls_with_the_element_held(floor
     # stalled late in the carry, where the element is nearer its goal than anywhere before
     # (closer to the start a floor panel is farther from its recess than on the table)
     stop = grasped_at + 9 * (len(clean.actions) - grasped_at) // 10
-    collector = DemoCollector("Flooring-v1")
+    collector = DemoCollector("Flooring-v1", config=EXPERT)
     try:
         takeovers, steps = collector.takeovers(clean.seed, 0.0, _ReplayThenStop(clean.actions, stop))
         assert steps == collector.env.unwrapped.MAX_EPISODE_STEPS, "the stalled policy ran out of time"

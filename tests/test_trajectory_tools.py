@@ -15,7 +15,7 @@ import torch
 
 from ms_construction.envs import ENV_IDS
 
-from conftest import make_env
+from tests.helpers import PLAN_TRIES, SLOW_MACHINE_RRT_TIME, make_env
 
 ROOT = Path(__file__).resolve().parents[1]
 EXPERT_ENV = "Flooring-v1"
@@ -102,13 +102,13 @@ def expert_traj(tmp_path_factory) -> Path:
     """One expert episode of Flooring-v1 (seed 0), recorded by scripts/run_expert.py. OMPL seeds its
     sampler from the clock: a run that does not place is run again (these tests are about the tool)."""
     out = tmp_path_factory.mktemp("expert")
-    for _ in range(3):
+    for _ in range(PLAN_TRIES):
         _run("scripts/run_expert.py", "--env-id", EXPERT_ENV, "--episodes", "1", "--seed", "0",
-             "--save-trajectory", "--out", str(out))
+             "--save-trajectory", "--out", str(out), "--expert.rrt-time", str(SLOW_MACHINE_RRT_TIME))
         meta = json.loads((out / f"{EXPERT_ENV}.expert.json").read_text())
         if meta["episodes"][0]["success"]:
             return out / f"{EXPERT_ENV}.expert.h5"
-    pytest.fail("the expert did not place Flooring-v1 seed 0 in 3 runs")
+    pytest.fail(f"the expert did not place Flooring-v1 seed 0 in {PLAN_TRIES} runs")
 
 
 def _copy(traj: Path, dest: Path) -> Path:

@@ -5,14 +5,14 @@ panel"). The URDF is generated and committed (`assets/arm/construction_arm.urdf`
 follow ManiSkill's convention of gravity-compensated links (balance_passive_force), so the PD gains
 only have to hold the payload: they are stiff enough that a 15 kg element at full reach sags by
 millimetres (tests/test_arm.py), and the force limits are the URDF's effort limits, which follow the
-paper's 400 N tool force limit.
+paper's 400 N tool force limit. The plate's grasp sensor and its hold of an element are
+`ms_construction.agents.suction_gripper`.
 """
 
 from copy import deepcopy
 
 import numpy as np
 import sapien
-import torch
 
 from mani_skill.agents.base_agent import BaseAgent, Keyframe
 from mani_skill.agents.controllers import (
@@ -56,16 +56,9 @@ class ConstructionArm(BaseAgent):
         self.plate = sapien_utils.get_obj_by_name(self.robot.get_links(), "suction_plate")
 
     @property
-    def tcp_pos(self) -> torch.Tensor:
-        return self.tcp.pose.p
-
-    @property
     def tcp_pose(self):
         """Pose of the suction plate's face centre; its z axis points out of the plate."""
         return self.tcp.pose
-
-    def is_static(self, threshold: float = 0.2) -> torch.Tensor:
-        return torch.max(torch.abs(self.robot.get_qvel()), 1)[0] <= threshold
 
     @property
     def _controller_configs(self):

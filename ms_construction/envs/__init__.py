@@ -1,3 +1,11 @@
+"""The construction tasks: importing this registers them with ManiSkill.
+
+`ENV_IDS` and `TASK_ENV_IDS` are read back from ManiSkill's registry, so they name exactly what
+`gym.make` knows: the general task first, then one environment per task type in `task_id` order.
+"""
+
+from mani_skill.utils.registration import REGISTERED_ENVS
+
 from ms_construction.envs.construction_env import ConstructionTaskEnv
 from ms_construction.envs.tasks import (
     CeilingInstallationEnv,
@@ -5,9 +13,14 @@ from ms_construction.envs.tasks import (
     FlooringEnv,
     WindowInstallationEnv,
 )
+from ms_construction.parameters import ELEMENT_KINDS
 
-ENV_IDS = ("ConstructionPickPlace-v1", "CeilingInstallation-v1", "WindowInstallation-v1", "Flooring-v1")
-TASK_ENV_IDS = {"ceiling": "CeilingInstallation-v1", "window": "WindowInstallation-v1", "flooring": "Flooring-v1"}
+_OURS = {env_id: spec.cls for env_id, spec in REGISTERED_ENVS.items() if issubclass(spec.cls, ConstructionTaskEnv)}
+_SINGLE = {cls.TASKS[0]: env_id for env_id, cls in _OURS.items() if len(cls.TASKS) == 1}
+TASK_ENV_IDS = {kind: _SINGLE[kind] for kind in ELEMENT_KINDS}
+"""task type -> its single-task environment id, in ELEMENT_KINDS order."""
+ENV_IDS = (*(env_id for env_id, cls in _OURS.items() if len(cls.TASKS) > 1), *TASK_ENV_IDS.values())
+"""every registered construction environment: the general task, then the single tasks."""
 
 __all__ = [
     "ENV_IDS",

@@ -3,16 +3,9 @@
 One class holds the mechanics; `ms_construction/envs/tasks.py` registers the general task and the
 three single-task environments with their task cards.
 
-Grasp (the paper's ray-cast sensor): a ray leaves the centre of the suction plate along its
-approach axis (tcp z). When it meets the element's grasp face (its +z face, inside the face's
-rectangle, within 60 degrees of the face normal) at a distance <= tau_pick, the element is grasped.
-It is pulled onto the plate (the paper's attaching force) and then held rigidly against it: before
-every physics substep the element's velocity is set so that it reaches its held pose relative to
-the plate at the end of the substep (speed-capped, gravity included). The solver still resolves
-the element's contacts, so a held element cannot pass through walls or slabs: it is stopped there
-while the plate goes on. All of it is batched tensor arithmetic, with no joints made at run time.
-The suction plate itself does not collide with elements (its pads are compliant); every other link
-does.
+The suction plate's grasp sensor and hold are `ms_construction.agents.suction_gripper`; this module
+decides which element each env works on, when a grasp counts (first grasp, picked) and when it is
+placed.
 """
 
 from __future__ import annotations
@@ -30,31 +23,23 @@ from mani_skill.utils.structs import Actor, Pose
 from mani_skill.utils.structs.types import GPUMemoryConfig, SimConfig
 
 from ms_construction.agents.construction_arm import ConstructionArm
+from ms_construction.agents.suction_gripper import PLATE_ELEMENT_COLLISION_BIT, SuctionGripper, grasp_ray
 from ms_construction.curriculum import TOLERANCE_KEYS, resolve_tolerances, stage_tolerances, validate_tolerances
-from ms_construction.rotations import pose_inv, pose_mul, qangle_deg, qaxis, qconj, qmat, qmul, quat_to_rotvec, quat_z
+from ms_construction.parameters import (
+    DROP_CLEARANCE,
+    ELEMENT_KINDS,
+    HIDDEN_POSE,
+    START_XY_NOISE,
+    START_YAW_DEG,
+    START_YAW_NOISE_DEG,
+    STORAGE_XY,
+    SYMMETRIES_DEG,
+)
+from ms_construction.rotations import pose_mul, qangle_deg, qaxis, qconj, qmul, quat_z
 from ms_construction.site import ConstructionSiteSceneBuilder, build_element
-from ms_construction.site_geometry import ELEMENT_KINDS
 
-PLATE_ELEMENT_COLLISION_BIT = 29
-"""collision group 2 bit shared by the suction plate and the elements: they never collide."""
-MAX_GRASP_INCIDENCE_DEG = 60.0
-HOLD_MAX_SPEED = 3.0
-"""m/s; the pull onto the plate and the tracking of a held element are capped at this speed."""
-HOLD_MAX_ANGULAR_SPEED = 10.0
-"""rad/s."""
-START_XY_NOISE = 0.08
-"""m; element start position on the staging table, uniform in +-this around the table centre."""
-START_YAW_NOISE_DEG = 15.0
-START_YAW_DEG = {"ceiling": 90.0, "window": 0.0, "flooring": 0.0}
-"""nominal yaw on the table: the long side along the table's long side (y)."""
-STORAGE_XY = {"ceiling": (-3.2, -1.2), "window": (-3.2, 0.0), "flooring": (-3.2, 1.2)}
-"""general task: where the episode's unused elements wait, on the ground outside the barriers."""
-SYMMETRIES_DEG = {
-    # rotations about the element's own z axis that leave its installation unchanged:
-    "ceiling": (0.0, 180.0),  # a rectangle, finished face fixed (down)
-    "window": (0.0,),  # head up and inside face in: no symmetry
-    "flooring": (0.0, 90.0, 180.0, 270.0),  # a square, finish up
-}
+ROBOT_INIT_QPOS_NOISE = 0.02
+"""rad; std of the arm's start configuration around its rest keyframe, per joint."""
 STATE_QUATERNION_STARTS = (16, 23, 33)
 """Where the quaternions [w, x, y, z] of the plate (tcp_pose), the goal and the element start in the
 flat `state` observation (qpos 6, qvel 6, is_grasped 1, tcp_pose 7, goal_pose 7, task 3, obj_pose 7,
@@ -65,16 +50,6 @@ def _bearing(a: torch.Tensor, b: torch.Tensor) -> torch.Tensor:
     """(1 + cos of the angle between two horizontal directions from the arm's axis) / 2, in [0, 1]."""
     cos = (a * b).sum(-1) / (torch.linalg.norm(a, dim=-1) * torch.linalg.norm(b, dim=-1)).clamp(min=1e-6)
     return (1 + cos) / 2
-
-
-def _clip_norm(v: torch.Tensor, max_norm: float) -> torch.Tensor:
-    n = torch.linalg.norm(v, dim=-1, keepdim=True)
-    return v * torch.clamp(max_norm / n.clamp(min=1e-9), max=1.0)
-
-
-def _clip_norm_np(v: np.ndarray, max_norm: float) -> np.ndarray:
-    n = float(np.linalg.norm(v))
-    return v * min(1.0, max_norm / max(n, 1e-9))
 
 
 class ConstructionTaskEnv(BaseEnv):
@@ -93,7 +68,7 @@ class ConstructionTaskEnv(BaseEnv):
         self,
         *args,
         robot_uids: str = "construction_arm",
-        robot_init_qpos_noise: float = 0.02,
+        robot_init_qpos_noise: float = ROBOT_INIT_QPOS_NOISE,
         curriculum_stage: str = "cp4",
         tolerances: Optional[dict] = None,
         tasks: Optional[Sequence[str]] = None,
@@ -174,25 +149,21 @@ class ConstructionTaskEnv(BaseEnv):
         # task state (also in get_state_dict)
         self.task_id = torch.full((n,), int(self._task_choices[0]), dtype=torch.long, device=dev)
         self.goal_slot = torch.zeros(n, dtype=torch.long, device=dev)
-        self.held = torch.zeros(n, dtype=torch.bool, device=dev)
+        self.gripper = SuctionGripper(self.agent.tcp, n, dev, self.sim_config.scene_config.gravity, self.sim_freq,
+                                      self.gpu_sim_enabled)
         self.picked = torch.zeros(n, dtype=torch.bool, device=dev)
         self.first_grasp_now = torch.zeros(n, dtype=torch.bool, device=dev)
-        self.hold_pose_in_tcp = torch.zeros(n, 7, **f32)
-        self.hold_pose_in_tcp[:, 3] = 1
         self.tolerances = torch.tensor([[self._tol_init[k] for k in TOLERANCE_KEYS]], **f32).repeat(n, 1)
         self.obj = self.elements[self.TASKS[0]]
         self._element_body_index: Optional[torch.Tensor] = None  # [kinds, num_envs], GPU only
         self._task_onehot = torch.eye(len(kinds), **f32)
-        self._gravity = torch.tensor(self.sim_config.scene_config.gravity, **f32)
-        self._gravity_np = np.asarray(self.sim_config.scene_config.gravity, np.float32)
-        self._cos_max_incidence = float(np.cos(np.deg2rad(MAX_GRASP_INCIDENCE_DEG)))
 
     def _build_goal_marker(self, kind: str, manifest: dict) -> Actor:
         """A translucent green ghost of the element at its goal (human render only)."""
         builder = self.scene.create_actor_builder()
         half = np.array(manifest["elements"][kind]["size"]) / 2
         builder.add_box_visual(half_size=half, material=sapien.render.RenderMaterial(base_color=[0.1, 0.9, 0.2, 0.35]))
-        builder.initial_pose = sapien.Pose(p=[0, 0, -10])
+        builder.initial_pose = sapien.Pose(p=HIDDEN_POSE[:3], q=HIDDEN_POSE[3:])
         marker = builder.build_kinematic(name=f"{kind}_goal_marker")
         self._hidden_objects.append(marker)
         return marker
@@ -212,7 +183,7 @@ class ConstructionTaskEnv(BaseEnv):
 
             xyz = self._staging_xyz.repeat(b, 1)
             xyz[:, :2] += (torch.rand(b, 2) * 2 - 1) * START_XY_NOISE
-            xyz[:, 2] += self._el_size[task, 2] / 2 + 1e-3
+            xyz[:, 2] += self._el_size[task, 2] / 2 + DROP_CLEARANCE
             yaw = self._start_yaw[task] + (torch.rand(b) * 2 - 1) * START_YAW_NOISE_DEG
             start = torch.cat([xyz, quat_z(yaw)], -1)
             zeros = torch.zeros(b, 3)
@@ -230,7 +201,7 @@ class ConstructionTaskEnv(BaseEnv):
 
     def _place_goal_markers(self, env_idx: torch.Tensor) -> None:
         task, goal = self.task_id[env_idx], self._goal_table[self.task_id[env_idx], self.goal_slot[env_idx]]
-        hidden = torch.tensor([0, 0, -10.0, 1, 0, 0, 0], device=self.device).expand_as(goal)
+        hidden = torch.tensor(HIDDEN_POSE, device=self.device).expand_as(goal)
         for kind, marker in self.goal_markers.items():
             active = (task == ELEMENT_KINDS.index(kind))[:, None]
             marker.set_pose(Pose.create(torch.where(active, goal, hidden)))
@@ -239,7 +210,8 @@ class ConstructionTaskEnv(BaseEnv):
         k = ELEMENT_KINDS.index(kind)
         x, y = STORAGE_XY[kind]
         ground = -self.site.manifest["site_params"]["ground_thickness"]
-        pose = torch.tensor([x, y, ground + float(self._el_size[k, 2]) / 2 + 1e-3, 1, 0, 0, 0], device=self.device)
+        pose = torch.tensor([x, y, ground + float(self._el_size[k, 2]) / 2 + DROP_CLEARANCE, 1, 0, 0, 0],
+                            device=self.device)
         return pose.repeat(b, 1)
 
     def _select_active_elements(self):
@@ -303,42 +275,28 @@ class ConstructionTaskEnv(BaseEnv):
         """Where the element's own frame must end up."""
         return Pose.create(self._goal_table[self.task_id, self.goal_slot])
 
-    def _tcp_in_element(self) -> torch.Tensor:
-        """Raw pose [n, 7] of the plate's tcp in the element's frame."""
-        return pose_mul(pose_inv(self.obj.pose.raw_pose), self.agent.tcp.pose.raw_pose)
+    @property
+    def held(self) -> torch.Tensor:
+        """[n] whether each env's element is on the suction plate (the gripper's state)."""
+        return self.gripper.held
+
+    @property
+    def hold_pose_in_tcp(self) -> torch.Tensor:
+        """[n, 7] raw pose of the held element in the plate's tcp frame."""
+        return self.gripper.hold_pose_in_tcp
 
     def grasp_ray(self, tcp_in_el: Optional[torch.Tensor] = None) -> tuple[torch.Tensor, torch.Tensor]:
-        """(distance along the plate's ray to the grasp face, whether the ray hits the face).
-
-        Distance is +inf where the ray misses the face or meets it from behind or too obliquely."""
+        """The plate's grasp sensor on each env's element: (distance along the ray to the grasp face,
+        whether the ray hits the face); `suction_gripper.grasp_ray`, by default at the tcp's pose now."""
         if tcp_in_el is None:
-            tcp_in_el = self._tcp_in_element()
-        p = tcp_in_el[:, :3]
-        d = qaxis(tcp_in_el[:, 3:], 2)  # the ray: the tcp's z axis, in the element frame
-        size = self._el_size[self.task_id]
-        face_z = size[:, 2] / 2
-        facing = d[:, 2] <= -self._cos_max_incidence
-        above = p[:, 2] >= face_z - 1e-4
-        dist = (p[:, 2] - face_z) / (-d[:, 2]).clamp(min=1e-6)
-        hit = p[:, :2] + dist[:, None] * d[:, :2]
-        ok = facing & above & (hit.abs() <= size[:, :2] / 2).all(-1)
-        return torch.where(ok, dist, torch.full_like(dist, float("inf"))), ok
+            tcp_in_el = self.gripper.tcp_in_element(self.obj)
+        return grasp_ray(tcp_in_el, self._el_size[self.task_id])
 
     def _update_grasp(self) -> None:
-        tcp_in_el = self._tcp_in_element()
-        dist, _ = self.grasp_ray(tcp_in_el)
-        grasp_now = ~self.held & (dist <= self.tau_pick)
+        grasp_now = self.gripper.grasp(self.obj, self._grasp_in_el[self.task_id], self._el_size[self.task_id],
+                                       self.tau_pick)
         self.first_grasp_now = grasp_now & ~self.picked
         self.picked |= grasp_now
-        if self.gpu_sim_enabled or bool(grasp_now.any()):
-            # held pose: the grasp face against the plate, keeping the element's current rotation
-            # about the plate's axis (the pull does not spin it)
-            grasp = self._grasp_in_el[self.task_id]
-            m = qmat(qmul(qconj(grasp[:, 3:]), tcp_in_el[:, 3:]))
-            psi = torch.rad2deg(torch.atan2(m[:, 1, 0], m[:, 0, 0]))
-            held_tcp_in_el = torch.cat([grasp[:, :3], qmul(grasp[:, 3:], quat_z(psi))], -1)
-            self.hold_pose_in_tcp = torch.where(grasp_now[:, None], pose_inv(held_tcp_in_el), self.hold_pose_in_tcp)
-            self.held |= grasp_now
 
     def _step_action(self, action):
         action = super()._step_action(action)
@@ -352,57 +310,7 @@ class ConstructionTaskEnv(BaseEnv):
         self._substep += 1
 
     def _before_simulation_step(self):
-        """The hold: before every physics substep, set the held element's velocities so that it
-        reaches its pose on the plate by the substep's end (it stays a dynamic body: it collides)."""
-        if not self.gpu_sim_enabled:
-            if bool(self.held[0]):
-                body = self.obj._bodies[0]
-                v, w = self._hold_velocities_cpu()
-                body.set_linear_velocity(v)
-                body.set_angular_velocity(w)
-            return
-        if self._substep > 0:
-            self.scene._gpu_fetch_all()
-        el = self.obj
-        v, w = self._hold_velocities()
-        held = self.held[:, None]
-        el.set_linear_velocity(torch.where(held, v, el.linear_velocity))
-        el.set_angular_velocity(torch.where(held, w, el.angular_velocity))
-        self.scene.px.gpu_apply_rigid_dynamic_data()
-
-    def _hold_velocities(self) -> tuple[torch.Tensor, torch.Tensor]:
-        """Linear and angular velocities [n, 3] that take each element to its held pose this substep."""
-        dt = 1.0 / self.sim_freq
-        tcp = self.agent.tcp
-        tcp_pose, el_pose = tcp.pose.raw_pose, self.obj.pose.raw_pose
-        target = pose_mul(tcp_pose, self.hold_pose_in_tcp)
-        # feed-forward: the held point moves with the plate; feedback: close the error this substep;
-        # PhysX adds g*dt to the velocity before integrating the position
-        w_tcp = tcp.angular_velocity
-        v = tcp.linear_velocity + torch.cross(w_tcp, target[:, :3] - tcp_pose[:, :3], dim=-1)
-        v = v + (target[:, :3] - el_pose[:, :3]) / dt - self._gravity * dt
-        w = w_tcp + quat_to_rotvec(qmul(target[:, 3:], qconj(el_pose[:, 3:]))) / dt
-        return _clip_norm(v, HOLD_MAX_SPEED), _clip_norm(w, HOLD_MAX_ANGULAR_SPEED)
-
-    def _hold_velocities_cpu(self) -> tuple[np.ndarray, np.ndarray]:
-        """`_hold_velocities` of the one physx_cpu env, computed on SAPIEN's own poses and numpy
-        vectors: the same formula without a tensor round trip, which made the hold cost several
-        times the physics substep it precedes (docs/BENCHMARKS.md, the "held" column)."""
-        dt = 1.0 / self.sim_freq
-        link, body = self.agent.tcp._objs[0], self.obj._bodies[0]
-        tcp, el = link.entity_pose, body.entity.pose
-        h = self.hold_pose_in_tcp[0].numpy()
-        target = tcp * sapien.Pose(h[:3], h[3:])
-        w_tcp = link.angular_velocity
-        r = target.p - tcp.p
-        lever = np.array([w_tcp[1] * r[2] - w_tcp[2] * r[1], w_tcp[2] * r[0] - w_tcp[0] * r[2],
-                          w_tcp[0] * r[1] - w_tcp[1] * r[0]])  # w x r (np.cross costs more than the physics here)
-        v = link.linear_velocity + lever + (target.p - el.p) / dt - self._gravity_np * dt
-        q = (sapien.Pose(q=target.q) * sapien.Pose(q=el.q).inv()).q  # target rotation * element rotation^-1
-        q = -q if q[0] < 0 else q
-        s = float(np.linalg.norm(q[1:]))
-        w = w_tcp + (q[1:] * (2 * np.arctan2(s, q[0]) / s if s > 1e-8 else 2.0)) / dt
-        return _clip_norm_np(v, HOLD_MAX_SPEED), _clip_norm_np(w, HOLD_MAX_ANGULAR_SPEED)
+        self.gripper.hold(self.obj, self.scene, first_substep=self._substep == 0)
 
     # ------------------------------------------------------------------------------------- #
     # evaluation, observations, rewards

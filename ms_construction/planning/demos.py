@@ -26,7 +26,7 @@ import os
 import time
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Optional
+from typing import Callable, Optional
 
 import gymnasium as gym
 import numpy as np
@@ -34,7 +34,7 @@ import torch
 from tqdm import tqdm
 
 from ms_construction.planning.expert import ExpertConfig, MotionPlanningExpert
-from ms_construction.site_geometry import ELEMENT_KINDS
+from ms_construction.parameters import ELEMENT_KINDS
 
 DELTA_CONTROL_MODE = "pd_joint_delta_pos"
 DEMO_EXPERT_CONFIG = ExpertConfig(speed=0.55)
@@ -158,15 +158,17 @@ class DemoCollector:
         self.env.close()
 
 
+PolicyLoader = Callable[[Path, str], tuple]
+"""(checkpoint path, env id) -> (policy with get_action(obs, deterministic), its control mode)."""
 _collector, _policy = None, None
 
 
-def _collect(job: tuple[str, str, int, float, Optional[str]]) -> tuple[list[dict], int]:
+def _collect(job: tuple[str, str, int, float, Optional[str], Optional[PolicyLoader]]) -> tuple[list[dict], int]:
     """One episode in a worker process (its collector kept for the next): the expert's, or with a
     policy checkpoint, the expert's takeovers where that policy fails. Returns the placed
     demonstrations and the env steps the policy took."""
     global _collector, _policy
-    env_id, stage, seed, noise, policy_path = job
+    env_id, stage, seed, noise, policy_path, load_policy = job
     torch.set_num_threads(1)
     if _collector is None:
         _collector = DemoCollector(env_id, stage)
@@ -174,8 +176,6 @@ def _collect(job: tuple[str, str, int, float, Optional[str]]) -> tuple[list[dict
         demos, policy_steps = [_collector.collect(seed, noise)], 0
     else:
         if _policy is None:
-            from baselines.ppo.evaluation import load_policy
-
             _policy, _ = load_policy(Path(policy_path), env_id)
         demos, policy_steps = _collector.takeovers(seed, noise, _policy)
     return [dict(obs=d.obs, actions=d.actions, rewards=d.rewards, placed=d.placed, task=d.task, seed=d.seed,
@@ -230,15 +230,21 @@ def policy_steps(path: Path) -> int:
 
 def record_demos(out: Path, episodes: int, env_id: str = "ConstructionPickPlace-v1", seed: int = 100_000,
                  noise: float = 0.1, curriculum_stage: str = "cp4", workers: int = 2, save_every: int = 50,
-                 resume: bool = False, policy: Optional[Path] = None) -> Path:
+                 resume: bool = False, policy: Optional[Path] = None, load_policy: Optional[PolicyLoader] = None
+                 ) -> Path:
     """Episodes seed, seed + 1, ... (every other one with DART noise `noise`); the placed ones are
     written to `out` every `save_every` episodes and at the end; `resume` continues `out`.
-    With a `policy` checkpoint: the expert's takeovers where that policy fails (`DemoCollector.takeovers`)."""
+    With a `policy` checkpoint: the expert's takeovers where that policy fails (`DemoCollector.takeovers`);
+    `load_policy(path, env_id) -> (policy, control_mode)` loads it in each worker process (a
+    module-level function, such as `baselines.ppo.evaluation.load_policy`: the package does not
+    know the learner's network)."""
+    if policy is not None and load_policy is None:
+        raise ValueError("record_demos(policy=...) needs load_policy, e.g. baselines.ppo.evaluation.load_policy")
     demos, tried, wall_s = load_demos(out) if resume and out.exists() else ([], 0, 0.0)
     steps_of_policy = policy_steps(out) if resume and out.exists() else 0
     start = time.time() - wall_s
-    jobs = [(env_id, curriculum_stage, seed + i, noise if i % 2 else 0.0, None if policy is None else str(policy))
-            for i in range(tried, episodes)]
+    policy_job = (None, None) if policy is None else (str(policy), load_policy)
+    jobs = [(env_id, curriculum_stage, seed + i, noise if i % 2 else 0.0, *policy_job) for i in range(tried, episodes)]
     desc = "expert demos" if policy is None else "expert takeovers"
     bar = tqdm(total=episodes, initial=tried, desc=desc, unit="ep", dynamic_ncols=True)
     with mp.get_context("spawn").Pool(workers) as pool:

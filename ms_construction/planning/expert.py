@@ -31,7 +31,7 @@ import torch
 from transforms3d.euler import euler2quat
 
 from ms_construction.agents.construction_arm import REST_QPOS
-from ms_construction.envs.construction_env import SYMMETRIES_DEG
+from ms_construction.parameters import SYMMETRIES_DEG
 from ms_construction.kinematics import ArmIK
 from ms_construction.planning.arm_planner import ArmPlanner
 from ms_construction.planning.collision_model import (
@@ -41,7 +41,7 @@ from ms_construction.planning.collision_model import (
     site_collision_objects,
 )
 from ms_construction.planning.trajectory import tcp_line, time_parameterize
-from ms_construction.site_geometry import ELEMENT_KINDS
+from ms_construction.parameters import ELEMENT_KINDS
 
 
 @dataclass(frozen=True)
@@ -111,10 +111,6 @@ class PhaseFailure(Exception):
     """A phase found no way to go on."""
 
 
-class EpisodeEnded(Exception):
-    """The env terminated (success) or truncated."""
-
-
 def _pose(raw) -> sapien.Pose:
     t = raw.detach().cpu().numpy().reshape(-1)[:7] if torch.is_tensor(raw) else np.asarray(raw).reshape(-1)
     return sapien.Pose(t[:3], t[3:])
@@ -168,36 +164,26 @@ class MotionPlanningExpert:
         self.steps, self.plan_time, self.info, self.phase_steps, self.phase = 0, 0.0, {}, {}, "approach"
         self.q = u.agent.robot.get_qpos()[0].cpu().numpy().astype(np.float64)
         self.rng = np.random.default_rng(seed)
-        held_at_start = bool(u.held[0])
+        self.held_at_start, self.ended = bool(u.held[0]), False
+        phases = [("approach", self._approach), ("descend", self._descend), ("lift", self._lift),
+                  ("carry", self._carry), ("install", self._install)]
         failure = ""
         try:
             self._set_obstacles()
-            if not held_at_start:
-                with self._phase("approach"):
-                    self._approach()
-            with self._phase("descend"):
-                if not held_at_start:
-                    self._descend()
-                self._await_pull()
-            loaded, loaded_exact = self._loaded_planners()
-            with self._phase("lift"):
-                try:
-                    self._lift(loaded_exact)
-                except PhaseFailure:
-                    if not held_at_start:
-                        raise
-            with self._phase("carry"):
-                install = self._carry(loaded, loaded_exact)
-            with self._phase("install"):
-                self._install(install)
+            for name, phase in phases[1:] if self.held_at_start else phases:
+                with self._phase(name):
+                    phase()
+                if self.ended:  # success ends the episode, and so does the time limit
+                    break
         except PhaseFailure as e:
             failure = str(e)
-        except EpisodeEnded:
-            if not self.info.get("success"):
-                failure = f"{self.phase}: the episode was truncated after {self.steps} steps"
-        return EpisodeResult(seed=seed, task=self.kind, picked=bool(u.picked[0]), placed=bool(self.info.get("success")),
-                             steps=self.steps, planning_time=self.plan_time, failure=failure,
-                             phase_steps=self.phase_steps)
+        placed = bool(self.info.get("success"))
+        if not placed and not failure:
+            failure = (f"{self.phase}: the episode was truncated after {self.steps} steps" if self.ended else
+                       f"install: no success at the end of the line (element {self.info['place_dist']:.3f} m, "
+                       f"{self.info['place_angle_deg']:.1f} deg from the goal, held {self.info['is_grasped']})")
+        return EpisodeResult(seed=seed, task=self.kind, picked=bool(u.picked[0]), placed=placed, steps=self.steps,
+                             planning_time=self.plan_time, failure=failure, phase_steps=self.phase_steps)
 
     # ------------------------------------------------------------------------------------- #
     # phases
@@ -213,9 +199,15 @@ class MotionPlanningExpert:
             self._settle()
 
     def _descend(self) -> None:
+        """A straight line towards the grasp face until the grasp triggers (unless the approach
+        ended inside the grasp range, or the element was held from the start), then the pull."""
+        if not bool(self.u.held[0]):
+            self._descend_line()
+        if not self.ended:
+            self._await_pull()
+
+    def _descend_line(self) -> None:
         u = self.u
-        if bool(u.held[0]):  # the approach ended inside the grasp range
-            return
         with self._planning():
             line = tcp_line(self.ik, self.q, self._grasp_pose() * sapien.Pose([0, 0, -self.cfg.descend_to]))
             if line is None:
@@ -223,7 +215,7 @@ class MotionPlanningExpert:
             self._check_free(self.free_exact, line, "descend")
             traj = time_parameterize(line, self.cfg.line_speed * self.vmax, self.acc, self.dt)
         self._follow(traj, until=lambda: bool(u.held[0]))
-        if not bool(u.held[0]):
+        if not bool(u.held[0]) and not self.ended:
             raise PhaseFailure(f"descend: no grasp (ray distance {float(u.grasp_ray()[0][0]):.3f} m)")
 
     def _await_pull(self) -> None:
@@ -233,20 +225,31 @@ class MotionPlanningExpert:
             held_at = _pose(u.agent.tcp_pose.raw_pose) * _pose(u.hold_pose_in_tcp)
             if np.linalg.norm(held_at.p - _pose(u.obj.pose.raw_pose).p) < 0.005:
                 return
-            self._step(self.q)
+            if self._step(self.q):
+                return
 
-    def _lift(self, loaded_exact: ArmPlanner) -> None:
+    def _lift(self) -> None:
+        """Straight up; a takeover that starts held may skip it where the line up is not free."""
+        self.loaded, self.loaded_exact = self._loaded_planners()
+        try:
+            self._lift_line()
+        except PhaseFailure:
+            if not self.held_at_start:
+                raise
+
+    def _lift_line(self) -> None:
         tcp = self.ik.fk(self.q)
         with self._planning():
             line = tcp_line(self.ik, self.q, sapien.Pose(tcp.p + [0, 0, self.cfg.lift], tcp.q))
             if line is None:
                 raise PhaseFailure("lift: no IK along the line up")
-            self._check_free(loaded_exact, line, "lift")
+            self._check_free(self.loaded_exact, line, "lift")
             traj = time_parameterize(line, self.cfg.line_speed * self.vmax, self.acc, self.dt)
         self._follow(traj)
 
-    def _carry(self, loaded: ArmPlanner, loaded_exact: ArmPlanner) -> np.ndarray:
-        """Carry to the pre-install pose; returns the joint targets of the install line from there."""
+    def _carry(self) -> None:
+        """Carry to the pre-install pose; keeps the joint targets of the install line from there."""
+        loaded, loaded_exact = self.loaded, self.loaded_exact
         with self._planning():
             lines = self._install_lines(loaded, loaded_exact)
             installs = [time_parameterize(line, self.cfg.line_speed * self.vmax, self.acc, self.dt) for line in lines]
@@ -255,13 +258,12 @@ class MotionPlanningExpert:
             i, traj = self._plan(loaded, [line[0] for line in lines], "carry", max_steps=budget)
         self._follow(traj)
         self._settle()
-        return installs[i]
+        self.install_traj = installs[i]
 
-    def _install(self, traj: np.ndarray) -> None:
-        self._follow(traj)
+    def _install(self) -> None:
+        """Along the install line until the task reports success (which ends the episode)."""
+        self._follow(self.install_traj)
         self._settle()
-        raise PhaseFailure(f"install: no success at the end of the line (element {self.info['place_dist']:.3f} m, "
-                           f"{self.info['place_angle_deg']:.1f} deg from the goal, held {self.info['is_grasped']})")
 
     # ------------------------------------------------------------------------------------- #
     # goals
@@ -422,25 +424,24 @@ class MotionPlanningExpert:
     # ------------------------------------------------------------------------------------- #
     # execution
     # ------------------------------------------------------------------------------------- #
-    def _step(self, target: np.ndarray) -> None:
+    def _step(self, target: np.ndarray) -> bool:
+        """One control step to `target`; returns whether the episode ended (success or time limit)."""
         self.q = np.asarray(target, np.float64)
         _, _, terminated, truncated, info = self.env.step(torch.as_tensor(self.q[None], dtype=torch.float32))
         self.steps += 1
         self.info = {k: v.reshape(-1)[0].item() for k, v in info.items() if torch.is_tensor(v)}
-        if bool(terminated) or bool(truncated):
-            raise EpisodeEnded
+        self.ended = bool(terminated) or bool(truncated)
+        return self.ended
 
     def _follow(self, traj: np.ndarray, until: Optional[Callable[[], bool]] = None) -> None:
-        """Send the targets one per control step, stopping early once `until()` holds."""
+        """Send the targets one per control step, stopping at the episode's end or once `until()` holds."""
         for target in traj:
-            self._step(target)
-            if until is not None and until():
+            if self._step(target) or (until is not None and until()):
                 return
 
     def _settle(self) -> None:
-        """Hold the last target until the arm has caught up with it."""
-        for _ in range(self.cfg.settle_steps):
+        """Hold the last target until the arm has caught up with it (not past the episode's end)."""
+        for _ in range(0 if self.ended else self.cfg.settle_steps):
             qpos = self.u.agent.robot.get_qpos()[0].cpu().numpy()
-            if np.abs(qpos - self.q).max() <= self.cfg.settle_tol:
+            if np.abs(qpos - self.q).max() <= self.cfg.settle_tol or self._step(self.q):
                 return
-            self._step(self.q)

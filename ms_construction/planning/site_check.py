@@ -16,7 +16,7 @@ from mplib.pymp.collision_detection import fcl
 
 from ms_construction.assets import load_manifest
 from ms_construction.planning.collision_model import box_object, site_collision_objects
-from ms_construction.site_geometry import ELEMENT_KINDS
+from ms_construction.parameters import ELEMENT_KINDS
 
 
 Hits = dict[tuple[str, int], dict[str, tuple[float, float]]]

@@ -1,8 +1,9 @@
 """Geometry of the construction site, its goal slots and its building elements.
 
-Pure geometry (numpy, manifold3d, trimesh): no simulator here. `scripts/build_assets.py` turns it
-into committed meshes; tasks read the committed manifest, never this module, so a change here shows
-up as a stale asset until the assets are rebuilt.
+Pure geometry (numpy, manifold3d, trimesh) of the parameters in `ms_construction.parameters`: no
+simulator here. `scripts/build_assets.py` turns it into committed meshes; tasks read the committed
+manifest, never this module, so a change here shows up as a stale asset until the assets are
+rebuilt.
 
 World frame: z up, the arm's pedestal stands at the origin on the ground slab (top at z = 0).
 Sectors around the arm: the exterior wall with windows at +x, ceiling openings overhead at +y,
@@ -15,7 +16,6 @@ tcp frame at grasp sits on that face with its z axis pointing into the element.
 
 from __future__ import annotations
 
-import dataclasses
 from dataclasses import dataclass, field
 
 import manifold3d
@@ -24,78 +24,7 @@ import trimesh
 from transforms3d.euler import euler2mat
 from transforms3d.quaternions import mat2quat
 
-ELEMENT_KINDS = ("ceiling", "window", "flooring")
-"""Task types in the order of their `task_id` (0 ceiling, 1 window, 2 flooring)."""
-
-
-@dataclass(frozen=True)
-class ElementParams:
-    """One building element: a rigid box (a window is a frame with glass filling it)."""
-
-    size: tuple[float, float, float]
-    """length (x), width (y), thickness (z) in metres."""
-    mass: float = 15.0
-    """kg; the paper's elements all weigh 15 kg."""
-    material: str = "gypsum"
-    """visual material of the body (window: of the frame)."""
-    frame_width: float = 0.0
-    """window only: width of the frame profile around the glass, m."""
-
-
-@dataclass(frozen=True)
-class SiteParams:
-    """Generator parameters of the site (all lengths in metres, angles in degrees)."""
-
-    clearance: float = 0.02
-    """gap between an installed element and its opening, on every side."""
-    ceiling_panel: ElementParams = ElementParams((0.80, 0.60, 0.03), material="gypsum")
-    """acoustic fibre-cement ceiling panel."""
-    window: ElementParams = ElementParams((0.60, 0.80, 0.07), material="aluminium", frame_width=0.06)
-    """double-glazed window: 0.6 m wide, 0.8 m tall, aluminium frame."""
-    floor_panel: ElementParams = ElementParams((0.60, 0.60, 0.035), material="timber")
-    """raised-access floor panel with a timber finish."""
-
-    ground_extent: tuple[float, float, float, float] = (-2.3, 1.7, -2.3, 2.3)
-    """ground slab footprint (x_min, x_max, y_min, y_max); its top is at z = 0."""
-    ground_thickness: float = 0.2
-    story_height: float = 2.4
-    """clear height: the underside of the second-story slab."""
-    slab_thickness: float = 0.2
-    slab_extent: tuple[float, float, float, float] = (-2.0, 1.35, -2.0, 2.0)
-    wall_x: float = 1.15
-    """inner face of the exterior wall."""
-    wall_thickness: float = 0.2
-    wall_y_extent: tuple[float, float] = (-2.0, 2.0)
-    window_sill: float = 0.88
-    """height of the bottom of each window opening."""
-    window_ys: tuple[float, ...] = (-0.85, 0.0, 0.85)
-    """centres of the window openings along the wall."""
-    ceiling_slots: tuple[tuple[float, float, float], ...] = ((0.62, 0.42, 30.0), (0.0, 0.78, 90.0), (-0.62, 0.42, 150.0))
-    """(x, y, yaw) of each ceiling opening; yaw of the panel's length axis."""
-    floor_slots: tuple[tuple[float, float, float], ...] = ((0.75, -1.1, 0.0), (0.0, -1.1, 0.0), (-0.75, -1.1, 0.0))
-    """(x, y, yaw) of each floor recess."""
-
-    staging_center: tuple[float, float] = (-1.15, 0.0)
-    staging_size: tuple[float, float] = (1.1, 1.3)
-    """table top (x, y) size."""
-    staging_height: float = 0.5
-    """top surface of the staging table."""
-    staging_rim: tuple[float, float] = (0.05, 0.03)
-    """barrier rim around the table top: height, thickness."""
-
-    barrier_height: float = 0.8
-    barrier_thickness: float = 0.3
-    barrier_extent: tuple[float, float, float] = (-2.0, 1.15, 2.0)
-    """Jersey barriers along x = x_min and y = +-y_abs, up to the wall at x_max."""
-    column_xy: tuple[tuple[float, float], ...] = ((-1.55, 1.55), (-1.55, -1.55))
-    column_size: float = 0.3
-
-    def element(self, kind: str) -> ElementParams:
-        return {"ceiling": self.ceiling_panel, "window": self.window, "flooring": self.floor_panel}[kind]
-
-    def to_dict(self) -> dict:
-        return dataclasses.asdict(self)
-
+from ms_construction.parameters import ElementParams, SiteParams
 
 MATERIALS = {
     # name: (base colour RGBA, metallic, roughness)

@@ -20,12 +20,10 @@ import numpy as np
 import trimesh
 from trimesh.visual.material import PBRMaterial
 
-from ms_construction.arm_model import ArmParams, arm_srdf, arm_urdf, effort_limits
-from ms_construction.assets import ASSET_DIR, GENERATOR_VERSION, sha256
-from ms_construction.site_geometry import (
-    ELEMENT_KINDS,
+from ms_construction.assets import ASSET_DIR, GENERATOR_VERSION, REBUILD_COMMAND, sha256
+from ms_construction.build.arm_model import arm_srdf, arm_urdf, effort_limits
+from ms_construction.build.site_geometry import (
     MATERIALS,
-    SiteParams,
     StaticPart,
     box_planes,
     goal_poses,
@@ -34,6 +32,7 @@ from ms_construction.site_geometry import (
     static_parts,
     to_trimesh,
 )
+from ms_construction.parameters import ELEMENT_KINDS, ArmParams, SiteParams
 
 INTRUSION_TOL = 1e-3
 """m; how far a collision hull may enter an opening after decomposition."""
@@ -200,7 +199,7 @@ def build_assets(
         "site_params": site.to_dict(),
         "arm_params": arm.to_dict(),
         "coacd": asdict(settings),
-        "command": "python scripts/build_assets.py",
+        "command": REBUILD_COMMAND,
         "parts": parts,
         "elements": {k: _element_record(site, k) for k in ELEMENT_KINDS},
         "goal_poses": goal_poses(site),
