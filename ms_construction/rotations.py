@@ -1,8 +1,10 @@
 """Batched quaternion arithmetic ([w, x, y, z], shape [..., 4]) in few torch ops.
 
 ManiSkill's rotation_conversions spells the Hamilton product out term by term (about twenty small
-tensor ops per call); on physx_cpu with one env, op count is step time, so the task code uses these
-equivalents: a product is one gather and one multiply-sum, a rotation two cross products.
+tensor ops per call) and its Pose composes through them; on physx_cpu with one env, op count is step
+time, so the task code uses these equivalents: a product is one gather and one multiply-sum, a
+rotation two cross products. `scripts/benchmark_rotations.py` times each against ManiSkill's
+(docs/BENCHMARKS.md) and tests/test_rotations.py checks that they agree.
 """
 
 from __future__ import annotations
