@@ -8,16 +8,14 @@ total budget as the general agent.
 """
 
 import dataclasses
-import sys
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Literal
 
 import tyro
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
-from baselines.ppo import ppo  # noqa: E402
-from ms_construction.envs import TASK_ENV_IDS  # noqa: E402
+from baselines.ppo import ppo
+from ms_construction.envs import TASK_ENV_IDS
 
 GROUP_NAMES = {"ceiling": "controlGroup4.1", "window": "controlGroup4.2", "flooring": "controlGroup4.3"}
 

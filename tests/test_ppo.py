@@ -3,16 +3,25 @@
 import csv
 import dataclasses
 import math
+import os
 import shutil
+import signal
+import subprocess
 import sys
+import time
 from pathlib import Path
+from typing import get_args
 
+import gymnasium as gym
 import numpy as np
 import pytest
 import torch
 
 from baselines.ppo import ppo
 from ms_construction.curriculum import stage_tolerances
+from ms_construction.vector_env import CPUVectorEnv
+
+ROOT = Path(__file__).resolve().parents[1]
 
 TINY = dict(num_envs=2, num_eval_envs=1, num_steps=40, num_minibatches=2, update_epochs=2, eval_freq=100,
             num_eval_steps=250, checkpoint_freq=1, env_id="Flooring-v1", sim_backend="physx_cpu")
@@ -25,6 +34,11 @@ def tiny_args(tmp_path, **kw) -> ppo.Args:
 def read_csv(path):
     with open(path) as f:
         return list(csv.DictReader(f))
+
+
+def worker_tolerances(envs: CPUVectorEnv) -> list[list[float]]:
+    """(tau_pick, tau_place, tau_angle_deg) in force in each worker's env."""
+    return [t[0].tolist() for t in envs.call("tolerances")]
 
 
 @pytest.mark.parametrize("curiosity", ["none", "icm"])
@@ -93,14 +107,13 @@ def test_promotion_rules():
     assert ppo.should_promote(args, p) is None, "the last stage is never left"
 
 
-def test_vec_env_stage_change_sets_every_worker_s_tolerances():
-    args = ppo.Args(**{**TINY, "num_envs": 2})
-    envs = ppo.VecEnv(args, 2, "physx_cpu", torch.device("cpu"))
-    envs.reset(seed=0)
+def test_stage_change_sets_every_worker_s_tolerances():
+    envs = ppo.make_envs(ppo.Args(**TINY), 2, torch.device("cpu"))
+    ppo.reset(envs, seed=0)
     try:
         for stage in ("cp2", "cp3"):
-            envs.set_curriculum_stage(stage)
-            tol = envs.env.call("tolerances")
+            ppo.set_curriculum_stage(envs, stage)
+            tol = worker_tolerances(envs)
             expected = stage_tolerances(stage)
             for t in tol:
                 np.testing.assert_allclose(t, [expected["pick"], expected["place"], expected["angle_deg"]], rtol=1e-6)
@@ -111,13 +124,13 @@ def test_vec_env_stage_change_sets_every_worker_s_tolerances():
 @pytest.mark.parametrize("by", ["steps", "success"])
 def test_promotion_in_a_run_moves_train_and_eval_envs_to_the_next_stage(tmp_path, monkeypatch, by):
     calls = []
-    original = ppo.VecEnv.set_curriculum_stage
+    original = ppo.set_curriculum_stage
 
-    def spy(self, stage):
-        original(self, stage)
-        calls.append((self.num_envs, stage, tuple(map(tuple, self.env.call("tolerances")))))
+    def spy(envs, stage):
+        original(envs, stage)
+        calls.append((envs.num_envs, stage, tuple(map(tuple, worker_tolerances(envs)))))
 
-    monkeypatch.setattr(ppo.VecEnv, "set_curriculum_stage", spy)
+    monkeypatch.setattr(ppo, "set_curriculum_stage", spy)
     extra = dict(stage_timesteps=160) if by == "steps" else dict(stage_timesteps=10**9, min_stage_timesteps=80, promote_success=0.0, eval_freq=2)
     args = tiny_args(tmp_path, curriculum=("cp1", "cp2"), total_timesteps=240, exp_name=f"promote_{by}", curiosity="none", **extra)
     progress = ppo.main(args)
@@ -190,8 +203,7 @@ def test_checkpoint_for_other_shapes_gives_a_clear_error(tmp_path):
 
 
 def test_control_group_command_plans_three_single_task_runs_at_cp4():
-    sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "scripts"))
-    import train_control_groups as cg
+    import scripts.train_control_groups as cg
 
     runs = cg.plan(cg.Args(total_timesteps=1234))
     assert [r.env_id for r in runs] == ["CeilingInstallation-v1", "WindowInstallation-v1", "Flooring-v1"]
@@ -207,7 +219,7 @@ def test_short_run_on_the_easiest_stage_shows_a_learning_signal(tmp_path):
                      num_steps=250, num_minibatches=4, num_eval_envs=2, total_timesteps=40_000, eval_freq=10,
                      checkpoint_freq=10**6)
     tr = ppo.setup(args)
-    tr.eval_envs.set_curriculum_stage("cp1")
+    ppo.set_curriculum_stage(tr.eval_envs, "cp1")
     untrained = ppo.evaluate(tr.agent, tr.eval_envs, tr.args, seed=123)
     ppo.train(tr)
     evals = [r for r in read_csv(tmp_path / "learn" / "progress.csv") if r["eval_pick_success"]]
@@ -229,3 +241,70 @@ def test_capture_video_writes_evaluation_videos_offscreen(tmp_path):
     assert videos, "no evaluation video"
     frames = iio.imread(videos[0])
     assert frames.shape[0] >= 200 and frames.std() > 20
+
+
+@pytest.mark.parametrize("field,value,allowed", [("env_id", "Floring-v1", "Flooring-v1"),
+                                                 ("control_mode", "pd_joint_vel", "pd_ee_delta_pose"),
+                                                 ("reward_mode", "shaped", "normalized_dense")])
+def test_an_unknown_env_control_or_reward_mode_is_refused_before_anything_starts(tmp_path, monkeypatch, field, value, allowed):
+    monkeypatch.setattr(ppo, "make_envs", lambda *a, **k: pytest.fail("envs were started"))
+    with pytest.raises(SystemExit) as e:
+        ppo.main(tiny_args(tmp_path, **{field: value}))
+    message = str(e.value)
+    assert message.startswith(f"--{field.replace('_', '-')} {value}: use one of") and allowed in message
+
+
+@pytest.mark.parametrize("flag,value,allowed", [("--env-id", "Floring-v1", "Flooring-v1"),
+                                                ("--control-mode", "pd_joint_vel", "pd_ee_delta_pose")])
+def test_the_command_line_refuses_an_unknown_env_or_control_mode_without_a_traceback(flag, value, allowed):
+    out = subprocess.run([sys.executable, "baselines/ppo/ppo.py", flag, value], cwd=ROOT, capture_output=True,
+                         text=True, timeout=300)
+    assert out.returncode != 0 and "Traceback" not in out.stderr, out.stderr
+    assert value in out.stderr and allowed in out.stderr, out.stderr
+
+
+def test_the_control_modes_args_allow_are_the_arm_s_controllers():
+    env = gym.make("Flooring-v1", num_envs=1, obs_mode="state")
+    try:
+        assert set(get_args(ppo.ControlMode)) == set(env.unwrapped.agent.supported_control_modes)
+    finally:
+        env.close()
+
+
+@pytest.mark.parametrize("how", ["SIGTERM", "Ctrl-C"])
+def test_a_stopped_run_saves_its_checkpoint_and_exits_with_one_line(tmp_path, how):
+    """SIGTERM to the learner, or SIGINT to the whole process group as Ctrl-C in a terminal sends it
+    (the env workers get it too): the run ends after its iteration with a checkpoint that resumes,
+    and says so in one line, without tracebacks from the workers it closes."""
+    cmd = [sys.executable, "baselines/ppo/ppo.py", "--env-id", "Flooring-v1", "--sim-backend", "physx_cpu",
+           "--num-envs", "2", "--num-eval-envs", "1", "--num-steps", "40", "--num-minibatches", "2",
+           "--update-epochs", "1", "--eval-freq", "1000", "--total-timesteps", "1000000", "--curiosity", "none",
+           "--curriculum", "cp4", "--log-dir", str(tmp_path), "--exp-name", "stopped"]
+    proc = subprocess.Popen(cmd, cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                            start_new_session=True)  # its own process group, as a terminal's job
+    csv_path = tmp_path / "stopped" / "progress.csv"
+    try:
+        deadline = time.monotonic() + 240
+        while not (csv_path.exists() and len(read_csv(csv_path)) >= 1):
+            assert proc.poll() is None and time.monotonic() < deadline, proc.communicate()[1] if proc.poll() is not None else "no iteration yet"
+            time.sleep(0.5)
+        sig = signal.SIGTERM if how == "SIGTERM" else signal.SIGINT
+        if how == "SIGTERM":
+            proc.send_signal(sig)
+        else:
+            os.killpg(proc.pid, sig)
+        _, stderr = proc.communicate(timeout=120)
+    finally:
+        if proc.poll() is None:
+            os.killpg(proc.pid, signal.SIGKILL)
+    assert proc.returncode == 128 + sig, (proc.returncode, stderr)
+    assert "Traceback" not in stderr, stderr
+    last = stderr.strip().splitlines()[-1]
+    assert last.startswith(f"stopped by {sig.name} after iteration ") and "--resume" in last, stderr
+    rows = read_csv(csv_path)
+    ckpt = tmp_path / "stopped" / "checkpoint.pt"
+    run = ppo.setup(ppo.Args(resume=str(ckpt)))
+    try:
+        assert run.progress.iteration == len(rows) and run.progress.global_step == int(rows[-1]["global_step"])
+    finally:
+        run.eval_envs.close()

@@ -14,9 +14,10 @@ scripts/train_general_agent.py): `--checkpoint` from baselines/ppo/bc.py, `--fre
     python baselines/ppo/ppo.py --evaluate --checkpoint runs/<run>/checkpoint.pt --env-id Flooring-v1
     python scripts/evaluate.py --checkpoint runs/<run>/checkpoint.pt --all     # the full evaluation
 
-CPU path (physx_cpu, one env per process): a gymnasium AsyncVectorEnv of CPUGymWrapper envs, one
-process per core by default. GPU path (physx_cuda): ManiSkillVectorEnv. `--sim-backend auto` picks
-by what the machine has.
+CPU path (physx_cpu, one env per process): ms_construction.vector_env.CPUVectorEnv, env worker
+processes behind ManiSkillVectorEnv's interface (same-step resets, torch tensors). GPU path
+(physx_cuda): ManiSkillVectorEnv. `--sim-backend auto` picks by what the machine has. Ctrl-C or
+SIGTERM ends a run after the iteration in progress, with a checkpoint (a second Ctrl-C ends it at once).
 """
 
 from __future__ import annotations
@@ -27,11 +28,12 @@ import math
 import os
 import random
 import signal
+import sys
 import time
 from collections import defaultdict
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Literal, Optional
+from typing import Literal, Optional, Union, get_args, get_origin, get_type_hints
 
 import gymnasium as gym
 import numpy as np
@@ -43,10 +45,20 @@ from torch.distributions.normal import Normal
 from torch.utils.tensorboard import SummaryWriter
 from tqdm import tqdm
 
-import ms_construction  # noqa: F401  (registers the tasks)
+from mani_skill.vector.wrappers.gymnasium import ManiSkillVectorEnv
+
 from ms_construction.curriculum import STAGE_NAMES
+from ms_construction.envs import ENV_IDS
 from ms_construction.envs.construction_env import STATE_QUATERNION_STARTS
 from ms_construction.rotations import qmat
+from ms_construction.vector_env import CPUVectorEnv
+
+ControlMode = Literal["pd_joint_delta_pos", "pd_joint_pos", "pd_joint_target_delta_pos", "pd_ee_delta_pos",
+                      "pd_ee_delta_pose", "pd_ee_target_delta_pose"]
+"""the construction arm's controllers (its `_controller_configs`)."""
+RewardMode = Literal["sparse", "dense", "normalized_dense"]
+Envs = Union[CPUVectorEnv, ManiSkillVectorEnv]
+"""a batch of envs with same-step resets and torch tensors in and out, on either backend."""
 
 
 @dataclass
@@ -73,10 +85,10 @@ class Args:
     """where run folders go."""
 
     env_id: str = "ConstructionPickPlace-v1"
-    """the environment (the general task, or one of the three single tasks)."""
-    control_mode: str = "pd_joint_delta_pos"
+    """the environment: the general task or one of the three single tasks (ms_construction.envs.ENV_IDS)."""
+    control_mode: ControlMode = "pd_joint_delta_pos"
     """the arm's controller."""
-    reward_mode: str = "sparse"
+    reward_mode: RewardMode = "sparse"
     """sparse (the paper's Algorithm 1), dense or normalized_dense."""
     sim_backend: Literal["auto", "physx_cpu", "physx_cuda"] = "auto"
     """physx_cuda when a GPU is there (auto), else physx_cpu."""
@@ -176,108 +188,43 @@ class Args:
 # ------------------------------------------------------------------------------------------------- #
 # Environments
 # ------------------------------------------------------------------------------------------------- #
-class SameStepReset(gym.Wrapper):
-    """CPU worker wrapper: resets the env in the step that ends its episode, like ManiSkillVectorEnv.
+def make_envs(args: Args, num_envs: int, device: torch.device, eval_mode: bool = False,
+              video_dir: Optional[Path] = None) -> Envs:
+    """`num_envs` envs with same-step resets and torch tensors in and out: worker processes on
+    physx_cpu (one env each), ManiSkillVectorEnv on physx_cuda. With `video_dir`, evaluation videos."""
+    kwargs = dict(obs_mode="state", control_mode=args.control_mode, reward_mode=args.reward_mode,
+                  render_mode="rgb_array" if video_dir else None)
+    if args.sim_backend == "physx_cpu":
+        return CPUVectorEnv(args.env_id, num_envs, kwargs, device=device, video_dir=video_dir)
+    env = gym.make(args.env_id, num_envs=num_envs, sim_backend=args.sim_backend, **kwargs)
+    if video_dir is not None:
+        from mani_skill.utils.wrappers import RecordEpisode
 
-    gymnasium 1.0's AsyncVectorEnv would reset on the *next* step instead, so the episode's end is
-    reported in `info` (with the final observation) and the vector env always sees done=False."""
-
-    def step(self, action):
-        obs, reward, terminated, truncated, info = self.env.step(action)
-        done = bool(terminated or truncated)
-        ep = info.get("episode", {})
-        out = dict(
-            terminated=bool(terminated),
-            truncated=bool(truncated),
-            final_obs=obs if done else np.zeros_like(obs),
-            success=bool(ep.get("success_once", False)),
-            picked=bool(info["picked"]),
-            ep_return=float(ep.get("return", 0.0)),
-            ep_length=int(ep.get("episode_len", 0)),
-        )
-        if done:
-            obs, _ = self.env.reset()
-        return obs, reward, False, False, out
-
-    def set_curriculum_stage(self, stage: str) -> None:
-        self.env.unwrapped.set_curriculum_stage(stage)
-
-    def tolerances(self) -> list[float]:
-        """(tau_pick, tau_place, tau_angle_deg) in force."""
-        return self.env.unwrapped.tolerances[0].tolist()
+        env = RecordEpisode(env, str(video_dir), save_trajectory=False, video_fps=20, max_steps_per_video=args.num_eval_steps)
+    partial = args.eval_partial_reset if eval_mode else args.partial_reset
+    return ManiSkillVectorEnv(env, num_envs, ignore_terminations=not partial, record_metrics=True)
 
 
-class VecEnv:
-    """Both backends behind one interface: torch tensors in and out, same-step resets, and per
-    step a dict with `done`, `terminated`, `truncated`, `final_obs` and the finished episodes'
-    `success`, `picked`, `ep_return`, `ep_length`."""
+def reset(envs: Envs, seed: int) -> torch.Tensor:
+    """Reset every env, env i with seed `seed + i`; the first observations."""
+    obs, _ = envs.reset(seed=[seed + i for i in range(envs.num_envs)])
+    return obs
 
-    def __init__(self, args: Args, num_envs: int, backend: str, device: torch.device, eval_mode: bool = False,
-                 video_dir: Optional[Path] = None):
-        self.backend, self.device, self.num_envs = backend, device, num_envs
-        kwargs = dict(obs_mode="state", control_mode=args.control_mode, reward_mode=args.reward_mode,
-                      render_mode="rgb_array" if video_dir else None, sim_backend=backend)
-        if backend == "physx_cpu":
-            from mani_skill.utils.wrappers import CPUGymWrapper
 
-            def make(i):
-                def thunk():
-                    env = gym.make(args.env_id, **kwargs)
-                    if video_dir is not None and i == 0:
-                        from mani_skill.utils.wrappers import RecordEpisode
+def set_curriculum_stage(envs: Envs, stage: str) -> None:
+    """Every env of `envs` to the tolerances of `stage` (Table I)."""
+    if isinstance(envs, CPUVectorEnv):
+        envs.call("set_curriculum_stage", stage)
+    else:
+        envs.unwrapped.set_curriculum_stage(stage)
 
-                        env = RecordEpisode(env, str(video_dir), save_trajectory=False, video_fps=20)
-                    return SameStepReset(CPUGymWrapper(env, record_metrics=True))
-                return thunk
 
-            self.env = gym.vector.AsyncVectorEnv([make(i) for i in range(num_envs)], context="forkserver")
-        else:
-            from mani_skill.vector.wrappers.gymnasium import ManiSkillVectorEnv
-
-            env = gym.make(args.env_id, num_envs=num_envs, **kwargs)
-            if video_dir is not None:
-                from mani_skill.utils.wrappers import RecordEpisode
-
-                env = RecordEpisode(env, str(video_dir), save_trajectory=False, video_fps=20, max_steps_per_video=args.num_eval_steps)
-            partial = args.eval_partial_reset if eval_mode else args.partial_reset
-            self.env = ManiSkillVectorEnv(env, num_envs, ignore_terminations=not partial, record_metrics=True)
-        self.single_observation_space = self.env.single_observation_space
-        self.single_action_space = self.env.single_action_space
-
-    def reset(self, seed: int) -> torch.Tensor:
-        obs, _ = self.env.reset(seed=seed if self.backend == "physx_cpu" else [seed + i for i in range(self.num_envs)])
-        return torch.as_tensor(obs, dtype=torch.float32, device=self.device)
-
-    def step(self, action: torch.Tensor):
-        t = lambda x, dtype=torch.float32: torch.as_tensor(x, dtype=dtype, device=self.device)  # noqa: E731
-        if self.backend == "physx_cpu":
-            obs, reward, _, _, info = self.env.step(action.cpu().numpy())
-            term, trunc = t(info["terminated"], torch.bool), t(info["truncated"], torch.bool)
-            out = dict(terminated=term, truncated=trunc, done=term | trunc, final_obs=t(info["final_obs"]),
-                       success=t(info["success"], torch.bool), picked=t(info["picked"], torch.bool),
-                       ep_return=t(info["ep_return"]), ep_length=t(info["ep_length"]))
-            return t(obs), t(reward), out
-        obs, reward, term, trunc, info = self.env.step(action)
-        done = term | trunc
-        out = dict(terminated=term, truncated=trunc, done=done, final_obs=obs.clone())
-        if "final_info" in info:
-            fin, mask = info["final_info"], info["_final_info"]
-            out["final_obs"][mask] = info["final_observation"][mask]
-            out.update(success=fin["episode"]["success_once"], picked=fin["picked"],
-                       ep_return=fin["episode"]["return"], ep_length=fin["episode"]["episode_len"].float())
-        else:
-            zeros = torch.zeros_like(reward)
-            out.update(success=zeros.bool(), picked=zeros.bool(), ep_return=zeros, ep_length=zeros)
-        return obs.float(), reward.float(), out
-
-    def set_curriculum_stage(self, stage: str) -> None:
-        if self.backend == "physx_cpu":
-            self.env.call("set_curriculum_stage", stage)
-        else:
-            self.env.unwrapped.set_curriculum_stage(stage)
-
-    def close(self):
-        self.env.close()
+def finished_episodes(infos: dict) -> dict:
+    """The episodes that ended in a step (its info has "final_info"): per env, whether its episode
+    ended (`ended`), and the ended episodes' place success, pick success, return and length."""
+    fin = infos["final_info"]
+    return dict(ended=infos["_final_info"], success=fin["episode"]["success_once"], picked=fin["picked"],
+                ep_return=fin["episode"]["return"], ep_length=fin["episode"]["episode_len"])
 
 
 # ------------------------------------------------------------------------------------------------- #
@@ -448,11 +395,15 @@ def save_checkpoint(path: Path, args: Args, progress: Progress, agent, optimizer
     os.replace(tmp, path)
 
 
-def load_checkpoint(path: str, obs_dim: int, act_dim: int, env_id: str) -> dict:
-    """Load a checkpoint and refuse one made for other observation or action shapes."""
+def read_checkpoint(path: str, option: str) -> dict:
+    """The checkpoint at `path` (given as `option`), or a clear error if there is none."""
     if not Path(path).is_file():
-        raise SystemExit(f"checkpoint not found: {path}")
-    ckpt = torch.load(path, map_location="cpu", weights_only=False)
+        raise SystemExit(f"{option}: checkpoint not found: {path}")
+    return torch.load(path, map_location="cpu", weights_only=False)
+
+
+def check_shapes(ckpt: dict, path: str, obs_dim: int, act_dim: int, env_id: str) -> dict:
+    """`ckpt`, unless it was made for other observation or action shapes than `env_id`'s here."""
     if (ckpt["obs_dim"], ckpt["act_dim"]) != (obs_dim, act_dim):
         raise SystemExit(
             f"checkpoint {path} was trained with observations of size {ckpt['obs_dim']} and actions of size "
@@ -460,6 +411,11 @@ def load_checkpoint(path: str, obs_dim: int, act_dim: int, env_id: str) -> dict:
             f"{env_id} here has {obs_dim} and {act_dim}. Use the same control mode and observation mode."
         )
     return ckpt
+
+
+def load_checkpoint(path: str, obs_dim: int, act_dim: int, env_id: str) -> dict:
+    """Load a checkpoint and refuse one made for other observation or action shapes."""
+    return check_shapes(read_checkpoint(path, "--checkpoint"), path, obs_dim, act_dim, env_id)
 
 
 class CSVLog:
@@ -471,7 +427,7 @@ class CSVLog:
             with open(path) as f:
                 rows = [r for r in csv.DictReader(f) if int(r["global_step"]) <= resume_step]
             self._write(rows, "w")
-        elif not path.exists() or resume_step is None:
+        else:
             self._write([], "w")
 
     def _write(self, rows, mode):
@@ -499,24 +455,31 @@ def should_promote(args: Args, progress: Progress) -> Optional[str]:
 
 
 def validate(args: Args) -> None:
+    """Refuse, before anything starts, what the run would otherwise fail on later (often in the env
+    worker processes, with their tracebacks)."""
+    if args.env_id not in ENV_IDS:
+        raise SystemExit(f"--env-id {args.env_id}: use one of {', '.join(ENV_IDS)}")
+    hints = get_type_hints(Args)
+    for f in dataclasses.fields(Args):  # Args built in code are not checked by tyro
+        allowed = get_args(hints[f.name]) if get_origin(hints[f.name]) is Literal else ()
+        if allowed and getattr(args, f.name) not in allowed:
+            raise SystemExit(f"--{f.name.replace('_', '-')} {getattr(args, f.name)}: use one of {', '.join(allowed)}")
     missing = [p for p in args.demos if not Path(p).is_file()]
     if missing:
         raise SystemExit(f"--demos: no such file(s): {', '.join(missing)} (record them with scripts/collect_demos.py)")
     bad = [s for s in args.curriculum if s not in STAGE_NAMES]
     if bad or not args.curriculum:
         raise SystemExit(f"--curriculum {' '.join(args.curriculum)}: stages must be among {', '.join(STAGE_NAMES)}")
-    if args.reward_mode not in ("sparse", "dense", "normalized_dense"):
-        raise SystemExit(f"--reward-mode {args.reward_mode}: use sparse, dense or normalized_dense")
     for name in ("total_timesteps", "stage_timesteps", "num_minibatches", "update_epochs", "eval_freq", "checkpoint_freq"):
         if getattr(args, name) <= 0:
             raise SystemExit(f"--{name.replace('_', '-')} must be positive, got {getattr(args, name)}")
 
 
-def resolve_defaults(args: Args) -> str:
-    backend = args.sim_backend
-    if backend == "auto":
-        backend = "physx_cuda" if torch.cuda.is_available() else "physx_cpu"
-    gpu = backend == "physx_cuda"
+def resolve_defaults(args: Args) -> None:
+    """Fill in the defaults that depend on the machine (in `args`, so that checkpoints keep them)."""
+    if args.sim_backend == "auto":
+        args.sim_backend = "physx_cuda" if torch.cuda.is_available() else "physx_cpu"
+    gpu = args.sim_backend == "physx_cuda"
     if args.num_envs is None:
         args.num_envs = 512 if gpu else (os.cpu_count() or 1)
     if args.num_eval_envs is None:
@@ -525,25 +488,26 @@ def resolve_defaults(args: Args) -> str:
         args.num_steps = 50 if gpu else 250
     if args.exp_name is None:
         args.exp_name = f"{args.env_id}__{args.curiosity}__{'-'.join(args.curriculum)}__s{args.seed}"
-    return backend
 
 
 # ------------------------------------------------------------------------------------------------- #
 # Evaluation
 # ------------------------------------------------------------------------------------------------- #
 @torch.no_grad()
-def evaluate(agent: Agent, envs: VecEnv, args: Args, seed: int) -> dict:
+def evaluate(agent: Agent, envs: Envs, args: Args, seed: int) -> dict:
     """Deterministic policy, the first episode of every eval env: pick and place success, return."""
-    obs = envs.reset(seed=seed)
+    obs = reset(envs, seed)
     finished = torch.zeros(envs.num_envs, dtype=torch.bool, device=obs.device)
     stats = defaultdict(lambda: torch.zeros(envs.num_envs, device=obs.device))
     for _ in range(args.num_eval_steps):
-        action = agent.get_action(obs, deterministic=True)
-        obs, _, info = envs.step(action.clamp(-1, 1))
-        new = info["done"] & ~finished
+        obs, _, _, _, infos = envs.step(agent.get_action(obs, deterministic=True).clamp(-1, 1))
+        if "final_info" not in infos:
+            continue
+        ep = finished_episodes(infos)
+        new = ep["ended"] & ~finished
         for key in ("success", "picked", "ep_return"):
-            stats[key] = torch.where(new, info[key].float(), stats[key])
-        finished |= info["done"]
+            stats[key] = torch.where(new, ep[key].float(), stats[key])
+        finished |= ep["ended"]
         if finished.all():
             break
     mean = lambda x: float(x[finished].mean()) if finished.any() else float("nan")  # noqa: E731
@@ -558,56 +522,58 @@ def evaluate(agent: Agent, envs: VecEnv, args: Args, seed: int) -> dict:
 # ------------------------------------------------------------------------------------------------- #
 # Training
 # ------------------------------------------------------------------------------------------------- #
+def checkpoint_path(args: Args) -> Path:
+    """The run's checkpoint (the one resumed from, when resuming); its other files sit beside it."""
+    return Path(args.resume) if args.resume else Path(args.log_dir) / args.exp_name / "checkpoint.pt"
+
+
 @dataclass
-class Trainer:
-    """Everything a run holds between iterations (what a checkpoint restores)."""
+class Run:
+    """A run between iterations, as `setup` builds or restores it: its arguments (machine defaults
+    filled in), networks, optimizers and progress, which its checkpoint saves, and its evaluation envs."""
 
     args: Args
-    backend: str
-    device: torch.device
-    run_dir: Path
-    ckpt_path: Path
-    eval_envs: VecEnv
-    obs_dim: int
-    act_dim: int
+    eval_envs: Envs
     agent: Agent
     optimizer: optim.Optimizer
     icm: Optional[ICM]
     icm_optimizer: Optional[optim.Optimizer]
     progress: Progress
-    resumed: bool
 
-    def checkpoint(self) -> None:
+    @property
+    def obs_dim(self) -> int:
+        return int(np.prod(self.eval_envs.single_observation_space.shape))
+
+    @property
+    def act_dim(self) -> int:
+        return int(np.prod(self.eval_envs.single_action_space.shape))
+
+    def save(self) -> None:
         if self.args.save_model:
-            save_checkpoint(self.ckpt_path, self.args, self.progress, self.agent, self.optimizer, self.icm,
+            save_checkpoint(checkpoint_path(self.args), self.args, self.progress, self.agent, self.optimizer, self.icm,
                             self.icm_optimizer, self.obs_dim, self.act_dim)
 
 
-def setup(args: Args) -> Trainer:
-    """Build (or, with --resume, restore) a run: args, seeds, networks, optimizers, progress."""
-    resume_ckpt = None
-    if args.resume:
-        if not Path(args.resume).is_file():
-            raise SystemExit(f"--resume: checkpoint not found: {args.resume}")
-        resume_ckpt = torch.load(args.resume, map_location="cpu", weights_only=False)
-        saved = resume_ckpt["args"]
+def setup(args: Args) -> Run:
+    """Build (or, with --resume, restore) a run: args, seeds, evaluation envs, networks, optimizers, progress."""
+    resume = read_checkpoint(args.resume, "--resume") if args.resume else None
+    if resume is not None:
+        saved = resume["args"]
         args = Args(**{**saved, "resume": args.resume, "curriculum": tuple(saved["curriculum"])})
     validate(args)
-    backend = resolve_defaults(args)
-    run_dir = Path(args.log_dir) / args.exp_name
-    ckpt_path = Path(args.resume) if args.resume else run_dir / "checkpoint.pt"
+    resolve_defaults(args)
 
     random.seed(args.seed)
     np.random.seed(args.seed)
     torch.manual_seed(args.seed)
     torch.backends.cudnn.deterministic = args.torch_deterministic
     device = torch.device("cuda" if torch.cuda.is_available() and args.cuda else "cpu")
-    if backend == "physx_cpu":
+    if args.sim_backend == "physx_cpu":
         # the env processes own the cores; a multi-threaded learner would fight them for every step
         torch.set_num_threads(1)
 
-    eval_video = run_dir / "videos" if args.capture_video else None
-    eval_envs = VecEnv(args, args.num_eval_envs, backend, device, eval_mode=True, video_dir=eval_video)
+    eval_envs = make_envs(args, args.num_eval_envs, device, eval_mode=True,
+                          video_dir=checkpoint_path(args).parent / "videos" if args.capture_video else None)
     obs_dim = int(np.prod(eval_envs.single_observation_space.shape))
     act_dim = int(np.prod(eval_envs.single_action_space.shape))
 
@@ -619,66 +585,66 @@ def setup(args: Args) -> Trainer:
         icm_optimizer = optim.Adam(icm.parameters(), lr=args.icm_learning_rate)
 
     progress = Progress()
-    if args.checkpoint:
+    if resume is not None:
+        check_shapes(resume, args.resume, obs_dim, act_dim, args.env_id)
+        agent.load_state_dict(resume["agent"])
+        optimizer.load_state_dict(resume["optimizer"])
+        if icm is not None:
+            icm.load_state_dict(resume["icm"])
+            icm_optimizer.load_state_dict(resume["icm_optimizer"])
+        progress = Progress(**resume["progress"])
+        rng = resume["rng"]
+        random.setstate(rng["python"])
+        np.random.set_state(rng["numpy"])
+        torch.set_rng_state(rng["torch"])
+        if rng["cuda"] is not None and torch.cuda.is_available():
+            torch.cuda.set_rng_state_all(rng["cuda"])
+    elif args.checkpoint:
         init = load_checkpoint(args.checkpoint, obs_dim, act_dim, args.env_id)
         agent.load_state_dict(init["agent"])
         if icm is not None and init["icm"] is not None:
             icm.load_state_dict(init["icm"])
         if args.evaluate:
             progress = Progress(**init["progress"])
-    if resume_ckpt is not None:
-        load_checkpoint(args.resume, obs_dim, act_dim, args.env_id)  # refuses other shapes
-        agent.load_state_dict(resume_ckpt["agent"])
-        optimizer.load_state_dict(resume_ckpt["optimizer"])
-        if icm is not None:
-            icm.load_state_dict(resume_ckpt["icm"])
-            icm_optimizer.load_state_dict(resume_ckpt["icm_optimizer"])
-        progress = Progress(**resume_ckpt["progress"])
-        rng = resume_ckpt["rng"]
-        random.setstate(rng["python"])
-        np.random.set_state(rng["numpy"])
-        torch.set_rng_state(rng["torch"])
-        if rng["cuda"] is not None and torch.cuda.is_available():
-            torch.cuda.set_rng_state_all(rng["cuda"])
-    return Trainer(args, backend, device, run_dir, ckpt_path, eval_envs, obs_dim, act_dim, agent, optimizer,
-                   icm, icm_optimizer, progress, resume_ckpt is not None)
+    return Run(args, eval_envs, agent, optimizer, icm, icm_optimizer, progress)
 
 
 def main(args: Args) -> Progress:
-    tr = setup(args)
-    if tr.args.evaluate:
-        stage = tr.args.curriculum[min(tr.progress.stage_index, len(tr.args.curriculum) - 1)]
-        tr.eval_envs.set_curriculum_stage(stage)
-        print({"stage": stage, **evaluate(tr.agent, tr.eval_envs, tr.args, seed=tr.args.seed)})
-        tr.eval_envs.close()
-        return tr.progress
-    return train(tr)
+    run = setup(args)
+    if run.args.evaluate:
+        stage = run.args.curriculum[min(run.progress.stage_index, len(run.args.curriculum) - 1)]
+        set_curriculum_stage(run.eval_envs, stage)
+        print({"stage": stage, **evaluate(run.agent, run.eval_envs, run.args, seed=run.args.seed)})
+        run.eval_envs.close()
+        return run.progress
+    return train(run)
 
 
-def train(tr: Trainer) -> Progress:
-    """The PPO loop; returns where the run ended."""
-    args, device, progress = tr.args, tr.device, tr.progress
-    agent, optimizer, icm, icm_optimizer, eval_envs = tr.agent, tr.optimizer, tr.icm, tr.icm_optimizer, tr.eval_envs
-    obs_dim, act_dim, run_dir, ckpt_path = tr.obs_dim, tr.act_dim, tr.run_dir, tr.ckpt_path
-    envs = VecEnv(args, args.num_envs, tr.backend, device)
+def train(run: Run) -> Progress:
+    """The PPO loop, from where `run` is to the end of its budget; returns where the run ended.
+
+    Ctrl-C or SIGTERM ends the run after the iteration in progress: it saves the checkpoint, closes the
+    envs and exits (SystemExit, status 128 + the signal's number) with one line that says how to resume.
+    A second Ctrl-C (a KeyboardInterrupt) ends it at once, dropping the iteration in progress: the last
+    checkpoint stands."""
+    args, agent, icm, progress = run.args, run.agent, run.icm, run.progress
+    device = next(agent.parameters()).device
+    run_dir = checkpoint_path(args).parent
+    envs = make_envs(args, args.num_envs, device)
     batch_size = args.num_envs * args.num_steps
     minibatch_size = batch_size // args.num_minibatches
     num_iterations = math.ceil(args.total_timesteps / batch_size)
     stage = args.curriculum[progress.stage_index]
     if not progress.stage_changes:
         progress.stage_changes.append((0, stage))
-    for e in (envs, eval_envs):
-        e.set_curriculum_stage(stage)
+    for e in (envs, run.eval_envs):
+        set_curriculum_stage(e, stage)
 
     run_dir.mkdir(parents=True, exist_ok=True)
     writer = SummaryWriter(str(run_dir))
-    if not tr.resumed:
+    if not args.resume:
         writer.add_text("hyperparameters", "|param|value|\n|-|-|\n" + "\n".join(f"|{k}|{v}|" for k, v in vars(args).items()))
-    log = CSVLog(run_dir / "progress.csv", progress.global_step if tr.resumed else None)
-    checkpoint = tr.checkpoint
-
-    stop = {"now": False}
-    signal.signal(signal.SIGTERM, lambda *_: stop.update(now=True))
+    log = CSVLog(run_dir / "progress.csv", progress.global_step if args.resume else None)
 
     demo_obs = demo_actions = None
     if args.demos:
@@ -686,9 +652,9 @@ def train(tr: Trainer) -> Progress:
         demo_obs = torch.as_tensor(np.concatenate([f["obs"] for f in files]), dtype=torch.float32, device=device)
         demo_actions = torch.as_tensor(np.concatenate([f["actions"] for f in files]), dtype=torch.float32, device=device)
 
-    obs_buf = torch.zeros((args.num_steps, args.num_envs, obs_dim), device=device)
+    obs_buf = torch.zeros((args.num_steps, args.num_envs, run.obs_dim), device=device)
     next_obs_buf = torch.zeros_like(obs_buf)  # s_{t+1}: the final observation where an episode ended
-    actions = torch.zeros((args.num_steps, args.num_envs, act_dim), device=device)
+    actions = torch.zeros((args.num_steps, args.num_envs, run.act_dim), device=device)
     logprobs = torch.zeros((args.num_steps, args.num_envs), device=device)
     rewards = torch.zeros_like(logprobs)
     dones = torch.zeros_like(logprobs)
@@ -696,15 +662,23 @@ def train(tr: Trainer) -> Progress:
     values = torch.zeros_like(logprobs)
     intrinsic_running = torch.zeros(args.num_envs, device=device)
 
-    next_obs = envs.reset(seed=args.seed + progress.iteration * 1000)
+    stop: list[int] = []  # the signal that asked the run to end
+
+    def request_stop(signum, _frame):
+        stop.append(signum)
+        signal.signal(signal.SIGINT, signal.default_int_handler)  # a second Ctrl-C ends the run at once
+
+    handlers = {signum: signal.signal(signum, request_stop) for signum in (signal.SIGINT, signal.SIGTERM)}
+    interrupted = False
+    next_obs = reset(envs, seed=args.seed + progress.iteration * 1000)
     bar = tqdm(total=args.total_timesteps, initial=min(progress.global_step, args.total_timesteps), unit="step",
                desc=f"{args.exp_name} [{stage}]", dynamic_ncols=True)
     try:
-        while progress.iteration < num_iterations and not stop["now"]:
+        while progress.iteration < num_iterations and not stop:
             progress.iteration += 1
             t0 = time.time()
             if args.anneal_lr:
-                optimizer.param_groups[0]["lr"] = args.learning_rate * (1.0 - (progress.iteration - 1.0) / num_iterations)
+                run.optimizer.param_groups[0]["lr"] = args.learning_rate * (1.0 - (progress.iteration - 1.0) / num_iterations)
             episodes = defaultdict(list)
 
             # ---- rollout ----
@@ -715,16 +689,15 @@ def train(tr: Trainer) -> Progress:
                     action, logprob, _, value = agent.get_action_and_value(next_obs)
                 values[step] = value.flatten()
                 actions[step], logprobs[step] = action, logprob
-                next_obs, reward, info = envs.step(action.clamp(-1, 1))
+                next_obs, reward, terminations, truncations, infos = envs.step(action.clamp(-1, 1))
                 rewards[step] = reward * args.reward_scale
-                dones[step], terminated[step] = info["done"].float(), info["terminated"].float()
-                next_obs_buf[step] = torch.where(info["done"][:, None], info["final_obs"], next_obs)
-                done = info["done"]
-                if done.any():
+                dones[step], terminated[step] = (terminations | truncations).float(), terminations.float()
+                next_obs_buf[step] = next_obs
+                if "final_info" in infos:
+                    ep = finished_episodes(infos)
+                    next_obs_buf[step, ep["ended"]] = infos["final_observation"][ep["ended"]]
                     for key in ("success", "picked", "ep_return", "ep_length"):
-                        episodes[key] += info[key][done].float().tolist()
-                    episodes["env"] += done.nonzero().flatten().tolist()
-                    episodes["step"] += [step] * int(done.sum())
+                        episodes[key] += ep[key][ep["ended"]].float().tolist()
 
             # ---- intrinsic reward (computed on the whole rollout) ----
             flat = lambda x: x.reshape(-1, *x.shape[2:])  # noqa: E731
@@ -761,7 +734,7 @@ def train(tr: Trainer) -> Progress:
             b_obs, b_next_obs, b_actions = flat(obs_buf), flat(next_obs_buf), flat(actions)
             b_logprobs, b_adv, b_ret, b_val = logprobs.reshape(-1), advantages.reshape(-1), returns.reshape(-1), values.reshape(-1)
             b_inds = np.arange(batch_size)
-            clipfracs, losses = [], defaultdict(list)
+            losses = defaultdict(list)
             for _epoch in range(args.update_epochs):
                 np.random.shuffle(b_inds)
                 for start in range(0, batch_size, minibatch_size):
@@ -771,7 +744,6 @@ def train(tr: Trainer) -> Progress:
                     ratio = logratio.exp()
                     with torch.no_grad():
                         approx_kl = ((ratio - 1) - logratio).mean()
-                        clipfracs.append(((ratio - 1.0).abs() > args.clip_coef).float().mean().item())
                     mb_adv = b_adv[mb]
                     if args.norm_adv:
                         mb_adv = (mb_adv - mb_adv.mean()) / (mb_adv.std() + 1e-8)
@@ -791,17 +763,17 @@ def train(tr: Trainer) -> Progress:
                         losses["bc_loss"].append(bc_loss.item())
                     if progress.iteration <= args.critic_warmup_iterations:
                         loss = v_loss * args.vf_coef
-                    optimizer.zero_grad()
+                    run.optimizer.zero_grad()
                     loss.backward()
                     nn.utils.clip_grad_norm_(agent.parameters(), args.max_grad_norm)
-                    optimizer.step()
+                    run.optimizer.step()
                     if icm is not None:
                         fwd, inv = icm.losses(b_obs[mb], b_next_obs[mb], b_actions[mb])
                         icm_loss = (1 - args.icm_forward_weight) * inv + args.icm_forward_weight * fwd
-                        icm_optimizer.zero_grad()
+                        run.icm_optimizer.zero_grad()
                         icm_loss.backward()
                         nn.utils.clip_grad_norm_(icm.parameters(), args.max_grad_norm)
-                        icm_optimizer.step()
+                        run.icm_optimizer.step()
                         losses["icm_forward_loss"].append(fwd.item())
                         losses["icm_inverse_loss"].append(inv.item())
                     losses["value_loss"].append(v_loss.item())
@@ -817,7 +789,7 @@ def train(tr: Trainer) -> Progress:
             # ---- logs, evaluation, curriculum ----
             sps = batch_size / (time.time() - t0)
             row = dict(global_step=progress.global_step, iteration=progress.iteration, stage=stage, sps=round(sps, 1),
-                       learning_rate=optimizer.param_groups[0]["lr"], episodes=len(episodes["success"]))
+                       learning_rate=run.optimizer.param_groups[0]["lr"], episodes=len(episodes["success"]))
             row.update({k: float(np.mean(v)) for k, v in losses.items()})
             if episodes["success"]:
                 row.update(pick_success=float(np.mean(episodes["picked"])), place_success=float(np.mean(episodes["success"])),
@@ -825,7 +797,7 @@ def train(tr: Trainer) -> Progress:
                 if episodes["intrinsic_return"]:
                     row["intrinsic_return"] = float(np.mean(episodes["intrinsic_return"]))
             if progress.iteration % args.eval_freq == 0 or progress.iteration == num_iterations:
-                result = evaluate(agent, eval_envs, args, seed=args.seed + 10_000 + progress.iteration)
+                result = evaluate(agent, run.eval_envs, args, seed=args.seed + 10_000 + progress.iteration)
                 s, a = result["eval_place_success"], args.success_smoothing
                 if not math.isnan(s):
                     progress.smoothed_success = s if progress.smoothed_success is None else a * s + (1 - a) * progress.smoothed_success
@@ -841,25 +813,35 @@ def train(tr: Trainer) -> Progress:
                 progress.smoothed_success = None
                 stage = args.curriculum[progress.stage_index]
                 progress.stage_changes.append((progress.global_step, stage))
-                for e in (envs, eval_envs):
-                    e.set_curriculum_stage(stage)
+                for e in (envs, run.eval_envs):
+                    set_curriculum_stage(e, stage)
                 writer.add_text("curriculum", f"step {progress.global_step}: promoted to {stage} ({promotion})", progress.global_step)
                 tqdm.write(f"step {progress.global_step}: promoted to {stage} ({promotion})")
                 bar.set_description(f"{args.exp_name} [{stage}]")
             bar.update(min(batch_size, args.total_timesteps - bar.n))
             bar.set_postfix(sps=f"{sps:.0f}", place=row.get("place_success", float("nan")), pick=row.get("pick_success", float("nan")))
             if promotion or progress.iteration % args.checkpoint_freq == 0 or progress.iteration == num_iterations:
-                checkpoint()
+                run.save()
     except KeyboardInterrupt:
-        stop["now"] = True
+        interrupted = True
     finally:
+        for signum, handler in handlers.items():
+            signal.signal(signum, handler)
         bar.close()
-        if stop["now"]:
-            checkpoint()
-            print(f"interrupted at step {progress.global_step}; resume with: python baselines/ppo/ppo.py --resume {ckpt_path}")
         envs.close()
-        eval_envs.close()
+        run.eval_envs.close()
         writer.close()
+    resume = f"python baselines/ppo/ppo.py --resume {checkpoint_path(args)}"
+    if interrupted:
+        print(f"interrupted during iteration {progress.iteration}, which is lost; resume from the last checkpoint "
+              f"with: {resume}", file=sys.stderr)
+    elif stop:
+        run.save()
+        saved = f"checkpoint saved; resume with: {resume}" if args.save_model else "no checkpoint (--no-save-model)"
+        print(f"stopped by {signal.Signals(stop[0]).name} after iteration {progress.iteration} "
+              f"(step {progress.global_step}): {saved}", file=sys.stderr)
+    if stop:
+        raise SystemExit(128 + stop[0])
     return progress
 
 

@@ -1,0 +1,143 @@
+"""Many physx_cpu envs behind ManiSkillVectorEnv's interface: worker processes, same-step resets, torch.
+
+ManiSkill simulates many envs in one process only on physx_cuda; on physx_cpu a process holds one
+env. `CPUVectorEnv` runs `num_envs` of them in gymnasium AsyncVectorEnv worker processes and gives
+them the interface of ManiSkillVectorEnv, so that a learner written for the GPU (ManiSkill's PPO
+baseline, baselines/ppo/ppo.py) runs unchanged on a CPU machine:
+
+- torch tensors in and out, batched over envs, on `device`;
+- same-step resets: an env whose episode ends (terminated or truncated) is reset within that step, as
+  ManiSkillVectorEnv does (gymnasium 1.0's AsyncVectorEnv would reset it on the *next* step and return
+  a transition that belongs to no episode). The step returns the new episode's first observation;
+  `info["final_observation"]`, `info["final_info"]` (the ended episode's last info, with "episode":
+  return, episode_len, success_once as ManiSkill's `record_metrics` gives them) and the mask
+  `info["_final_info"]` describe the envs whose episode ended, and are absent when none did;
+- `call(name, *args)` calls a method of each worker's env (the task's own, e.g.
+  `set_curriculum_stage`) and returns the results.
+
+Only the ended episodes' info travels from the workers: the per-step info of ManiSkillVectorEnv is
+not returned (fewer bytes and less work per step for the learner, which waits for every step).
+
+On physx_cuda use ManiSkillVectorEnv itself.
+
+    envs = CPUVectorEnv("Flooring-v1", num_envs=2, env_kwargs=dict(obs_mode="state", control_mode="pd_joint_delta_pos"))
+    obs, _ = envs.reset(seed=0)
+    obs, reward, terminated, truncated, info = envs.step(torch.zeros(2, *envs.single_action_space.shape))
+    envs.close()
+"""
+
+from __future__ import annotations
+
+import functools
+import os
+import signal
+from typing import Callable, Optional, Sequence, Union
+
+import gymnasium as gym
+import numpy as np
+import torch
+
+
+class SameStepReset(gym.Wrapper):
+    """Worker side of `CPUVectorEnv`: resets the env in the step that ends its episode and reports the
+    end in `info` (final_observation, final_info, terminated, truncated), so that AsyncVectorEnv always
+    sees an episode that goes on and never resets on its own. A step that ends nothing has an empty
+    info (nothing to send)."""
+
+    def step(self, action):
+        obs, reward, terminated, truncated, info = self.env.step(action)
+        if not (terminated or truncated):
+            return obs, reward, False, False, {}
+        ended = dict(final_observation=obs, final_info=info, terminated=bool(terminated), truncated=bool(truncated))
+        obs, _ = self.env.reset()
+        return obs, reward, False, False, ended
+
+
+def _make_worker_env(env_id: str, env_kwargs: dict, video_dir: Optional[str], index: int,
+                     wrappers: Sequence[Callable[[gym.Env], gym.Env]], creator_pid: int) -> gym.Env:
+    """The env of worker `index`, made in the worker process (and once, for its spaces, by
+    AsyncVectorEnv in the process that creates the vector env, `creator_pid`)."""
+    from mani_skill.utils.wrappers import CPUGymWrapper
+
+    if os.getpid() != creator_pid:
+        # Ctrl-C and a SIGTERM to the process group reach every worker: the learner decides when to
+        # stop and closes the workers; a worker stopped in the middle of a step would only print a traceback
+        signal.signal(signal.SIGINT, signal.SIG_IGN)
+        signal.signal(signal.SIGTERM, signal.SIG_IGN)
+    env = gym.make(env_id, num_envs=1, sim_backend="physx_cpu", **env_kwargs)
+    for wrap in wrappers:
+        env = wrap(env)
+    if video_dir is not None and index == 0:
+        from mani_skill.utils.wrappers import RecordEpisode
+
+        env = RecordEpisode(env, video_dir, save_trajectory=False, video_fps=20)
+    return SameStepReset(CPUGymWrapper(env, record_metrics=True))
+
+
+def _to_torch(x, device: torch.device):
+    """numpy arrays (nested in dicts) as tensors; gymnasium's per-key masks `_key` dropped (every env in
+    `final_info` has the same keys: `_final_info` is their mask)."""
+    if isinstance(x, dict):
+        return {k: _to_torch(v, device) for k, v in x.items() if not (k.startswith("_") and k[1:] in x)}
+    if isinstance(x, np.ndarray) and x.dtype != object:
+        return torch.as_tensor(x, device=device)
+    return x
+
+
+class CPUVectorEnv:
+    """`num_envs` physx_cpu envs of `env_id` (each `gym.make(env_id, **env_kwargs)` in a worker
+    process) with ManiSkillVectorEnv's interface; see the module docstring.
+
+    Args:
+        env_id: a registered ManiSkill env id.
+        num_envs: worker processes, one env each.
+        env_kwargs: keyword arguments of gym.make (obs_mode, control_mode, reward_mode, render_mode, ...).
+        device: where the returned tensors live (the learner's device).
+        video_dir: record the first env's episodes there as videos (RecordEpisode; needs
+            render_mode="rgb_array" in env_kwargs).
+        wrappers: applied to each worker's env (the batched ManiSkill env of one), innermost first,
+            e.g. a gym.Wrapper class; they must pickle (defined at the top level of a module).
+    """
+
+    def __init__(self, env_id: str, num_envs: int, env_kwargs: Optional[dict] = None,
+                 device: Union[str, torch.device] = "cpu", video_dir: Optional[str] = None,
+                 wrappers: Sequence[Callable[[gym.Env], gym.Env]] = ()):
+        env_kwargs = dict(env_kwargs or {})
+        self.num_envs, self.device = num_envs, torch.device(device)
+        # forkserver: workers start from a clean process, not a copy of the learner (its torch threads,
+        # its CUDA context)
+        self.env = gym.vector.AsyncVectorEnv(
+            [functools.partial(_make_worker_env, env_id, env_kwargs, None if video_dir is None else str(video_dir), i,
+                               tuple(wrappers), os.getpid()) for i in range(num_envs)], context="forkserver")
+        self.single_observation_space = self.env.single_observation_space
+        self.single_action_space = self.env.single_action_space
+
+    def reset(self, *, seed: Union[int, Sequence[int], None] = None, options: Optional[dict] = None):
+        """Reset every env (env i with seed `seed + i`, or `seed[i]` for a list): (obs, info)."""
+        obs, info = self.env.reset(seed=seed if seed is None or isinstance(seed, int) else list(seed), options=options)
+        return torch.as_tensor(obs, device=self.device), _to_torch(info, self.device)
+
+    def step(self, actions: torch.Tensor):
+        """One step of every env: (obs, reward, terminated, truncated, info), same-step resets."""
+        obs, reward, _, _, info = self.env.step(actions.cpu().numpy())
+        obs = torch.as_tensor(obs, device=self.device)
+        reward = torch.as_tensor(reward, dtype=torch.float32, device=self.device)
+        terminated = torch.zeros(self.num_envs, dtype=torch.bool, device=self.device)
+        truncated = torch.zeros_like(terminated)
+        if "final_info" not in info:
+            return obs, reward, terminated, truncated, {}
+        terminated[:] = torch.as_tensor(info["terminated"])
+        truncated[:] = torch.as_tensor(info["truncated"])
+        ended = torch.as_tensor(info["_final_info"], device=self.device)
+        return obs, reward, terminated, truncated, dict(
+            final_observation=torch.as_tensor(info["final_observation"], device=self.device),
+            final_info=_to_torch(info["final_info"], self.device),
+            _final_info=ended, _final_observation=ended)
+
+    def call(self, name: str, *args, **kwargs) -> tuple:
+        """`name(*args, **kwargs)` of every worker's env (the first that has it, outermost wrapper
+        first, down to the task itself); each worker's result."""
+        return self.env.call(name, *args, **kwargs)
+
+    def close(self) -> None:
+        self.env.close()

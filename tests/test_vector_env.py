@@ -1,0 +1,36 @@
+"""ms_construction.vector_env: physx_cpu envs in worker processes behind ManiSkillVectorEnv's interface."""
+
+import signal
+
+import torch
+
+from ms_construction.vector_env import CPUVectorEnv
+
+
+def test_an_ended_episode_is_reset_in_the_same_step_and_reported_in_final_info():
+    handlers = [signal.getsignal(s) for s in (signal.SIGINT, signal.SIGTERM)]
+    envs = CPUVectorEnv("Flooring-v1", 2, dict(obs_mode="state", control_mode="pd_joint_delta_pos",
+                                               reward_mode="dense", max_episode_steps=3))
+    try:
+        # the workers ignore Ctrl-C (their creator stops them); the creating process keeps its handlers
+        assert [signal.getsignal(s) for s in (signal.SIGINT, signal.SIGTERM)] == handlers
+        obs, _ = envs.reset(seed=[0, 1])
+        assert obs.shape == (2, 43) and obs.dtype == torch.float32
+        zeros = torch.zeros(2, *envs.single_action_space.shape)
+        for _ in range(2):
+            obs, reward, terminated, truncated, info = envs.step(zeros)
+            assert info == {} and not (terminated | truncated).any()
+            assert reward.shape == (2,) and reward.dtype == torch.float32
+        before = obs
+        obs, reward, terminated, truncated, info = envs.step(zeros)
+        assert truncated.all() and not terminated.any()
+        assert info["_final_info"].tolist() == [True, True]
+        assert info["final_info"]["episode"]["episode_len"].tolist() == [3, 3]
+        assert "success_once" in info["final_info"]["episode"] and "picked" in info["final_info"]
+        # the final observation is the ended episode's (it moved on from the step before); the
+        # returned one is the next episode's first, in an env already reset
+        assert info["final_observation"].shape == (2, 43) and not torch.equal(info["final_observation"], obs)
+        assert torch.allclose(info["final_observation"][:, :6], before[:, :6], atol=0.2)
+        assert [int(t) for t in envs.call("elapsed_steps")] == [0, 0]
+    finally:
+        envs.close()
