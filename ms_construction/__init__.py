@@ -3,6 +3,11 @@
 Importing the package registers the arm (`construction_arm`) and the four environments, so
 `gym.make("CeilingInstallation-v1")` works after `import ms_construction`, and
 `gym.make("ms_construction:CeilingInstallation-v1")` works without it.
+
+Run time: `envs` (the tasks), `agents` (the arm and its suction gripper), `site` (the scene),
+`parameters` (what the generators and the run time share), `curriculum` (Table I), `planning` (the
+motion-planning expert and its demonstrations), `vector_env` (physx_cpu envs in worker processes).
+Build time only: `build` (the generators of the committed assets; imports mesh libraries).
 """
 
 from ms_construction import agents, envs  # noqa: F401  (registration)
