@@ -97,7 +97,9 @@ class Args:
     learning_rate: float = 3e-4
     """Adam learning rate of policy and value."""
     num_envs: Optional[int] = None
-    """parallel training envs (default: one per CPU core on physx_cpu, 512 on physx_cuda)."""
+    """parallel training envs (default: one per CPU core on physx_cpu, 512 on physx_cuda). On physx_cpu, twice
+    as many as cores keeps more of the simulator's speed while the learner infers and updates (see
+    docs/BENCHMARKS.md), with a batch twice as large per update."""
     num_eval_envs: Optional[int] = None
     """parallel evaluation envs (default: 2 on physx_cpu, 16 on physx_cuda)."""
     partial_reset: bool = True
