@@ -1,7 +1,7 @@
 """Our batched quaternion helpers agree with ManiSkill's (rotation_conversions, Pose).
 
 The task keeps its own (ms_construction/rotations.py) because they are faster on its hot path:
-`python scripts/benchmark_rotations.py` measures both; docs/data/rotations_benchmark.md.
+`python scripts/benchmark_rotations.py` measures both (docs/BENCHMARKS.md).
 """
 
 import pytest
