@@ -81,13 +81,16 @@ class SuctionGripper:
         """Raw pose [n, 7] of the plate's tcp in the element's frame."""
         return pose_mul(pose_inv(element.pose.raw_pose), self.tcp.pose.raw_pose)
 
-    def grasp(self, element: Actor, grasp_in_el: torch.Tensor, size: torch.Tensor, tau_pick: torch.Tensor) -> torch.Tensor:
+    def grasp(self, element: Actor, grasp_in_el: torch.Tensor, size: torch.Tensor, kind: torch.Tensor,
+              tau_pick: torch.Tensor) -> torch.Tensor:
         """Grasp where the ray meets the face within tau_pick and nothing is held yet; returns
-        which envs grasped now. The held pose puts the grasp face (`grasp_in_el`, the tcp's pose at
-        grasp in the element frame, [n, 7]) against the plate, keeping the element's current
-        rotation about the plate's axis: the pull does not spin it."""
+        which envs grasped now. Per element kind (indexed by `kind` [n]): `grasp_in_el` [kinds, 7],
+        the tcp's pose at grasp in the element frame, and `size` [kinds, 3]. The held pose puts the
+        grasp face against the plate, keeping the element's current rotation about the plate's
+        axis: the pull does not spin it."""
         if not self.gpu and bool(self.held[0]):  # physx_cpu's one env holds already: no ray to cast
             return torch.zeros_like(self.held)
+        grasp_in_el, size = grasp_in_el[kind], size[kind]
         tcp_in_el = self.tcp_in_element(element)
         dist, _ = grasp_ray(tcp_in_el, size)
         grasp_now = ~self.held & (dist <= tau_pick)

@@ -293,8 +293,7 @@ class ConstructionTaskEnv(BaseEnv):
         return grasp_ray(tcp_in_el, self._el_size[self.task_id])
 
     def _update_grasp(self) -> None:
-        grasp_now = self.gripper.grasp(self.obj, self._grasp_in_el[self.task_id], self._el_size[self.task_id],
-                                       self.tau_pick)
+        grasp_now = self.gripper.grasp(self.obj, self._grasp_in_el, self._el_size, self.task_id, self.tau_pick)
         self.first_grasp_now = grasp_now & ~self.picked
         self.picked |= grasp_now
 
