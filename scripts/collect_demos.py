@@ -22,7 +22,7 @@ from typing import Optional
 
 import tyro
 
-from baselines.ppo.evaluation import load_policy
+from baselines.ppo.checkpoints import load_policy
 from ms_construction.planning.demos import record_demos
 
 

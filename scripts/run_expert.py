@@ -58,7 +58,9 @@ class Args:
     workers: int = 1
     """processes solving episodes in parallel (one env each); recording needs 1."""
     write_results: bool = False
-    """write the table into the 'Motion-planning expert' section of docs/RESULTS.md."""
+    """write the table into the 'Motion-planning expert' section of docs/RESULTS.md, and its JSON (the
+    figures scripts/evaluate.py --write-results sets beside the general agent's) to
+    docs/data/expert_results.json unless --json names another file."""
     expert: ExpertConfig = ExpertConfig()
     """the expert's settings (margins, speeds, planning time limits); the defaults are what
     docs/RESULTS.md reports."""
@@ -171,6 +173,8 @@ def main(args: Args) -> None:
     command = "python scripts/run_expert.py " + " ".join(shlex.quote(a) for a in sys.argv[1:])
     print(table(rows))
     print("\n".join(failures) or "no failures")
+    if args.write_results and args.json is None:
+        args.json = Path("docs/data/expert_results.json")
     if args.json:
         args.json.parent.mkdir(parents=True, exist_ok=True)
         args.json.write_text(json.dumps({"command": command, "curriculum_stage": args.curriculum_stage,

@@ -45,7 +45,7 @@ from pathlib import Path
 import torch
 import tyro
 
-from baselines.ppo import bc, evaluation, ppo
+from baselines.ppo import bc, checkpoints, evaluation, ppo
 from ms_construction.planning.demos import load_demos, policy_steps, record_demos, tried_episodes
 
 SHIPPED = Path("assets/checkpoints/general_agent.pt")
@@ -133,7 +133,7 @@ def main(args: Args) -> Path:
                 continue
             if tried_episodes(path) < wanted:
                 record_demos(path, wanted, env_id=env_id, seed=seed, workers=args.workers, save_every=100, resume=True,
-                             policy=policy, load_policy=evaluation.load_policy)
+                             policy=policy, load_policy=checkpoints.load_policy)
             files.append(path)
         return files
 

@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 import torch
 
-from baselines.ppo import bc, evaluation, ppo
+from baselines.ppo import bc, evaluation, networks, ppo
 from ms_construction.planning.demos import DEMO_EXPERT_CONFIG, DemoCollector, load_demos, save_demos
 
 from tests.helpers import PLAN_TRIES, SLOW_MACHINE_RRT_TIME
@@ -125,13 +125,13 @@ def test_discounted_returns_restart_at_every_demonstration():
 
 
 def test_running_mean_std_matches_the_data_it_has_seen():
-    rms = ppo.RunningMeanStd((3,))
+    rms = networks.RunningMeanStd((3,))
     x = torch.randn(1000, 3) * torch.tensor([1.0, 5.0, 0.1]) + torch.tensor([2.0, -1.0, 0.0])
     for chunk in x.split(250):
         rms.update(chunk)
     np.testing.assert_allclose(rms.mean.numpy(), x.mean(0).numpy(), atol=1e-4)
     np.testing.assert_allclose(rms.var.numpy(), x.var(0, unbiased=False).numpy(), rtol=1e-3)
-    agent = ppo.Agent(3, 2, 16)
+    agent = networks.Agent(3, 2, 16)
     raw = agent.normalize(x[:5])
     assert torch.equal(raw, x[:5]), "an agent that has seen no data passes observations through"
     agent.obs_rms.load_state_dict(rms.state_dict())
@@ -165,7 +165,7 @@ def test_rotation_features_are_the_same_for_q_and_minus_q_and_sit_where_the_stat
     x = flat.repeat(2, 1)
     for s in STATE_QUATERNION_STARTS:
         x[1, s:s + 4] *= -1
-    f = ppo.rotation_features(x, STATE_QUATERNION_STARTS)
+    f = networks.rotation_features(x, STATE_QUATERNION_STARTS)
     assert f.shape == (2, 43 + 6) and torch.allclose(f[0], f[1], atol=1e-6)
     assert not torch.allclose(x[0], x[1])
     env.close()

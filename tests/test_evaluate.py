@@ -6,7 +6,9 @@ import pytest
 import torch
 
 from baselines.ppo import evaluation
-from baselines.ppo.ppo import Agent, Args as PPOArgs, Progress, save_checkpoint
+from baselines.ppo.checkpoints import Progress, save_checkpoint
+from baselines.ppo.networks import Agent
+from baselines.ppo.ppo import Args as PPOArgs
 
 
 def test_shipped_general_agent_places_on_every_task(tmp_path):

@@ -17,11 +17,14 @@ import numpy as np
 import pytest
 import torch
 
-from baselines.ppo import ppo
+from baselines.ppo import evaluation, ppo
 from ms_construction.curriculum import stage_tolerances
 from ms_construction.vector_env import CPUVectorEnv
 
 ROOT = Path(__file__).resolve().parents[1]
+SCRIPT_ENV = {**os.environ, "PYTHONPATH": str(ROOT)}
+"""scripts run as subprocesses import this checkout's packages (an editable install may point at another
+checkout of the repository, e.g. where git worktrees share one virtual environment)."""
 
 TINY = dict(num_envs=2, num_eval_envs=1, num_steps=40, num_minibatches=2, update_epochs=2, eval_freq=100,
             num_eval_steps=250, checkpoint_freq=1, env_id="Flooring-v1", sim_backend="physx_cpu")
@@ -220,7 +223,7 @@ def test_short_run_on_the_easiest_stage_shows_a_learning_signal(tmp_path):
                      checkpoint_freq=10**6)
     tr = ppo.setup(args)
     ppo.set_curriculum_stage(tr.eval_envs, "cp1")
-    untrained = ppo.evaluate(tr.agent, tr.eval_envs, tr.args, seed=123)
+    untrained = evaluation.evaluate_envs(tr.agent, tr.eval_envs, tr.args.num_eval_steps, seed=123)
     ppo.train(tr)
     evals = [r for r in read_csv(tmp_path / "learn" / "progress.csv") if r["eval_pick_success"]]
     assert len(evals) == 8
@@ -258,7 +261,7 @@ def test_an_unknown_env_control_or_reward_mode_is_refused_before_anything_starts
                                                 ("--control-mode", "pd_joint_vel", "pd_ee_delta_pose")])
 def test_the_command_line_refuses_an_unknown_env_or_control_mode_without_a_traceback(flag, value, allowed):
     out = subprocess.run([sys.executable, "baselines/ppo/ppo.py", flag, value], cwd=ROOT, capture_output=True,
-                         text=True, timeout=300)
+                         text=True, timeout=300, env=SCRIPT_ENV)
     assert out.returncode != 0 and "Traceback" not in out.stderr, out.stderr
     assert value in out.stderr and allowed in out.stderr, out.stderr
 
@@ -280,7 +283,7 @@ def test_a_stopped_run_saves_its_checkpoint_and_exits_with_one_line(tmp_path, ho
            "--num-envs", "2", "--num-eval-envs", "1", "--num-steps", "40", "--num-minibatches", "2",
            "--update-epochs", "1", "--eval-freq", "1000", "--total-timesteps", "1000000", "--curiosity", "none",
            "--curriculum", "cp4", "--log-dir", str(tmp_path), "--exp-name", "stopped"]
-    proc = subprocess.Popen(cmd, cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+    proc = subprocess.Popen(cmd, cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=SCRIPT_ENV,
                             start_new_session=True)  # its own process group, as a terminal's job
     csv_path = tmp_path / "stopped" / "progress.csv"
     try:
@@ -308,3 +311,120 @@ def test_a_stopped_run_saves_its_checkpoint_and_exits_with_one_line(tmp_path, ho
         assert run.progress.iteration == len(rows) and run.progress.global_step == int(rows[-1]["global_step"])
     finally:
         run.eval_envs.close()
+
+
+# ---- the update on a fixed batch: the numbers the update gave before it was a function (e2cc667's inline
+# update, run on this batch), so that a speed-up cannot change what PPO computes ----
+REFERENCE_UPDATES = {
+    "plain": (dict(curiosity="none", bc=False, clip_vloss=False, target_kl=None), dict(
+        value_loss=1.0177209327618282, policy_loss=0.23657110623187488, entropy=5.539665751987034,
+        approx_kl=0.45542471193605, updates=36, agent_abs_sum=3227.7171355229466, actor_w0_00=-0.4099215865135193,
+        critic_last_b=-0.0003031925007235259)),
+    "icm_bc_clip": (dict(curiosity="icm", bc=True, clip_vloss=True, target_kl=0.1), dict(
+        bc_loss=0.34727514452404445, icm_forward_loss=14.370754506852892, icm_inverse_loss=6.065553638670179,
+        value_loss=1.1406903333134122, policy_loss=0.26191089674830437, entropy=5.5262128247155085,
+        approx_kl=0.4729505595233705, updates=18, agent_abs_sum=3225.7835979375086, actor_w0_00=-0.41283199191093445,
+        critic_last_b=0.0002906389709096402, icm_abs_sum=4582.531226159324)),
+    "early_stop": (dict(curiosity="none", bc=False, clip_vloss=False, target_kl=1e-4), dict(
+        value_loss=1.0333226720492046, policy_loss=0.21124553183714548, entropy=5.519400437672933,
+        approx_kl=0.45658889578448403, updates=9, agent_abs_sum=3225.32009339033, actor_w0_00=-0.4143797755241394,
+        critic_last_b=0.0005660938913933933)),
+}
+
+
+def fixed_batch(n=500, obs_dim=43, act_dim=6) -> dict:
+    g = torch.Generator().manual_seed(0)
+    obs = torch.randn(n, obs_dim, generator=g)
+    next_obs = obs + 0.1 * torch.randn(n, obs_dim, generator=g)
+    actions = torch.rand(n, act_dim, generator=g) * 2 - 1
+    adv = torch.randn(n, generator=g)
+    values = torch.randn(n, generator=g)
+    logprobs = -5 + 0.3 * torch.randn(n, generator=g)
+    return dict(obs=obs, next_obs=next_obs, actions=actions, logprobs=logprobs, advantages=adv, returns=adv + values,
+                values=values)
+
+
+@pytest.mark.parametrize("case", list(REFERENCE_UPDATES))
+def test_one_update_on_a_fixed_batch_gives_the_losses_and_weights_of_the_original_update(case):
+    from baselines.ppo.curiosity import ICM
+
+    setting, expected = REFERENCE_UPDATES[case]
+    threads = torch.get_num_threads()
+    torch.set_num_threads(1)
+    try:
+        torch.manual_seed(0)
+        np.random.seed(0)
+        args = ppo.Args(hidden_size=64, num_minibatches=8, update_epochs=4, curiosity=setting["curiosity"],
+                        bc_coef=0.1 if setting["bc"] else 0.0, clip_vloss=setting["clip_vloss"],
+                        target_kl=setting["target_kl"], icm_feature_dim=16)
+        agent = ppo.make_agent(args, 43, 6)
+        optimizer = torch.optim.Adam(agent.parameters(), lr=args.learning_rate, eps=1e-5)
+        icm = ICM(43, 6, 16, 64) if args.curiosity == "icm" else None
+        icm_optimizer = torch.optim.Adam(icm.parameters(), lr=args.icm_learning_rate) if icm else None
+        batch = fixed_batch()
+        agent.obs_rms.update(agent.features(batch["obs"]))
+        g = torch.Generator().manual_seed(1)
+        demos = (torch.randn(300, 43, generator=g), torch.rand(300, 6, generator=g)) if setting["bc"] else None
+        n_steps = []
+        step = optimizer.step
+        optimizer.step = lambda *a, **k: (n_steps.append(1), step(*a, **k))[1]
+        losses = ppo.ppo_update(agent, optimizer, batch, args, icm, icm_optimizer, demos)
+    finally:
+        torch.set_num_threads(threads)
+    with torch.no_grad():
+        got = dict(losses, updates=len(n_steps), agent_abs_sum=float(sum(p.double().abs().sum() for p in agent.parameters())),
+                   actor_w0_00=float(agent.actor_mean[0].weight[0, 0]), critic_last_b=float(agent.critic[6].bias[0]))
+        if icm is not None:
+            got["icm_abs_sum"] = float(sum(p.double().abs().sum() for p in icm.parameters()))
+    assert set(got) == set(expected)
+    for key, value in expected.items():
+        assert got[key] == pytest.approx(value, rel=1e-5, abs=1e-6), key
+
+
+def test_a_checkpoint_written_before_the_split_loads_through_the_checkpoint_api():
+    """The shipped agent predates baselines/ppo/checkpoints.py and the rename of finite_horizon_gae."""
+    from baselines.ppo import checkpoints
+
+    path = ROOT / "assets/checkpoints/general_agent.pt"
+    assert "finite_horizon_gae" in torch.load(path, map_location="cpu", weights_only=False)["args"]
+    ckpt = checkpoints.load_checkpoint(path, env_id="Flooring-v1", obs_dim=43, act_dim=6, control_mode="pd_joint_delta_pos")
+    assert ckpt["args"]["bootstrap_at_truncation"] is True and "finite_horizon_gae" not in ckpt["args"]
+    args = ppo.Args(**{**ckpt["args"], "curriculum": tuple(ckpt["args"]["curriculum"])})  # what --resume builds
+    assert args.bootstrap_at_truncation
+    agent, control_mode = checkpoints.load_policy(path, "Flooring-v1")
+    assert control_mode == "pd_joint_delta_pos"
+    for k, v in agent.state_dict().items():
+        assert torch.equal(v, ckpt["agent"][k]), k
+    with pytest.raises(SystemExit, match="control mode pd_joint_delta_pos, not pd_joint_pos"):
+        checkpoints.load_checkpoint(path, env_id="Flooring-v1", obs_dim=43, act_dim=6, control_mode="pd_joint_pos")
+
+
+@pytest.mark.parametrize("damage", ["random bytes", "truncated", "not a dict"])
+def test_a_file_that_is_not_a_checkpoint_is_refused_in_one_line_naming_it(tmp_path, damage):
+    from baselines.ppo import checkpoints
+
+    path = tmp_path / "bad.pt"
+    if damage == "random bytes":
+        path.write_bytes(np.random.default_rng(0).bytes(4096))
+    elif damage == "truncated":
+        path.write_bytes((ROOT / "assets/checkpoints/general_agent.pt").read_bytes()[:50_000])
+    else:
+        torch.save([1, 2, 3], path)
+    for option in ("--checkpoint", "--resume"):
+        with pytest.raises(SystemExit) as e:
+            checkpoints.load_checkpoint(path, option)
+        message = str(e.value)
+        assert message.startswith(f"{option}: {path} is not a checkpoint") and "\n" not in message
+        assert "a checkpoint is the .pt file that baselines/ppo/ppo.py" in message
+    with pytest.raises(SystemExit, match="is not a checkpoint"):
+        ppo.setup(ppo.Args(resume=str(path)))
+
+
+@pytest.mark.parametrize("script", [["scripts/evaluate.py"], ["baselines/ppo/ppo.py", "--evaluate"]])
+def test_the_command_line_refuses_a_garbage_checkpoint_without_a_traceback(tmp_path, script):
+    path = tmp_path / "garbage.pt"
+    path.write_bytes(b"not a checkpoint at all" * 100)
+    out = subprocess.run([sys.executable, *script, "--checkpoint", str(path), "--env-id", "Flooring-v1"], cwd=ROOT,
+                         capture_output=True, text=True, timeout=300, env=SCRIPT_ENV)
+    assert out.returncode != 0 and "Traceback" not in out.stderr, out.stderr
+    assert f"{path} is not a checkpoint" in out.stderr.strip().splitlines()[-1], out.stderr

@@ -24,7 +24,9 @@ import torch
 import tyro
 from tqdm import tqdm
 
-from baselines.ppo.ppo import Args as PPOArgs, Progress, make_agent, save_checkpoint
+from baselines.ppo.checkpoints import Progress, save_checkpoint
+from baselines.ppo.networks import make_agent
+from baselines.ppo.ppo import Args as PPOArgs
 
 
 @dataclass
@@ -129,13 +131,11 @@ def main(args: Args) -> Path:
         bar.set_postfix(train_action_mse=f"{a_loss.item():.4f}", val_action_mse=f"{va.item():.4f}", val_value_mse=f"{vv.item():.4f}")
     print(f"validation action MSE {va.item():.5f}, value MSE {vv.item():.5f}, {time.time() - t0:.0f} s")
 
-    optimizer_stub = torch.optim.Adam(agent.parameters())
-    save_checkpoint(args.out, ppo_args, Progress(), agent, optimizer_stub, None, None, obs.shape[1], act.shape[1])
-    ckpt = torch.load(args.out, weights_only=False)
-    ckpt["bc"] = {k: [str(p) for p in v] if k == "demos" else str(v) if isinstance(v, Path) else v
-                  for k, v in dataclasses.asdict(args).items()}
-    ckpt["bc"].update(demonstrations=len(episodes), steps=len(obs), val_action_mse=va.item())
-    torch.save(ckpt, args.out)
+    record = {k: [str(p) for p in v] if k == "demos" else str(v) if isinstance(v, Path) else v
+              for k, v in dataclasses.asdict(args).items()}
+    record.update(demonstrations=len(episodes), steps=len(obs), val_action_mse=va.item())
+    # no optimizer: PPO starts its own from a clone (--checkpoint loads the weights only)
+    save_checkpoint(args.out, ppo_args, Progress(), agent, None, None, None, obs.shape[1], act.shape[1], bc=record)
     print(f"wrote {args.out}")
     return args.out
 

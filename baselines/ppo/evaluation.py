@@ -21,6 +21,7 @@ import multiprocessing as mp
 import shlex
 import sys
 import time
+from collections import defaultdict
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Optional
@@ -29,12 +30,15 @@ import numpy as np
 import torch
 from tqdm import tqdm
 
+from baselines.ppo.checkpoints import load_checkpoint, load_policy
 from ms_construction.curriculum import STAGE_NAMES
 from ms_construction.envs import ENV_IDS, TASK_ENV_IDS
 from ms_construction.reporting import update_section
 
 DEFAULT_CHECKPOINT = Path("assets/checkpoints/general_agent.pt")
 RESULTS_PATH = Path("docs/RESULTS.md")
+EXPERT_RESULTS = Path("docs/data/expert_results.json")
+"""what `scripts/run_expert.py --write-results` writes beside its table in docs/RESULTS.md."""
 PAPER_TABLE_II = {  # the paper's general agent at cp4: pick %, place %
     "CeilingInstallation-v1": (84.55, 68.04),
     "WindowInstallation-v1": (95.32, 84.82),
@@ -80,33 +84,45 @@ def wilson(successes: int, n: int, z: float = 1.96) -> tuple[float, float]:
     return (max(0.0, centre - half), min(1.0, centre + half))
 
 
-def load_policy(path: Path, env_id: str):
-    """The checkpoint's Agent, after checking that it fits `env_id`'s state observations."""
-    import gymnasium as gym
+def reset(envs, seed: int) -> torch.Tensor:
+    """Reset every env of a vector env, env i with seed `seed + i`; the first observations."""
+    obs, _ = envs.reset(seed=[seed + i for i in range(envs.num_envs)])
+    return obs
 
-    from baselines.ppo.ppo import make_agent
 
-    if not Path(path).is_file():
-        raise SystemExit(f"checkpoint not found: {path}")
-    ckpt = torch.load(path, map_location="cpu", weights_only=False)
-    missing = [k for k in ("agent", "obs_dim", "act_dim", "args") if k not in ckpt]
-    if missing:
-        raise SystemExit(f"{path} is not a ppo.py checkpoint (missing {', '.join(missing)})")
-    control_mode = ckpt["args"]["control_mode"]
-    env = gym.make(env_id, obs_mode="state", control_mode=control_mode, num_envs=1, sim_backend="physx_cpu")
-    obs_dim, act_dim = env.observation_space.shape[-1], env.action_space.shape[-1]
-    env.close()
-    if (ckpt["obs_dim"], ckpt["act_dim"]) != (obs_dim, act_dim):
-        raise SystemExit(
-            f"checkpoint {path} does not fit {env_id}: it was trained with observations of size {ckpt['obs_dim']} and "
-            f"actions of size {ckpt['act_dim']} (env {ckpt['args']['env_id']}, control mode {control_mode}); {env_id} "
-            f"in {control_mode} with state observations has {obs_dim} and {act_dim}.")
-    agent = make_agent(ckpt["args"], ckpt["obs_dim"], ckpt["act_dim"])
-    try:
-        agent.load_state_dict(ckpt["agent"])
-    except RuntimeError as e:
-        raise SystemExit(f"checkpoint {path}: its weights do not fit the policy network ({e})") from None
-    return agent.eval(), control_mode
+def finished_episodes(infos: dict) -> dict:
+    """The episodes that ended in a vector env's step (its info has "final_info"): per env, whether
+    its episode ended (`ended`), and the ended episodes' place success, pick success, return and length."""
+    fin = infos["final_info"]
+    return dict(ended=infos["_final_info"], success=fin["episode"]["success_once"], picked=fin["picked"],
+                ep_return=fin["episode"]["return"], ep_length=fin["episode"]["episode_len"])
+
+
+@torch.no_grad()
+def evaluate_envs(agent, envs, num_steps: int, seed: int) -> dict:
+    """ppo.py's evaluation during training, on a vector env (`envs`, either backend): deterministic
+    policy, the first episode of every env (at most `num_steps` steps): pick and place success, return."""
+    obs = reset(envs, seed)
+    finished = torch.zeros(envs.num_envs, dtype=torch.bool, device=obs.device)
+    stats = defaultdict(lambda: torch.zeros(envs.num_envs, device=obs.device))
+    for _ in range(num_steps):
+        obs, _, _, _, infos = envs.step(agent.get_action(obs, deterministic=True).clamp(-1, 1))
+        if "final_info" not in infos:
+            continue
+        ep = finished_episodes(infos)
+        new = ep["ended"] & ~finished
+        for key in ("success", "picked", "ep_return"):
+            stats[key] = torch.where(new, ep[key].float(), stats[key])
+        finished |= ep["ended"]
+        if finished.all():
+            break
+    mean = lambda x: float(x[finished].mean()) if finished.any() else float("nan")  # noqa: E731
+    return dict(
+        eval_pick_success=mean(stats["picked"]),
+        eval_place_success=mean(stats["success"]),
+        eval_extrinsic_return=mean(stats["ep_return"]),
+        eval_episodes=int(finished.sum()),
+    )
 
 
 _worker: dict = {}
@@ -212,15 +228,13 @@ def table(results: dict[str, dict], expert: Optional[dict[str, str]] = None) -> 
     return "\n".join(lines)
 
 
-def expert_place_success() -> dict[str, str]:
-    """The planning expert's place success per task, from its generated table in docs/RESULTS.md."""
-    text = RESULTS_PATH.read_text() if RESULTS_PATH.exists() else ""
-    out = {}
-    for line in text.splitlines():
-        cells = [c.strip() for c in line.strip("|").split("|")]
-        if len(cells) >= 4 and cells[0] in PAPER_TABLE_II and cells[3].endswith("%"):
-            out[cells[0]] = f"{cells[3]} of {cells[1]}"
-    return out
+def expert_place_success(path: Path = EXPERT_RESULTS) -> dict[str, str]:
+    """The planning expert's place success per task ("97% of 100"), from the JSON that
+    scripts/run_expert.py writes (its summary per task); none where that file is missing."""
+    if not path.is_file():
+        return {}
+    summary = json.loads(path.read_text())["summary"]
+    return {env_id: f"{s['place_success']:.0%} of {s['episodes']}" for env_id, s in summary.items() if env_id in PAPER_TABLE_II}
 
 
 def main(args: Args) -> dict[str, dict]:
@@ -254,8 +268,7 @@ def main(args: Args) -> dict[str, dict]:
 
 def write_results(args: Args, results: dict[str, dict]) -> None:
     """The general agent's section of docs/RESULTS.md: our Table II and the checkpoint's training record."""
-    ckpt = torch.load(args.checkpoint, map_location="cpu", weights_only=False)
-    campaign = ckpt.get("campaign", {})
+    campaign = load_checkpoint(args.checkpoint).get("campaign", {})
     command = "python scripts/evaluate.py " + " ".join(shlex.quote(a) for a in sys.argv[1:])
     lines = ["## The general agent (our recipe)", "", f"Command: `{command}`", "",
              f"One policy (`{args.checkpoint}`, {args.checkpoint.stat().st_size / 1e6:.1f} MB) on the three tasks at "

@@ -1,7 +1,8 @@
 """PPO with a curiosity bonus (ICM) and the paper's tolerance curriculum, for the construction tasks.
 
-In the shape of ManiSkill's PPO baseline (CleanRL style: one file, read top to bottom, one `Args`
-dataclass). Additions: `--curiosity icm` (Pathak et al. 2017), `--curriculum cp1 cp2 cp3 cp4`
+In the shape of ManiSkill's PPO baseline (CleanRL style: read top to bottom, one `Args` dataclass);
+the networks are in networks.py, ICM in curiosity.py, checkpoints and the CSV log in checkpoints.py,
+the evaluation in evaluation.py. Additions: `--curiosity icm` (Pathak et al. 2017), `--curriculum cp1 cp2 cp3 cp4`
 (Table I of the paper, each stage inheriting every parameter of the previous one), sparse reward by
 default (the paper's Algorithm 1), atomic checkpoints and exact `--resume`, a CSV log per run.
 Observations are normalized (running mean and variance, in the checkpoint) and their quaternions
@@ -22,7 +23,6 @@ SIGTERM ends a run after the iteration in progress, with a checkpoint (a second 
 
 from __future__ import annotations
 
-import csv
 import dataclasses
 import math
 import os
@@ -31,7 +31,7 @@ import signal
 import sys
 import time
 from collections import defaultdict
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Literal, Optional, Union, get_args, get_origin, get_type_hints
 
@@ -41,16 +41,17 @@ import torch
 import torch.nn as nn
 import torch.optim as optim
 import tyro
-from torch.distributions.normal import Normal
 from torch.utils.tensorboard import SummaryWriter
 from tqdm import tqdm
 
 from mani_skill.vector.wrappers.gymnasium import ManiSkillVectorEnv
 
+from baselines.ppo.checkpoints import CSVLog, Progress, check_fit, load_checkpoint, save_checkpoint
+from baselines.ppo.curiosity import ICM
+from baselines.ppo.evaluation import evaluate_envs, finished_episodes, reset
+from baselines.ppo.networks import Agent, make_agent
 from ms_construction.curriculum import STAGE_NAMES
 from ms_construction.envs import ENV_IDS
-from ms_construction.envs.construction_env import STATE_QUATERNION_STARTS
-from ms_construction.rotations import qmat
 from ms_construction.vector_env import CPUVectorEnv
 
 ControlMode = Literal["pd_joint_delta_pos", "pd_joint_pos", "pd_joint_target_delta_pos", "pd_ee_delta_pos",
@@ -138,14 +139,15 @@ class Args:
     """scale of the extrinsic reward."""
     eval_freq: int = 10
     """evaluate every this many iterations (and at stage ends)."""
-    finite_horizon_gae: bool = True
+    bootstrap_at_truncation: bool = True
     """bootstrap episodes cut by the time limit with the value of their last observation (they did
-    not end there); off treats truncation like termination."""
+    not end there); off treats truncation like termination. (Saved as `finite_horizon_gae` in
+    earlier checkpoints, a name that means a GAE variant in ManiSkill's baseline.)"""
     hidden_size: int = 256
     """width of the policy, value and ICM networks."""
     norm_obs: bool = True
-    """normalize observations by their running mean and variance (kept in the checkpoint), as
-    ManiSkill's and CleanRL's continuous-control PPO do."""
+    """normalize observations by their running mean and variance (kept in the checkpoint), as CleanRL's
+    continuous-control PPO does (with gymnasium's NormalizeObservation)."""
     rotation_features: bool = True
     """feed the networks each quaternion of the state (plate, goal, element) as the first two columns
     of its rotation matrix: a quaternion's sign can flip mid-episode, the matrix cannot."""
@@ -207,12 +209,6 @@ def make_envs(args: Args, num_envs: int, device: torch.device, eval_mode: bool =
     return ManiSkillVectorEnv(env, num_envs, ignore_terminations=not partial, record_metrics=True)
 
 
-def reset(envs: Envs, seed: int) -> torch.Tensor:
-    """Reset every env, env i with seed `seed + i`; the first observations."""
-    obs, _ = envs.reset(seed=[seed + i for i in range(envs.num_envs)])
-    return obs
-
-
 def set_curriculum_stage(envs: Envs, stage: str) -> None:
     """Every env of `envs` to the tolerances of `stage` (Table I)."""
     if isinstance(envs, CPUVectorEnv):
@@ -221,228 +217,9 @@ def set_curriculum_stage(envs: Envs, stage: str) -> None:
         envs.unwrapped.set_curriculum_stage(stage)
 
 
-def finished_episodes(infos: dict) -> dict:
-    """The episodes that ended in a step (its info has "final_info"): per env, whether its episode
-    ended (`ended`), and the ended episodes' place success, pick success, return and length."""
-    fin = infos["final_info"]
-    return dict(ended=infos["_final_info"], success=fin["episode"]["success_once"], picked=fin["picked"],
-                ep_return=fin["episode"]["return"], ep_length=fin["episode"]["episode_len"])
-
-
 # ------------------------------------------------------------------------------------------------- #
-# Networks
+# Curriculum and arguments
 # ------------------------------------------------------------------------------------------------- #
-def layer_init(layer, std=np.sqrt(2), bias_const=0.0):
-    torch.nn.init.orthogonal_(layer.weight, std)
-    torch.nn.init.constant_(layer.bias, bias_const)
-    return layer
-
-
-def mlp(n_in: int, n_out: int, hidden: int, out_std: float = np.sqrt(2), act=nn.Tanh) -> nn.Sequential:
-    return nn.Sequential(
-        layer_init(nn.Linear(n_in, hidden)), act(),
-        layer_init(nn.Linear(hidden, hidden)), act(),
-        layer_init(nn.Linear(hidden, hidden)), act(),
-        layer_init(nn.Linear(hidden, n_out), std=out_std),
-    )
-
-
-class RunningMeanStd(nn.Module):
-    """Running mean and variance (parallel algorithm) of samples of `shape` (a scalar by default),
-    kept as buffers so checkpoints hold them."""
-
-    def __init__(self, shape: tuple[int, ...] = ()):
-        super().__init__()
-        self.register_buffer("mean", torch.zeros(shape))
-        self.register_buffer("var", torch.ones(shape))
-        self.register_buffer("count", torch.tensor(1e-4))
-
-    def update(self, x: torch.Tensor) -> None:
-        x = x.reshape(-1, *self.mean.shape)
-        batch_mean, batch_var, n = x.mean(0), x.var(0, unbiased=False), x.shape[0]
-        delta, total = batch_mean - self.mean, self.count + n
-        self.mean += delta * n / total
-        self.var = (self.var * self.count + batch_var * n + delta**2 * self.count * n / total) / total
-        self.count = total
-
-
-def rotation_features(x: torch.Tensor, quat_starts: tuple[int, ...]) -> torch.Tensor:
-    """`x` [..., obs_dim] with each quaternion [w, x, y, z] starting at one of `quat_starts` replaced
-    by the first two columns of its rotation matrix: 6 numbers that change continuously with the
-    rotation, where a quaternion jumps between q and -q (the plate's flips about w = 0 when it
-    faces down; Zhou et al. 2019, on the continuity of rotation representations)."""
-    parts, last = [], 0
-    for s in quat_starts:
-        parts += [x[..., last:s], qmat(x[..., s:s + 4])[..., :, :2].flatten(-2)]
-        last = s + 4
-    return torch.cat(parts + [x[..., last:]], -1)
-
-
-class Agent(nn.Module):
-    """Gaussian policy and value on observation features (`rotation_features` for the quaternions
-    at `quat_starts`) normalized by `obs_rms` (running mean and variance, clipped to +-10 as
-    gymnasium's NormalizeObservation does; raw until it has seen data)."""
-
-    def __init__(self, obs_dim: int, act_dim: int, hidden: int, quat_starts: tuple[int, ...] = ()):
-        super().__init__()
-        self.quat_starts = tuple(quat_starts)
-        feature_dim = obs_dim + 2 * len(self.quat_starts)
-        self.obs_rms = RunningMeanStd((feature_dim,))
-        self.critic = mlp(feature_dim, 1, hidden, out_std=1.0)
-        self.actor_mean = mlp(feature_dim, act_dim, hidden, out_std=0.01 * np.sqrt(2))
-        self.actor_logstd = nn.Parameter(torch.ones(1, act_dim) * -0.5)
-
-    def features(self, x):
-        return rotation_features(x, self.quat_starts) if self.quat_starts else x
-
-    def normalize(self, x):
-        x = self.features(x)
-        if float(self.obs_rms.count) < 1:
-            return x
-        return ((x - self.obs_rms.mean) / torch.sqrt(self.obs_rms.var + 1e-8)).clamp(-10, 10)
-
-    def get_value(self, x):
-        return self.critic(self.normalize(x))
-
-    def get_action(self, x, deterministic=False):
-        mean = self.actor_mean(self.normalize(x))
-        if deterministic:
-            return mean
-        return Normal(mean, torch.exp(self.actor_logstd.expand_as(mean))).sample()
-
-    def get_action_and_value(self, x, action=None):
-        x = self.normalize(x)
-        mean = self.actor_mean(x)
-        probs = Normal(mean, torch.exp(self.actor_logstd.expand_as(mean)))
-        if action is None:
-            action = probs.sample()
-        return action, probs.log_prob(action).sum(1), probs.entropy().sum(1), self.critic(x)
-
-
-def make_agent(args: "Args | dict", obs_dim: int, act_dim: int) -> Agent:
-    """The Agent that `args` (an Args or a checkpoint's saved dict of them) describes."""
-    get = args.get if isinstance(args, dict) else lambda k, d=None: getattr(args, k, d)
-    starts = STATE_QUATERNION_STARTS if get("rotation_features", False) else ()
-    return Agent(obs_dim, act_dim, get("hidden_size"), starts)
-
-
-class ICM(nn.Module):
-    """Intrinsic Curiosity Module: encoder phi, inverse model (a from phi(s), phi(s')), forward
-    model (phi(s') from phi(s), a). The encoder learns from the inverse loss only, so phi keeps what
-    the agent's actions change; the forward model's error on it is the curiosity."""
-
-    def __init__(self, obs_dim: int, act_dim: int, feature_dim: int, hidden: int):
-        super().__init__()
-        self.encoder = mlp(obs_dim, feature_dim, hidden, out_std=1.0, act=nn.ELU)
-        self.inverse = mlp(2 * feature_dim, act_dim, hidden, out_std=1.0, act=nn.ELU)
-        self.forward_model = mlp(feature_dim + act_dim, feature_dim, hidden, out_std=1.0, act=nn.ELU)
-        self.error_stats = RunningMeanStd()
-
-    def forward_error(self, obs, next_obs, action) -> torch.Tensor:
-        """Per-transition forward-model error in feature space (features held fixed)."""
-        phi, phi_next = self.encoder(obs).detach(), self.encoder(next_obs).detach()
-        pred = self.forward_model(torch.cat([phi, action], -1))
-        return 0.5 * ((pred - phi_next) ** 2).sum(-1)
-
-    def losses(self, obs, next_obs, action) -> tuple[torch.Tensor, torch.Tensor]:
-        phi, phi_next = self.encoder(obs), self.encoder(next_obs)
-        inverse_loss = ((self.inverse(torch.cat([phi, phi_next], -1)) - action) ** 2).sum(-1).mean()
-        return self.forward_error(obs, next_obs, action).mean(), inverse_loss
-
-    @torch.no_grad()
-    def intrinsic_reward(self, obs, next_obs, action, strength: float) -> torch.Tensor:
-        err = self.forward_error(obs, next_obs, action)
-        self.error_stats.update(err)
-        return strength * err / torch.sqrt(self.error_stats.var + 1e-8)
-
-
-# ------------------------------------------------------------------------------------------------- #
-# Checkpoints, logs, curriculum
-# ------------------------------------------------------------------------------------------------- #
-@dataclass
-class Progress:
-    """Where a run is; saved in checkpoints."""
-
-    global_step: int = 0
-    iteration: int = 0
-    stage_index: int = 0
-    stage_start_step: int = 0
-    smoothed_success: Optional[float] = None
-    stage_changes: list = field(default_factory=list)
-    """(global_step, stage) at every stage start."""
-
-
-CSV_FIELDS = [
-    "global_step", "iteration", "stage", "episodes", "pick_success", "place_success", "extrinsic_return",
-    "intrinsic_return", "episode_length", "eval_pick_success", "eval_place_success", "eval_extrinsic_return",
-    "smoothed_eval_success", "sps", "learning_rate", "value_loss", "policy_loss", "entropy", "approx_kl",
-    "icm_forward_loss", "icm_inverse_loss", "bc_loss",
-]
-
-
-def save_checkpoint(path: Path, args: Args, progress: Progress, agent, optimizer, icm, icm_optimizer,
-                    obs_dim: int, act_dim: int) -> None:
-    """Write atomically: a temporary file in the same folder, then an atomic rename."""
-    state = dict(
-        args=dataclasses.asdict(args), progress=dataclasses.asdict(progress), obs_dim=obs_dim, act_dim=act_dim,
-        agent=agent.state_dict(), optimizer=optimizer.state_dict(),
-        icm=None if icm is None else icm.state_dict(),
-        icm_optimizer=None if icm_optimizer is None else icm_optimizer.state_dict(),
-        rng=dict(python=random.getstate(), numpy=np.random.get_state(), torch=torch.get_rng_state(),
-                 cuda=torch.cuda.get_rng_state_all() if torch.cuda.is_available() else None),
-    )
-    path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = path.with_name(path.name + ".tmp")
-    torch.save(state, tmp)
-    os.replace(tmp, path)
-
-
-def read_checkpoint(path: str, option: str) -> dict:
-    """The checkpoint at `path` (given as `option`), or a clear error if there is none."""
-    if not Path(path).is_file():
-        raise SystemExit(f"{option}: checkpoint not found: {path}")
-    return torch.load(path, map_location="cpu", weights_only=False)
-
-
-def check_shapes(ckpt: dict, path: str, obs_dim: int, act_dim: int, env_id: str) -> dict:
-    """`ckpt`, unless it was made for other observation or action shapes than `env_id`'s here."""
-    if (ckpt["obs_dim"], ckpt["act_dim"]) != (obs_dim, act_dim):
-        raise SystemExit(
-            f"checkpoint {path} was trained with observations of size {ckpt['obs_dim']} and actions of size "
-            f"{ckpt['act_dim']} (env {ckpt['args']['env_id']}, control mode {ckpt['args']['control_mode']}); "
-            f"{env_id} here has {obs_dim} and {act_dim}. Use the same control mode and observation mode."
-        )
-    return ckpt
-
-
-def load_checkpoint(path: str, obs_dim: int, act_dim: int, env_id: str) -> dict:
-    """Load a checkpoint and refuse one made for other observation or action shapes."""
-    return check_shapes(read_checkpoint(path, "--checkpoint"), path, obs_dim, act_dim, env_id)
-
-
-class CSVLog:
-    """Appends one row per iteration; on resume, drops rows past the checkpoint's step."""
-
-    def __init__(self, path: Path, resume_step: Optional[int]):
-        self.path = path
-        if resume_step is not None and path.exists():
-            with open(path) as f:
-                rows = [r for r in csv.DictReader(f) if int(r["global_step"]) <= resume_step]
-            self._write(rows, "w")
-        else:
-            self._write([], "w")
-
-    def _write(self, rows, mode):
-        with open(self.path, mode, newline="") as f:
-            w = csv.DictWriter(f, fieldnames=CSV_FIELDS)
-            if mode == "w":
-                w.writeheader()
-            w.writerows(rows)
-
-    def append(self, row: dict) -> None:
-        self._write([{k: row.get(k, "") for k in CSV_FIELDS}], "a")
-
-
 def should_promote(args: Args, progress: Progress) -> Optional[str]:
     """Why the current stage ends now ('steps' or 'success'), or None."""
     if progress.stage_index >= len(args.curriculum) - 1:
@@ -493,32 +270,70 @@ def resolve_defaults(args: Args) -> None:
 
 
 # ------------------------------------------------------------------------------------------------- #
-# Evaluation
+# PPO update
 # ------------------------------------------------------------------------------------------------- #
-@torch.no_grad()
-def evaluate(agent: Agent, envs: Envs, args: Args, seed: int) -> dict:
-    """Deterministic policy, the first episode of every eval env: pick and place success, return."""
-    obs = reset(envs, seed)
-    finished = torch.zeros(envs.num_envs, dtype=torch.bool, device=obs.device)
-    stats = defaultdict(lambda: torch.zeros(envs.num_envs, device=obs.device))
-    for _ in range(args.num_eval_steps):
-        obs, _, _, _, infos = envs.step(agent.get_action(obs, deterministic=True).clamp(-1, 1))
-        if "final_info" not in infos:
-            continue
-        ep = finished_episodes(infos)
-        new = ep["ended"] & ~finished
-        for key in ("success", "picked", "ep_return"):
-            stats[key] = torch.where(new, ep[key].float(), stats[key])
-        finished |= ep["ended"]
-        if finished.all():
+def ppo_update(agent: Agent, optimizer: optim.Optimizer, batch: dict, args: Args, icm: Optional[ICM] = None,
+               icm_optimizer: Optional[optim.Optimizer] = None, demos: Optional[tuple] = None,
+               value_only: bool = False) -> dict[str, float]:
+    """PPO's clipped update on one rollout: `batch` holds obs, next_obs, actions, logprobs, advantages,
+    returns and values, flat over steps and envs. `args.update_epochs` epochs of `args.num_minibatches`
+    shuffled minibatches (numpy's RNG), stopping after an epoch whose last minibatch's approximate KL
+    exceeds `args.target_kl`; ICM learns on the same minibatches. `demos` (obs, actions) add a
+    behaviour-cloning term; `value_only` trains the critic alone (the warm-up). The mean of each loss."""
+    batch_size = len(batch["obs"])
+    minibatch_size = batch_size // args.num_minibatches
+    b_inds = np.arange(batch_size)
+    losses = defaultdict(list)  # tensors, read once at the end: a .item() per loss per minibatch costs more
+    for _epoch in range(args.update_epochs):
+        np.random.shuffle(b_inds)
+        for start in range(0, batch_size, minibatch_size):
+            mb = torch.from_numpy(b_inds[start:start + minibatch_size]).to(batch["obs"].device)
+            obs, actions = batch["obs"][mb], batch["actions"][mb]
+            _, newlogprob, entropy, newvalue = agent.get_action_and_value(obs, actions)
+            logratio = newlogprob - batch["logprobs"][mb]
+            ratio = logratio.exp()
+            with torch.no_grad():
+                approx_kl = ((ratio - 1) - logratio).mean()
+            mb_adv = batch["advantages"][mb]
+            if args.norm_adv:
+                mb_adv = (mb_adv - mb_adv.mean()) / (mb_adv.std() + 1e-8)
+            pg_loss = torch.max(-mb_adv * ratio, -mb_adv * torch.clamp(ratio, 1 - args.clip_coef, 1 + args.clip_coef)).mean()
+            newvalue, mb_ret = newvalue.view(-1), batch["returns"][mb]
+            if args.clip_vloss:
+                mb_val = batch["values"][mb]
+                v_clipped = mb_val + torch.clamp(newvalue - mb_val, -args.clip_coef, args.clip_coef)
+                v_loss = 0.5 * torch.max((newvalue - mb_ret) ** 2, (v_clipped - mb_ret) ** 2).mean()
+            else:
+                v_loss = 0.5 * ((newvalue - mb_ret) ** 2).mean()
+            entropy_loss = entropy.mean()
+            loss = pg_loss - args.ent_coef * entropy_loss + v_loss * args.vf_coef
+            if demos is not None and args.bc_coef > 0:
+                d = torch.randint(len(demos[0]), (len(mb),), device=mb.device)
+                bc_loss = ((agent.actor_mean(agent.normalize(demos[0][d])) - demos[1][d]) ** 2).mean()
+                loss = loss + args.bc_coef * bc_loss
+                losses["bc_loss"].append(bc_loss.detach())
+            if value_only:
+                loss = v_loss * args.vf_coef
+            optimizer.zero_grad()
+            loss.backward()
+            nn.utils.clip_grad_norm_(agent.parameters(), args.max_grad_norm)
+            optimizer.step()
+            if icm is not None:
+                fwd, inv = icm.losses(obs, batch["next_obs"][mb], actions)
+                icm_loss = (1 - args.icm_forward_weight) * inv + args.icm_forward_weight * fwd
+                icm_optimizer.zero_grad()
+                icm_loss.backward()
+                nn.utils.clip_grad_norm_(icm.parameters(), args.max_grad_norm)
+                icm_optimizer.step()
+                losses["icm_forward_loss"].append(fwd.detach())
+                losses["icm_inverse_loss"].append(inv.detach())
+            losses["value_loss"].append(v_loss.detach())
+            losses["policy_loss"].append(pg_loss.detach())
+            losses["entropy"].append(entropy_loss.detach())
+            losses["approx_kl"].append(approx_kl)
+        if args.target_kl is not None and approx_kl > args.target_kl:
             break
-    mean = lambda x: float(x[finished].mean()) if finished.any() else float("nan")  # noqa: E731
-    return dict(
-        eval_pick_success=mean(stats["picked"]),
-        eval_place_success=mean(stats["success"]),
-        eval_extrinsic_return=mean(stats["ep_return"]),
-        eval_episodes=int(finished.sum()),
-    )
+    return {k: torch.stack(v).double().mean().item() for k, v in losses.items()}
 
 
 # ------------------------------------------------------------------------------------------------- #
@@ -558,7 +373,8 @@ class Run:
 
 def setup(args: Args) -> Run:
     """Build (or, with --resume, restore) a run: args, seeds, evaluation envs, networks, optimizers, progress."""
-    resume = read_checkpoint(args.resume, "--resume") if args.resume else None
+    resume = load_checkpoint(args.resume, "--resume") if args.resume else None
+    init = load_checkpoint(args.checkpoint) if args.checkpoint and resume is None else None
     if resume is not None:
         saved = resume["args"]
         args = Args(**{**saved, "resume": args.resume, "curriculum": tuple(saved["curriculum"])})
@@ -587,8 +403,10 @@ def setup(args: Args) -> Run:
         icm_optimizer = optim.Adam(icm.parameters(), lr=args.icm_learning_rate)
 
     progress = Progress()
+    for ckpt, path in ((resume, args.resume), (init, args.checkpoint)):
+        if ckpt is not None:
+            check_fit(ckpt, path, args.env_id, obs_dim, act_dim, args.control_mode)
     if resume is not None:
-        check_shapes(resume, args.resume, obs_dim, act_dim, args.env_id)
         agent.load_state_dict(resume["agent"])
         optimizer.load_state_dict(resume["optimizer"])
         if icm is not None:
@@ -601,8 +419,7 @@ def setup(args: Args) -> Run:
         torch.set_rng_state(rng["torch"])
         if rng["cuda"] is not None and torch.cuda.is_available():
             torch.cuda.set_rng_state_all(rng["cuda"])
-    elif args.checkpoint:
-        init = load_checkpoint(args.checkpoint, obs_dim, act_dim, args.env_id)
+    elif init is not None:
         agent.load_state_dict(init["agent"])
         if icm is not None and init["icm"] is not None:
             icm.load_state_dict(init["icm"])
@@ -616,7 +433,7 @@ def main(args: Args) -> Progress:
     if run.args.evaluate:
         stage = run.args.curriculum[min(run.progress.stage_index, len(run.args.curriculum) - 1)]
         set_curriculum_stage(run.eval_envs, stage)
-        print({"stage": stage, **evaluate(run.agent, run.eval_envs, run.args, seed=run.args.seed)})
+        print({"stage": stage, **evaluate_envs(run.agent, run.eval_envs, run.args.num_eval_steps, seed=run.args.seed)})
         run.eval_envs.close()
         return run.progress
     return train(run)
@@ -634,7 +451,6 @@ def train(run: Run) -> Progress:
     run_dir = checkpoint_path(args).parent
     envs = make_envs(args, args.num_envs, device)
     batch_size = args.num_envs * args.num_steps
-    minibatch_size = batch_size // args.num_minibatches
     num_iterations = math.ceil(args.total_timesteps / batch_size)
     stage = args.curriculum[progress.stage_index]
     if not progress.stage_changes:
@@ -648,11 +464,11 @@ def train(run: Run) -> Progress:
         writer.add_text("hyperparameters", "|param|value|\n|-|-|\n" + "\n".join(f"|{k}|{v}|" for k, v in vars(args).items()))
     log = CSVLog(run_dir / "progress.csv", progress.global_step if args.resume else None)
 
-    demo_obs = demo_actions = None
+    demos = None
     if args.demos:
         files = [np.load(path) for path in args.demos]
-        demo_obs = torch.as_tensor(np.concatenate([f["obs"] for f in files]), dtype=torch.float32, device=device)
-        demo_actions = torch.as_tensor(np.concatenate([f["actions"] for f in files]), dtype=torch.float32, device=device)
+        demos = tuple(torch.as_tensor(np.concatenate([f[k] for f in files]), dtype=torch.float32, device=device)
+                      for k in ("obs", "actions"))
 
     obs_buf = torch.zeros((args.num_steps, args.num_envs, run.obs_dim), device=device)
     next_obs_buf = torch.zeros_like(obs_buf)  # s_{t+1}: the final observation where an episode ended
@@ -687,8 +503,7 @@ def train(run: Run) -> Progress:
             for step in range(args.num_steps):
                 progress.global_step += args.num_envs
                 obs_buf[step] = next_obs
-                with torch.no_grad():
-                    action, logprob, _, value = agent.get_action_and_value(next_obs)
+                action, logprob, value = agent.act(next_obs)
                 values[step] = value.flatten()
                 actions[step], logprobs[step] = action, logprob
                 next_obs, reward, terminations, truncations, infos = envs.step(action.clamp(-1, 1))
@@ -720,7 +535,7 @@ def train(run: Run) -> Progress:
                 # value of s_{t+1} for every step: V(final obs) where an episode was cut by the time
                 # limit (finite-horizon bootstrap), 0 where it terminated
                 v_next = agent.get_value(flat(next_obs_buf)).view_as(rewards)
-                cut = (dones - terminated) if args.finite_horizon_gae else torch.zeros_like(dones)
+                cut = (dones - terminated) if args.bootstrap_at_truncation else torch.zeros_like(dones)
                 v_next = v_next * cut
                 advantages = torch.zeros_like(rewards)
                 lastgaelam = torch.zeros(args.num_envs, device=device)
@@ -733,73 +548,26 @@ def train(run: Run) -> Progress:
                 returns = advantages + values
 
             # ---- update ----
-            b_obs, b_next_obs, b_actions = flat(obs_buf), flat(next_obs_buf), flat(actions)
-            b_logprobs, b_adv, b_ret, b_val = logprobs.reshape(-1), advantages.reshape(-1), returns.reshape(-1), values.reshape(-1)
-            b_inds = np.arange(batch_size)
-            losses = defaultdict(list)
-            for _epoch in range(args.update_epochs):
-                np.random.shuffle(b_inds)
-                for start in range(0, batch_size, minibatch_size):
-                    mb = b_inds[start:start + minibatch_size]
-                    _, newlogprob, entropy, newvalue = agent.get_action_and_value(b_obs[mb], b_actions[mb])
-                    logratio = newlogprob - b_logprobs[mb]
-                    ratio = logratio.exp()
-                    with torch.no_grad():
-                        approx_kl = ((ratio - 1) - logratio).mean()
-                    mb_adv = b_adv[mb]
-                    if args.norm_adv:
-                        mb_adv = (mb_adv - mb_adv.mean()) / (mb_adv.std() + 1e-8)
-                    pg_loss = torch.max(-mb_adv * ratio, -mb_adv * torch.clamp(ratio, 1 - args.clip_coef, 1 + args.clip_coef)).mean()
-                    newvalue = newvalue.view(-1)
-                    if args.clip_vloss:
-                        v_clipped = b_val[mb] + torch.clamp(newvalue - b_val[mb], -args.clip_coef, args.clip_coef)
-                        v_loss = 0.5 * torch.max((newvalue - b_ret[mb]) ** 2, (v_clipped - b_ret[mb]) ** 2).mean()
-                    else:
-                        v_loss = 0.5 * ((newvalue - b_ret[mb]) ** 2).mean()
-                    entropy_loss = entropy.mean()
-                    loss = pg_loss - args.ent_coef * entropy_loss + v_loss * args.vf_coef
-                    if demo_obs is not None and args.bc_coef > 0:
-                        d = torch.randint(len(demo_obs), (len(mb),), device=device)
-                        bc_loss = ((agent.actor_mean(agent.normalize(demo_obs[d])) - demo_actions[d]) ** 2).mean()
-                        loss = loss + args.bc_coef * bc_loss
-                        losses["bc_loss"].append(bc_loss.item())
-                    if progress.iteration <= args.critic_warmup_iterations:
-                        loss = v_loss * args.vf_coef
-                    run.optimizer.zero_grad()
-                    loss.backward()
-                    nn.utils.clip_grad_norm_(agent.parameters(), args.max_grad_norm)
-                    run.optimizer.step()
-                    if icm is not None:
-                        fwd, inv = icm.losses(b_obs[mb], b_next_obs[mb], b_actions[mb])
-                        icm_loss = (1 - args.icm_forward_weight) * inv + args.icm_forward_weight * fwd
-                        run.icm_optimizer.zero_grad()
-                        icm_loss.backward()
-                        nn.utils.clip_grad_norm_(icm.parameters(), args.max_grad_norm)
-                        run.icm_optimizer.step()
-                        losses["icm_forward_loss"].append(fwd.item())
-                        losses["icm_inverse_loss"].append(inv.item())
-                    losses["value_loss"].append(v_loss.item())
-                    losses["policy_loss"].append(pg_loss.item())
-                    losses["entropy"].append(entropy_loss.item())
-                    losses["approx_kl"].append(approx_kl.item())
-                if args.target_kl is not None and approx_kl > args.target_kl:
-                    break
+            batch = dict(obs=flat(obs_buf), next_obs=flat(next_obs_buf), actions=flat(actions), logprobs=logprobs.reshape(-1),
+                         advantages=advantages.reshape(-1), returns=returns.reshape(-1), values=values.reshape(-1))
+            losses = ppo_update(agent, run.optimizer, batch, args, run.icm, run.icm_optimizer, demos,
+                                value_only=progress.iteration <= args.critic_warmup_iterations)
             # statistics change after the update, so that each update sees its rollout's normalization
             if args.norm_obs and not args.freeze_obs_norm:
-                agent.obs_rms.update(agent.features(b_obs))
+                agent.obs_rms.update(agent.features(batch["obs"]))
 
             # ---- logs, evaluation, curriculum ----
             sps = batch_size / (time.time() - t0)
             row = dict(global_step=progress.global_step, iteration=progress.iteration, stage=stage, sps=round(sps, 1),
                        learning_rate=run.optimizer.param_groups[0]["lr"], episodes=len(episodes["success"]))
-            row.update({k: float(np.mean(v)) for k, v in losses.items()})
+            row.update(losses)
             if episodes["success"]:
                 row.update(pick_success=float(np.mean(episodes["picked"])), place_success=float(np.mean(episodes["success"])),
                            extrinsic_return=float(np.mean(episodes["ep_return"])), episode_length=float(np.mean(episodes["ep_length"])))
                 if episodes["intrinsic_return"]:
                     row["intrinsic_return"] = float(np.mean(episodes["intrinsic_return"]))
             if progress.iteration % args.eval_freq == 0 or progress.iteration == num_iterations:
-                result = evaluate(agent, run.eval_envs, args, seed=args.seed + 10_000 + progress.iteration)
+                result = evaluate_envs(agent, run.eval_envs, args.num_eval_steps, seed=args.seed + 10_000 + progress.iteration)
                 s, a = result["eval_place_success"], args.success_smoothing
                 if not math.isnan(s):
                     progress.smoothed_success = s if progress.smoothed_success is None else a * s + (1 - a) * progress.smoothed_success

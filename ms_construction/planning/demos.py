@@ -236,10 +236,10 @@ def record_demos(out: Path, episodes: int, env_id: str = "ConstructionPickPlace-
     written to `out` every `save_every` episodes and at the end; `resume` continues `out`.
     With a `policy` checkpoint: the expert's takeovers where that policy fails (`DemoCollector.takeovers`);
     `load_policy(path, env_id) -> (policy, control_mode)` loads it in each worker process (a
-    module-level function, such as `baselines.ppo.evaluation.load_policy`: the package does not
+    module-level function, such as `baselines.ppo.checkpoints.load_policy`: the package does not
     know the learner's network)."""
     if policy is not None and load_policy is None:
-        raise ValueError("record_demos(policy=...) needs load_policy, e.g. baselines.ppo.evaluation.load_policy")
+        raise ValueError("record_demos(policy=...) needs load_policy, e.g. baselines.ppo.checkpoints.load_policy")
     demos, tried, wall_s = load_demos(out) if resume and out.exists() else ([], 0, 0.0)
     steps_of_policy = policy_steps(out) if resume and out.exists() else 0
     start = time.time() - wall_s

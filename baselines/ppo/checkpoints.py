@@ -1,0 +1,147 @@
+"""A run's record: its progress, its checkpoints (one API to save and load them) and its CSV log.
+
+A checkpoint is the dict that `save_checkpoint` writes with torch.save: the run's args, progress,
+observation and action sizes, the Agent's weights (with its observation normalization), the
+optimizers, ICM and the RNG states (for an exact --resume). baselines/ppo/ppo.py and bc.py write
+them; `load_checkpoint` reads one for training or resuming, `load_policy` for evaluation.
+"""
+
+from __future__ import annotations
+
+import csv
+import dataclasses
+import os
+import pickle
+import random
+import zipfile
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Optional
+
+import numpy as np
+import torch
+
+from baselines.ppo.networks import Agent, make_agent
+
+WHAT_A_CHECKPOINT_IS = ("a checkpoint is the .pt file that baselines/ppo/ppo.py or baselines/ppo/bc.py writes "
+                        "(torch.save of a dict with args, obs_dim, act_dim and the agent's weights)")
+RENAMED_ARGS = {"finite_horizon_gae": "bootstrap_at_truncation"}
+"""ppo.py arguments saved under an earlier name: checkpoints written before the rename still load."""
+
+
+@dataclass
+class Progress:
+    """Where a run is; saved in checkpoints."""
+
+    global_step: int = 0
+    iteration: int = 0
+    stage_index: int = 0
+    stage_start_step: int = 0
+    smoothed_success: Optional[float] = None
+    stage_changes: list = field(default_factory=list)
+    """(global_step, stage) at every stage start."""
+
+
+def save_checkpoint(path: Path, args, progress: Progress, agent: Agent, optimizer, icm, icm_optimizer,
+                    obs_dim: int, act_dim: int, **extra) -> None:
+    """Write atomically (a temporary file in the same folder, then a rename); `extra` entries (e.g.
+    bc.py's record of its demonstrations) are stored beside the run's state."""
+    state = dict(
+        args=dataclasses.asdict(args), progress=dataclasses.asdict(progress), obs_dim=obs_dim, act_dim=act_dim,
+        agent=agent.state_dict(), optimizer=None if optimizer is None else optimizer.state_dict(),
+        icm=None if icm is None else icm.state_dict(),
+        icm_optimizer=None if icm_optimizer is None else icm_optimizer.state_dict(),
+        rng=dict(python=random.getstate(), numpy=np.random.get_state(), torch=torch.get_rng_state(),
+                 cuda=torch.cuda.get_rng_state_all() if torch.cuda.is_available() else None),
+        **extra,
+    )
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    tmp = path.with_name(path.name + ".tmp")
+    torch.save(state, tmp)
+    os.replace(tmp, path)
+
+
+def load_checkpoint(path, option: str = "--checkpoint", env_id: Optional[str] = None, obs_dim: Optional[int] = None,
+                    act_dim: Optional[int] = None, control_mode: Optional[str] = None) -> dict:
+    """The checkpoint at `path` (given as `option`), its args under their current names. With
+    `env_id` and its observation and action sizes (and control mode), a checkpoint that does not fit
+    them is refused. Every refusal is one line (SystemExit) that names the file."""
+    if not Path(path).is_file():
+        raise SystemExit(f"{option}: checkpoint not found: {path}")
+    try:
+        ckpt = torch.load(path, map_location="cpu", weights_only=False)
+    except (pickle.UnpicklingError, zipfile.BadZipFile, EOFError, RuntimeError, ValueError, OSError) as e:
+        raise SystemExit(f"{option}: {path} is not a checkpoint, or a truncated one ({type(e).__name__}); "
+                         f"{WHAT_A_CHECKPOINT_IS}") from None
+    missing = [k for k in ("agent", "obs_dim", "act_dim", "args") if not isinstance(ckpt, dict) or k not in ckpt]
+    if missing:
+        raise SystemExit(f"{option}: {path} is not a checkpoint (missing {', '.join(missing)}); {WHAT_A_CHECKPOINT_IS}")
+    ckpt["args"] = {RENAMED_ARGS.get(k, k): v for k, v in ckpt["args"].items()}
+    if obs_dim is not None:
+        check_fit(ckpt, path, env_id, obs_dim, act_dim, control_mode)
+    return ckpt
+
+
+def check_fit(ckpt: dict, path, env_id: str, obs_dim: int, act_dim: int, control_mode: Optional[str] = None) -> None:
+    """Refuse `ckpt` if it was made for other observation or action sizes than `env_id`'s here, or
+    (given one) another control mode."""
+    if (ckpt["obs_dim"], ckpt["act_dim"]) != (obs_dim, act_dim):
+        raise SystemExit(
+            f"checkpoint {path} does not fit {env_id}: it was trained with observations of size {ckpt['obs_dim']} and "
+            f"actions of size {ckpt['act_dim']} (env {ckpt['args']['env_id']}, control mode "
+            f"{ckpt['args']['control_mode']}); {env_id} in {control_mode} with state observations has {obs_dim} and "
+            f"{act_dim}. Use the checkpoint's control mode and state observations.")
+    if control_mode is not None and ckpt["args"]["control_mode"] != control_mode:
+        raise SystemExit(f"checkpoint {path} was trained in control mode {ckpt['args']['control_mode']}, "
+                         f"not {control_mode}: use --control-mode {ckpt['args']['control_mode']}")
+
+
+def load_policy(path, env_id: str) -> tuple[Agent, str]:
+    """The checkpoint's Agent (in eval mode) and its control mode, after checking that it fits
+    `env_id`'s state observations in that control mode."""
+    import gymnasium as gym
+
+    ckpt = load_checkpoint(path)
+    control_mode = ckpt["args"]["control_mode"]
+    env = gym.make(env_id, obs_mode="state", control_mode=control_mode, num_envs=1, sim_backend="physx_cpu")
+    obs_dim, act_dim = env.observation_space.shape[-1], env.action_space.shape[-1]
+    env.close()
+    check_fit(ckpt, path, env_id, obs_dim, act_dim, control_mode)
+    agent = make_agent(ckpt["args"], ckpt["obs_dim"], ckpt["act_dim"])
+    try:
+        agent.load_state_dict(ckpt["agent"])
+    except RuntimeError as e:
+        raise SystemExit(f"checkpoint {path}: its weights do not fit the policy network ({e})") from None
+    return agent.eval(), control_mode
+
+
+CSV_FIELDS = [
+    "global_step", "iteration", "stage", "episodes", "pick_success", "place_success", "extrinsic_return",
+    "intrinsic_return", "episode_length", "eval_pick_success", "eval_place_success", "eval_extrinsic_return",
+    "smoothed_eval_success", "sps", "learning_rate", "value_loss", "policy_loss", "entropy", "approx_kl",
+    "icm_forward_loss", "icm_inverse_loss", "bc_loss",
+]
+
+
+class CSVLog:
+    """Appends one row per iteration; on resume, drops rows past the checkpoint's step."""
+
+    def __init__(self, path: Path, resume_step: Optional[int]):
+        self.path = path
+        if resume_step is not None and path.exists():
+            with open(path) as f:
+                rows = [r for r in csv.DictReader(f) if int(r["global_step"]) <= resume_step]
+            self._write(rows, "w")
+        else:
+            self._write([], "w")
+
+    def _write(self, rows, mode):
+        with open(self.path, mode, newline="") as f:
+            w = csv.DictWriter(f, fieldnames=CSV_FIELDS)
+            if mode == "w":
+                w.writeheader()
+            w.writerows(rows)
+
+    def append(self, row: dict) -> None:
+        self._write([{k: row.get(k, "") for k in CSV_FIELDS}], "a")

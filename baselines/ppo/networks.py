@@ -1,0 +1,138 @@
+"""The learner's networks: the Gaussian policy and value (`Agent`), its observation features and
+normalization, and the MLP they and ICM (baselines/ppo/curiosity.py) are built of."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import torch
+import torch.nn as nn
+from torch.distributions.normal import Normal
+
+from ms_construction.envs.construction_env import STATE_QUATERNION_STARTS
+from ms_construction.rotations import qmat
+
+LOG_SQRT_2PI = math.log(math.sqrt(2 * math.pi))
+
+
+def layer_init(layer, std=np.sqrt(2), bias_const=0.0):
+    torch.nn.init.orthogonal_(layer.weight, std)
+    torch.nn.init.constant_(layer.bias, bias_const)
+    return layer
+
+
+def mlp(n_in: int, n_out: int, hidden: int, out_std: float = np.sqrt(2), act=nn.Tanh) -> nn.Sequential:
+    return nn.Sequential(
+        layer_init(nn.Linear(n_in, hidden)), act(),
+        layer_init(nn.Linear(hidden, hidden)), act(),
+        layer_init(nn.Linear(hidden, hidden)), act(),
+        layer_init(nn.Linear(hidden, n_out), std=out_std),
+    )
+
+
+class RunningMeanStd(nn.Module):
+    """Running mean and variance (parallel algorithm) of samples of `shape` (a scalar by default),
+    kept as buffers so checkpoints hold them."""
+
+    def __init__(self, shape: tuple[int, ...] = ()):
+        super().__init__()
+        self.register_buffer("mean", torch.zeros(shape))
+        self.register_buffer("var", torch.ones(shape))
+        self.register_buffer("count", torch.tensor(1e-4))
+
+    def update(self, x: torch.Tensor) -> None:
+        x = x.reshape(-1, *self.mean.shape)
+        batch_mean, batch_var, n = x.mean(0), x.var(0, unbiased=False), x.shape[0]
+        delta, total = batch_mean - self.mean, self.count + n
+        self.mean += delta * n / total
+        self.var = (self.var * self.count + batch_var * n + delta**2 * self.count * n / total) / total
+        self.count = total
+
+
+def rotation_features(x: torch.Tensor, quat_starts: tuple[int, ...]) -> torch.Tensor:
+    """`x` [..., obs_dim] with each quaternion [w, x, y, z] starting at one of `quat_starts` replaced
+    by the first two columns of its rotation matrix: 6 numbers that change continuously with the
+    rotation, where a quaternion jumps between q and -q (the plate's flips about w = 0 when it
+    faces down; Zhou et al. 2019, on the continuity of rotation representations)."""
+    quat_idx, order = _feature_layout(tuple(quat_starts), x.shape[-1], x.device)
+    # one qmat call for all quaternions and one gather into place: inference runs this every env step
+    cols = qmat(x[..., quat_idx].unflatten(-1, (len(quat_starts), 4)))[..., :, :2].flatten(-3)
+    return torch.cat([x, cols], -1)[..., order]
+
+
+_layouts: dict = {}
+
+
+def _feature_layout(quat_starts: tuple[int, ...], obs_dim: int, device: torch.device):
+    """(indices of the quaternions' numbers in x, order of [x, rotation columns] in the features)."""
+    key = (quat_starts, obs_dim, device)
+    if key not in _layouts:
+        order, last = [], 0
+        for i, s in enumerate(quat_starts):
+            order += list(range(last, s)) + list(range(obs_dim + 6 * i, obs_dim + 6 * i + 6))
+            last = s + 4
+        order += list(range(last, obs_dim))
+        quat_idx = [s + j for s in quat_starts for j in range(4)]
+        _layouts[key] = (torch.tensor(quat_idx, device=device), torch.tensor(order, device=device))
+    return _layouts[key]
+
+
+class Agent(nn.Module):
+    """Gaussian policy and value on observation features (`rotation_features` for the quaternions
+    at `quat_starts`) normalized by `obs_rms` (running mean and variance, clipped to +-10 as
+    gymnasium's NormalizeObservation does; raw until it has seen data)."""
+
+    def __init__(self, obs_dim: int, act_dim: int, hidden: int, quat_starts: tuple[int, ...] = ()):
+        super().__init__()
+        self.quat_starts = tuple(quat_starts)
+        feature_dim = obs_dim + 2 * len(self.quat_starts)
+        self.obs_rms = RunningMeanStd((feature_dim,))
+        self.critic = mlp(feature_dim, 1, hidden, out_std=1.0)
+        self.actor_mean = mlp(feature_dim, act_dim, hidden, out_std=0.01 * np.sqrt(2))
+        self.actor_logstd = nn.Parameter(torch.ones(1, act_dim) * -0.5)
+
+    def features(self, x):
+        return rotation_features(x, self.quat_starts) if self.quat_starts else x
+
+    def normalize(self, x):
+        x = self.features(x)
+        if float(self.obs_rms.count) < 1:
+            return x
+        return ((x - self.obs_rms.mean) / torch.sqrt(self.obs_rms.var + 1e-8)).clamp(-10, 10)
+
+    def get_value(self, x):
+        return self.critic(self.normalize(x))
+
+    def get_action(self, x, deterministic=False):
+        mean = self.actor_mean(self.normalize(x))
+        if deterministic:
+            return mean
+        return Normal(mean, torch.exp(self.actor_logstd.expand_as(mean))).sample()
+
+    def get_action_and_value(self, x, action=None):
+        x = self.normalize(x)
+        mean = self.actor_mean(x)
+        probs = Normal(mean, torch.exp(self.actor_logstd.expand_as(mean)))
+        if action is None:
+            action = probs.sample()
+        return action, probs.log_prob(action).sum(1), probs.entropy().sum(1), self.critic(x)
+
+    @torch.no_grad()
+    def act(self, x):
+        """(action, log-probability, value) as `get_action_and_value(x)` gives them, the same draw
+        from the same RNG stream, without building a Normal: Normal's argument checks cost more
+        than the networks at a rollout step's batch of a few envs."""
+        x = self.normalize(x)
+        mean = self.actor_mean(x)
+        scale = torch.exp(self.actor_logstd.expand_as(mean))
+        action = torch.normal(mean, scale)
+        logprob = -((action - mean) ** 2) / (2 * scale**2) - scale.log() - LOG_SQRT_2PI
+        return action, logprob.sum(1), self.critic(x)
+
+
+def make_agent(args, obs_dim: int, act_dim: int) -> Agent:
+    """The Agent that `args` (ppo.py's Args or a checkpoint's saved dict of them) describes."""
+    get = args.get if isinstance(args, dict) else lambda k, d=None: getattr(args, k, d)
+    starts = STATE_QUATERNION_STARTS if get("rotation_features", False) else ()
+    return Agent(obs_dim, act_dim, get("hidden_size"), starts)
