@@ -37,6 +37,8 @@ import gymnasium as gym
 import numpy as np
 import torch
 
+from ms_construction.envs.construction_env import default_render_backend
+
 
 class SameStepReset(gym.Wrapper):
     """Worker side of `CPUVectorEnv`: resets the env in the step that ends its episode and reports the
@@ -64,6 +66,9 @@ def _make_worker_env(env_id: str, env_kwargs: dict, video_dir: Optional[str], in
         # stop and closes the workers; a worker stopped in the middle of a step would only print a traceback
         signal.signal(signal.SIGINT, signal.SIG_IGN)
         signal.signal(signal.SIGTERM, signal.SIG_IGN)
+        # one intra-op thread: the env's tensors are a few numbers, and torch's default (a thread per
+        # core in every worker) only adds threads that compete with the learner and the other workers
+        torch.set_num_threads(1)
     env = gym.make(env_id, num_envs=1, sim_backend="physx_cpu", **env_kwargs)
     for wrap in wrappers:
         env = wrap(env)
@@ -102,7 +107,8 @@ class CPUVectorEnv:
     def __init__(self, env_id: str, num_envs: int, env_kwargs: Optional[dict] = None,
                  device: Union[str, torch.device] = "cpu", video_dir: Optional[str] = None,
                  wrappers: Sequence[Callable[[gym.Env], gym.Env]] = ()):
-        env_kwargs = dict(env_kwargs or {})
+        # chosen here, once, so that no worker probes for (and warns about) a missing CUDA device
+        env_kwargs = dict(render_backend=default_render_backend(), **(env_kwargs or {}))
         self.num_envs, self.device = num_envs, torch.device(device)
         # forkserver: workers start from a clean process, not a copy of the learner (its torch threads,
         # its CUDA context)

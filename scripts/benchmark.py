@@ -11,9 +11,9 @@ CPU (physx_cpu, state observations, pd_joint_delta_pos, uniform random actions):
   pick-carry-place episode);
 - env processes: ms_construction.vector_env.CPUVectorEnv (AsyncVectorEnv workers, one env each) with
   1, 2 and 4 workers: PickCube-v1, the general task, the general task with the element held, and
-  baselines/ppo/ppo.py training on those held envs (its env steps/s with the PPO update included; the
-  learner's defaults but for the number of envs) against the same number of processes simulating
-  alone: the share of the simulator's speed the learner keeps;
+  baselines/ppo/ppo.py training on the same number of processes (its env steps/s with the PPO update
+  included; the learner's defaults but for the number of envs), free-running and held, ICM off and
+  on, against those processes simulating alone: the share of the simulator's speed the learner keeps;
 - peak host memory: the resident set of this process and of each env worker process.
 
 Each figure is the median over rounds that alternate between the things compared, so the drifts of
@@ -128,13 +128,6 @@ def machine() -> str:
 # ------------------------------------------------------------------------------------------------- #
 # The element held
 # ------------------------------------------------------------------------------------------------- #
-def hold_all(u) -> None:
-    """Every env's element held by the plate, through the task state as a grasp leaves it."""
-    state = u.get_state_dict()
-    state["task"]["held"][:] = True
-    u.set_state_dict(state)
-
-
 class HoldElement(gym.Wrapper):
     """The element held from every reset on while `hold` is on (`set_hold`; through CPUVectorEnv.call)."""
 
@@ -145,12 +138,12 @@ class HoldElement(gym.Wrapper):
     def set_hold(self, hold: bool) -> None:
         self.hold = hold
         if hold:
-            hold_all(self.env.unwrapped)
+            self.env.unwrapped.set_held()
 
     def reset(self, **kwargs):
         out = self.env.reset(**kwargs)
         if self.hold:
-            hold_all(self.env.unwrapped)
+            self.env.unwrapped.set_held()
         return out
 
 
@@ -177,7 +170,7 @@ def steps_per_second(env, steps: int, seed: int, held: bool = False) -> float:
     u = env.unwrapped
     env.reset(seed=seed)
     if held:
-        hold_all(u)
+        u.set_held()
     gen = torch.Generator().manual_seed(seed)
     low = torch.as_tensor(env.action_space.low)
     high = torch.as_tensor(env.action_space.high)
@@ -188,7 +181,7 @@ def steps_per_second(env, steps: int, seed: int, held: bool = False) -> float:
         if bool(term.any() or trunc.any()):
             env.reset()
             if held:
-                hold_all(u)
+                u.set_held()
     return steps / (time.perf_counter() - t0)
 
 
@@ -224,8 +217,13 @@ def held_training_envs():
         ppo.make_envs = make_envs
 
 
-def ppo_steps_per_second(iterations: int, backend: str, num_envs: Optional[int] = None, held: bool = False) -> dict:
-    """baselines/ppo/ppo.py on GENERAL with its defaults (but `num_envs`, when given): the median env
+TRAINING = (("free", "none"), ("free", "icm"), ("held", "none"), ("held", "icm"))
+"""the PPO trainings measured against the simulation alone: free-running or held steps, ICM off or on."""
+
+
+def ppo_steps_per_second(iterations: int, backend: str, num_envs: Optional[int] = None, held: bool = False,
+                         curiosity: Optional[str] = None) -> dict:
+    """baselines/ppo/ppo.py on GENERAL with its defaults (but `num_envs` and `curiosity`, when given): the median env
     steps/s of `iterations` iterations (rollout and update; the first, start-up, iteration and the last,
     whose final evaluation is cut to one step, left out). No checkpoints."""
     import csv
@@ -234,7 +232,8 @@ def ppo_steps_per_second(iterations: int, backend: str, num_envs: Optional[int] 
 
     with tempfile.TemporaryDirectory() as log_dir:
         run_args = ppo.Args(env_id=GENERAL, sim_backend=backend, num_envs=num_envs, num_eval_envs=1, num_eval_steps=1,
-                            eval_freq=10**9, save_model=False, log_dir=log_dir, exp_name="benchmark")
+                            eval_freq=10**9, save_model=False, log_dir=log_dir, exp_name="benchmark",
+                            **({} if curiosity is None else dict(curiosity=curiosity)))
         run = ppo.setup(run_args)
         run.args.total_timesteps = run.args.num_envs * run.args.num_steps * (iterations + 2)
         with held_training_envs() if held else nullcontext():
@@ -257,7 +256,7 @@ def worker_peak_rss_mib(envs: CPUVectorEnv) -> float:
 def cpu_sections(args: Args) -> str:
     load_before = os.getloadavg()[0]
     one_env = one_env_table(args)
-    processes, worker_rss = process_table(args)
+    processes, training, worker_rss = process_table(args)
     learner_rss = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
     return "\n".join([
         "## CPU (physx_cpu)",
@@ -276,17 +275,25 @@ def cpu_sections(args: Args) -> str:
         "",
         one_env,
         "",
-        "### Env processes and PPO training",
+        "### Env processes",
         "",
         "ms_construction.vector_env.CPUVectorEnv: one env per worker process, same-step resets, sparse reward (the "
-        f"learner's default), uniform random actions, {args.vector_steps} vector steps per measurement; env steps/s = envs x vector steps per second. "
-        f"PPO: baselines/ppo/ppo.py training on {GENERAL} with the element held in every training env from every "
-        "reset on (as in most steps of a trained agent), its defaults but for the number of envs; env steps/s of "
-        f"the median of {args.train_iterations} iterations, each its rollout and its PPO update (and ICM's). "
-        "\"Share\": PPO's steps/s over those of the same number of processes simulating alone, held; medians "
-        f"of {args.rounds} rounds that alternate between the columns.",
+        f"learner's default), uniform random actions, {args.vector_steps} vector steps per measurement; env steps/s = "
+        f"envs x vector steps per second; medians of {args.rounds} rounds. \"Held\": the element held by the plate "
+        "from every reset on (as in most steps of a trained agent).",
         "",
         processes,
+        "",
+        "### PPO training against simulating alone",
+        "",
+        f"baselines/ppo/ppo.py training on {GENERAL}, its defaults (sparse reward, {args.train_iterations} timed "
+        "iterations after an untimed one, each its rollout and its PPO update, and ICM's where on) but for the number "
+        "of envs and the curiosity; free-running steps, or the element held in every training env from every reset "
+        "on. \"Share\": training's env steps/s over those of the same processes simulating alone (the table above) "
+        f"in the same round; median (range) of {args.rounds} rounds that alternate between them. Target: 0.6 or more "
+        "(stretch 0.8).",
+        "",
+        training,
         "",
         f"Peak host memory (resident set): the benchmark's process (learner and one-env runs) {learner_rss:,.0f} MiB; "
         f"one env worker process {worker_rss:,.0f} MiB at most.",
@@ -317,32 +324,40 @@ def one_env_table(args: Args) -> str:
     return "\n".join(rows)
 
 
-def process_table(args: Args) -> tuple[str, float]:
-    rows = [f"| env processes | {REFERENCE} | {GENERAL} | {GENERAL}, held | PPO training, held (updates included) | "
-            "share of the held simulation |", "|---|---|---|---|---|---|"]
+def process_table(args: Args) -> tuple[str, str, float]:
+    """The env processes' steps/s simulating alone, and PPO's training steps/s on the same number of
+    processes, free-running and held, ICM off and on, with its share of the simulation alone."""
+    sim_rows = [f"| env processes | {REFERENCE} | {GENERAL} | {GENERAL}, held |", "|---|---|---|---|"]
+    ppo_rows = ["| env processes | env steps | curiosity | PPO training, env steps/s | simulating alone, env steps/s | "
+                "share: training / simulating alone |", "|---|---|---|---|---|---|"]
     worker_rss = 0.0
     for n in args.workers:
         ref = CPUVectorEnv(REFERENCE, n, dict(CPU_KWARGS, reward_mode="sparse"))
         ours = CPUVectorEnv(GENERAL, n, dict(CPU_KWARGS, reward_mode="sparse"), wrappers=[HoldElement])
         vector_steps_per_second(ref, 20, seed=0)  # warm-up
         vector_steps_per_second(ours, 20, seed=0)
-        m = {k: [] for k in ("ref", "free", "held", "ppo", "share")}
+        m = {k: [] for k in ("ref", "free", "held", *TRAINING)}
         for r in tqdm(range(args.rounds), desc=f"{n} env processes", unit="round"):
             m["ref"].append(vector_steps_per_second(ref, args.vector_steps, seed=r))
             ours.call("set_hold", False)
             m["free"].append(vector_steps_per_second(ours, args.vector_steps, seed=r))
             ours.call("set_hold", True)
             m["held"].append(vector_steps_per_second(ours, args.vector_steps, seed=r))
-            m["ppo"].append(ppo_steps_per_second(args.train_iterations, "physx_cpu", n, held=True)["sps"])
-            m["share"].append(m["ppo"][-1] / m["held"][-1])
+            for steps, curiosity in TRAINING:
+                m[steps, curiosity].append(ppo_steps_per_second(args.train_iterations, "physx_cpu", n, held=steps == "held",
+                                                                curiosity=curiosity)["sps"])
         worker_rss = max(worker_rss, worker_peak_rss_mib(ours))
         ref.close()
         ours.close()
         med = {k: statistics.median(v) for k, v in m.items()}
-        rows.append(f"| {n} | {med['ref']:.0f} | {med['free']:.0f} | {med['held']:.0f} | {med['ppo']:.0f} | "
-                    f"{med['share']:.2f} ({min(m['share']):.2f}-{max(m['share']):.2f}) |")
-        print(rows[-1], flush=True)
-    return "\n".join(rows), worker_rss
+        sim_rows.append(f"| {n} | {med['ref']:.0f} | {med['free']:.0f} | {med['held']:.0f} |")
+        for steps, curiosity in TRAINING:
+            # each round's training over the same round's simulation alone
+            share = [t / a for t, a in zip(m[steps, curiosity], m[steps])]
+            ppo_rows.append(f"| {n} | {steps} | {curiosity} | {med[steps, curiosity]:.0f} | {med[steps]:.0f} | "
+                            f"{statistics.median(share):.2f} ({min(share):.2f}-{max(share):.2f}) |")
+        print("\n".join(sim_rows[-1:] + ppo_rows[-len(TRAINING):]), flush=True)
+    return "\n".join(sim_rows), "\n".join(ppo_rows), worker_rss
 
 
 # ------------------------------------------------------------------------------------------------- #
@@ -380,7 +395,7 @@ def gpu_steps_per_second(env, steps: int, seed: int, held: bool = False, warmup:
     u = env.unwrapped
     env.reset(seed=seed)
     if held:
-        hold_all(u)
+        u.set_held()
     low = torch.as_tensor(env.action_space.low, device=u.device)  # the batched space: [num_envs, act]
     high = torch.as_tensor(env.action_space.high, device=u.device)
     gen = torch.Generator(device=u.device).manual_seed(seed)

@@ -26,13 +26,6 @@ def to_sapien(raw: torch.Tensor, i: int = 0) -> sapien.Pose:
     return sapien.Pose(t[:3], t[3:])
 
 
-def set_held(u, held: bool = True) -> None:
-    """Every env's element held by the plate (or let go), through the task state as a grasp leaves it."""
-    state = u.get_state_dict()
-    state["task"]["held"][:] = held
-    u.set_state_dict(state)
-
-
 def make_env(env_id: str, **kwargs):
     kwargs.setdefault("obs_mode", "state")
     kwargs.setdefault("control_mode", "pd_joint_pos")

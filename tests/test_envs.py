@@ -1,8 +1,10 @@
 """The four construction tasks: API, determinism, grasp, rewards, placement, collisions, state."""
 
 import math
+import os
 import subprocess
 import sys
+from pathlib import Path
 
 import gymnasium as gym
 import numpy as np
@@ -15,7 +17,9 @@ from ms_construction.curriculum import STAGES
 from ms_construction.envs import ENV_IDS
 from ms_construction.parameters import ELEMENT_KINDS
 
-from tests.helpers import JointMover, StepLog, make_env, quat_z, set_held, to_sapien
+from tests.helpers import JointMover, StepLog, make_env, quat_z, to_sapien
+
+ROOT = Path(__file__).resolve().parents[1]
 
 OBS_MODES = ("state", "state_dict", "rgb", "depth", "rgbd", "pointcloud", "none")
 REWARD_MODES = ("sparse", "dense", "normalized_dense", "none")
@@ -212,7 +216,7 @@ def test_placement_succeeds_just_inside_and_fails_just_outside_the_tolerances(en
     env = make_env(env_id)
     env.reset(seed=0)
     u = env.unwrapped
-    set_held(u)
+    u.set_held()
     goal = to_sapien(u.goal_pose.raw_pose)
     tau_place, tau_angle = float(u.tau_place[0]), float(u.tau_angle_deg[0])
 
@@ -258,7 +262,7 @@ def test_turned_upside_down_or_tilted_elements_at_the_goal_are_not_placed(env_id
     env = make_env(env_id)
     env.reset(seed=0)
     u = env.unwrapped
-    set_held(u)
+    u.set_held()
     goal = to_sapien(u.goal_pose.raw_pose)
     u.obj.set_pose(goal)
     assert bool(u.evaluate()["success"][0]), "the goal pose itself is placed"
@@ -288,7 +292,7 @@ def test_cpu_hold_computes_the_same_velocities_as_the_batched_hold(env_id):
     env = make_env(env_id, control_mode="pd_joint_delta_pos")
     env.reset(seed=3)
     u = env.unwrapped
-    set_held(u)
+    u.set_held()
     gen = torch.Generator().manual_seed(0)
     checked = 0
     for i in range(12):
@@ -347,7 +351,7 @@ def test_state_round_trip_continues_identically(env_id):
     for a in actions[:4]:
         env.step(a)
     # a held element is part of the task state
-    set_held(u)
+    u.set_held()
     saved = u.get_state_dict()
 
     def rollout():
@@ -393,3 +397,27 @@ def test_record_episode_video_is_not_flat(env_id, tmp_path):
     assert frames.shape[0] >= 8 and frames.shape[1:] == (512, 512, 3)
     assert frames.std() > 20
     assert np.abs(frames[-1] - frames[0]).mean() > 0.1, "nothing moved"
+
+
+def test_without_cuda_the_cpu_render_backend_is_chosen_up_front_and_said_once():
+    """No CUDA device: every env gets render_backend="cpu" before ManiSkill looks for one (which warns
+    in every env, every worker process); the choice is printed once per process tree."""
+    code = ("import gymnasium as gym, ms_construction\n"
+            "from ms_construction.vector_env import CPUVectorEnv\n"
+            "envs = CPUVectorEnv('Flooring-v1', 2, dict(obs_mode='state'))\n"
+            "envs.reset(seed=0); envs.close()\n"
+            "for _ in range(2):\n"
+            "    env = gym.make('Flooring-v1', obs_mode='state'); print('backend', env.unwrapped.backend.render_backend); env.close()\n")
+    env = {k: v for k, v in os.environ.items() if k != "MS_CONSTRUCTION_RENDER_BACKEND"}
+    env["PYTHONPATH"] = str(ROOT)  # this checkout's ms_construction, whatever the editable install points at
+    out = subprocess.run([sys.executable, "-c", code], cwd=ROOT, capture_output=True, text=True, timeout=300, env=env)
+    assert out.returncode == 0, out.stderr
+    try:
+        sapien.Device("cuda")
+        pytest.skip("a CUDA device is here")
+    except RuntimeError:
+        pass
+    text = out.stdout + out.stderr
+    assert "CUDA device was not found" not in text, text
+    assert text.count("no CUDA device found, rendering on the CPU") == 1, text
+    assert out.stdout.count("backend sapien_cpu") == 2, out.stdout

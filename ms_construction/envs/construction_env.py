@@ -10,6 +10,8 @@ placed.
 
 from __future__ import annotations
 
+import functools
+import os
 from typing import Any, Optional, Sequence
 
 import numpy as np
@@ -52,6 +54,27 @@ def _bearing(a: torch.Tensor, b: torch.Tensor) -> torch.Tensor:
     return (1 + cos) / 2
 
 
+RENDER_BACKEND_ENV = "MS_CONSTRUCTION_RENDER_BACKEND"
+"""the render backend chosen by `default_render_backend`, passed on to child processes (env workers)."""
+
+
+@functools.lru_cache(maxsize=None)
+def default_render_backend() -> str:
+    """ManiSkill's default render backend ("gpu") where sapien finds a CUDA device, else "cpu", said
+    once: asked for "gpu" without CUDA, ManiSkill warns in every env it makes (every env process,
+    every evaluation) before falling back to the CPU."""
+    if os.environ.get(RENDER_BACKEND_ENV):
+        return os.environ[RENDER_BACKEND_ENV]
+    try:
+        sapien.Device("cuda")
+        backend = "gpu"
+    except RuntimeError:
+        backend = "cpu"
+        print("ms_construction: no CUDA device found, rendering on the CPU (render_backend='cpu')")
+    os.environ[RENDER_BACKEND_ENV] = backend
+    return backend
+
+
 class ConstructionTaskEnv(BaseEnv):
     """Base of the construction tasks; see ms_construction/envs/tasks.py for the task cards."""
 
@@ -85,6 +108,8 @@ class ConstructionTaskEnv(BaseEnv):
                 raise ValueError(f"tasks={tasks!r}: give distinct task types from {ELEMENT_KINDS}")
             self.TASKS = tuple(t for t in ELEMENT_KINDS if t in tasks)
         self.robot_init_qpos_noise = robot_init_qpos_noise
+        self._step_grasp_frame, self._in_step_readout = None, False
+        kwargs.setdefault("render_backend", default_render_backend())
         super().__init__(*args, robot_uids=robot_uids, **kwargs)
 
     # ------------------------------------------------------------------------------------- #
@@ -300,7 +325,14 @@ class ConstructionTaskEnv(BaseEnv):
     def _step_action(self, action):
         action = super()._step_action(action)
         self._update_grasp()
+        self._step_grasp_frame, self._in_step_readout = None, True  # the poses are final until the step returns
         return action
+
+    def step(self, action):
+        try:
+            return super().step(action)
+        finally:
+            self._in_step_readout = False  # between steps the poses may move (set_state_dict, set_pose)
 
     def _before_control_step(self):
         self._substep = 0
@@ -333,8 +365,14 @@ class ConstructionTaskEnv(BaseEnv):
         )
 
     def _grasp_frame(self) -> torch.Tensor:
-        """Raw world pose [n, 7] of the grasp face's centre, z pointing into the element."""
-        return pose_mul(self.obj.pose.raw_pose, self._grasp_in_el[self.task_id])
+        """Raw world pose [n, 7] of the grasp face's centre, z pointing into the element; read once
+        per step (the observation and the dense reward both need it, and on physx_cpu reading a pose
+        costs about a twentieth of a step)."""
+        if not self._in_step_readout:
+            return pose_mul(self.obj.pose.raw_pose, self._grasp_in_el[self.task_id])
+        if self._step_grasp_frame is None:
+            self._step_grasp_frame = pose_mul(self.obj.pose.raw_pose, self._grasp_in_el[self.task_id])
+        return self._step_grasp_frame
 
     def _get_obs_extra(self, info: dict):
         goal = self._goal_table[self.task_id, self.goal_slot]
@@ -398,6 +436,13 @@ class ConstructionTaskEnv(BaseEnv):
             tolerances=self.tolerances.clone(),
         )
         return state
+
+    def set_held(self, held: bool = True) -> None:
+        """Every env's element held by the plate (or let go), through the task state as a grasp
+        leaves it: a carry without a pick, for benchmarks and tests (batched, either backend)."""
+        state = self.get_state_dict()
+        state["task"]["held"][:] = held
+        self.set_state_dict(state)
 
     def set_state_dict(self, state: dict, env_idx: Optional[torch.Tensor] = None):
         """Restore a state from `get_state_dict`. A task leaf may be [b, k] (as saved), one env's
