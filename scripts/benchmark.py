@@ -51,6 +51,7 @@ import tyro
 from tqdm import tqdm
 
 from ms_construction.envs import ENV_IDS
+from ms_construction.envs.construction_env import default_render_backend
 from ms_construction.reporting import update_section
 from ms_construction.vector_env import CPUVectorEnv
 
@@ -162,7 +163,9 @@ CPU_KWARGS = dict(obs_mode="state", control_mode="pd_joint_delta_pos", render_mo
 
 
 def make(env_id: str):
-    return gym.make(env_id, num_envs=1, sim_backend="physx_cpu", reward_mode="dense", **CPU_KWARGS)
+    # render_backend for PickCube-v1 too: ManiSkill's own envs would warn without CUDA
+    return gym.make(env_id, num_envs=1, sim_backend="physx_cpu", reward_mode="dense",
+                    render_backend=default_render_backend(), **CPU_KWARGS)
 
 
 def steps_per_second(env, steps: int, seed: int, held: bool = False) -> float:

@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 import torch
 
-from baselines.ppo import bc, evaluation, networks, ppo
+from baselines.ppo import bc, checkpoints, networks, ppo
 from ms_construction.planning.demos import DEMO_EXPERT_CONFIG, DemoCollector, load_demos, save_demos
 
 from tests.helpers import PLAN_TRIES, SLOW_MACHINE_RRT_TIME
@@ -67,7 +67,7 @@ def test_behaviour_cloning_fits_the_demonstrations_and_writes_a_ppo_checkpoint(t
                           val_fraction=0.1, env_id="Flooring-v1"))
     ckpt = torch.load(out, weights_only=False)
     assert ckpt["bc"]["val_action_mse"] < 0.5 * float(np.var(np.concatenate([d.actions for d in flooring_demos])))
-    agent, control_mode = evaluation.load_policy(out, "Flooring-v1")
+    agent, control_mode = checkpoints.load_policy(out, "Flooring-v1")
     assert control_mode == "pd_joint_delta_pos"
     obs = torch.as_tensor(flooring_demos[0].obs)
     features = agent.features(torch.as_tensor(np.concatenate([d.obs for d in flooring_demos])))

@@ -11,6 +11,9 @@ default, Table I). Training never resets with seeds at or above 1,000,000 (ppo.p
 demonstrations' seeds lie below), the default `--seed`. Return is the extrinsic (sparse,
 Algorithm 1) return. The checkpoint must fit the env: observation and action sizes and the
 control mode it was trained in.
+
+`evaluate_envs` is ppo.py's evaluation during training: the same deterministic policy on a vector
+env (either backend), the first episode of each env, for the curriculum's smoothed success.
 """
 
 from __future__ import annotations
@@ -234,7 +237,8 @@ def expert_place_success(path: Path = EXPERT_RESULTS) -> dict[str, str]:
     if not path.is_file():
         return {}
     summary = json.loads(path.read_text())["summary"]
-    return {env_id: f"{s['place_success']:.0%} of {s['episodes']}" for env_id, s in summary.items() if env_id in PAPER_TABLE_II}
+    return {env_id: f"{s['place_success']:.0%} of {s['episodes']}" for env_id, s in summary.items()
+            if env_id in PAPER_TABLE_II}
 
 
 def main(args: Args) -> dict[str, dict]:

@@ -2,9 +2,10 @@
 
 In the shape of ManiSkill's PPO baseline (CleanRL style: read top to bottom, one `Args` dataclass);
 the networks are in networks.py, ICM in curiosity.py, checkpoints and the CSV log in checkpoints.py,
-the evaluation in evaluation.py. Additions: `--curiosity icm` (Pathak et al. 2017), `--curriculum cp1 cp2 cp3 cp4`
-(Table I of the paper, each stage inheriting every parameter of the previous one), sparse reward by
-default (the paper's Algorithm 1), atomic checkpoints and exact `--resume`, a CSV log per run.
+the evaluation in evaluation.py. Additions: `--curiosity icm` (Pathak et al. 2017), `--curriculum
+cp1 cp2 cp3 cp4` (Table I of the paper, each stage inheriting every parameter of the previous one),
+sparse reward by default (the paper's Algorithm 1), atomic checkpoints and exact `--resume`, a CSV
+log per run.
 Observations are normalized (running mean and variance, in the checkpoint) and their quaternions
 fed as rotation-matrix columns. Fine-tuning a warm start (our recipe for the general agent,
 scripts/train_general_agent.py): `--checkpoint` from baselines/ppo/bc.py, `--freeze-obs-norm`,
@@ -548,8 +549,9 @@ def train(run: Run) -> Progress:
                 returns = advantages + values
 
             # ---- update ----
-            batch = dict(obs=flat(obs_buf), next_obs=flat(next_obs_buf), actions=flat(actions), logprobs=logprobs.reshape(-1),
-                         advantages=advantages.reshape(-1), returns=returns.reshape(-1), values=values.reshape(-1))
+            batch = dict(obs=flat(obs_buf), next_obs=flat(next_obs_buf), actions=flat(actions),
+                         logprobs=logprobs.reshape(-1), advantages=advantages.reshape(-1),
+                         returns=returns.reshape(-1), values=values.reshape(-1))
             losses = ppo_update(agent, run.optimizer, batch, args, run.icm, run.icm_optimizer, demos,
                                 value_only=progress.iteration <= args.critic_warmup_iterations)
             # statistics change after the update, so that each update sees its rollout's normalization
