@@ -14,12 +14,13 @@ SCRIPT = ROOT / "scripts" / "plot_training.py"
 
 
 def csv_fields() -> list[str]:
-    """CSV_FIELDS of baselines/ppo/ppo.py, read from its source (importing it loads torch, gym and the tasks)."""
-    tree = ast.parse((ROOT / "baselines" / "ppo" / "ppo.py").read_text())
+    """CSV_FIELDS of ppo.py's CSV log (baselines/ppo/checkpoints.py), read from its source (importing it
+    loads torch and the networks)."""
+    tree = ast.parse((ROOT / "baselines" / "ppo" / "checkpoints.py").read_text())
     for node in tree.body:
         if isinstance(node, ast.Assign) and any(getattr(t, "id", None) == "CSV_FIELDS" for t in node.targets):
             return ast.literal_eval(node.value)
-    raise AssertionError("CSV_FIELDS not found in baselines/ppo/ppo.py")
+    raise AssertionError("CSV_FIELDS not found in baselines/ppo/checkpoints.py")
 
 
 def write_csv(path: Path, fields: list[str], rows: list[dict]) -> Path:
