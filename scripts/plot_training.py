@@ -1,12 +1,23 @@
-"""Plot a training run's progress.csv (written by baselines/ppo/ppo.py) as a PNG: success and return vs env steps.
+"""Plot training runs' progress.csv (written by baselines/ppo/ppo.py) as PNGs.
 
     python scripts/plot_training.py --csv runs/<run>/progress.csv --out docs/images/training.png
     python scripts/plot_training.py --csv runs/<a>/progress.csv runs/<b>/progress.csv --title "ICM vs none" --window 20
+    python scripts/plot_training.py --figure fig3 --csv campaign/paper_general_agent/progress.csv --out docs/images/paper_fig3.png
+    python scripts/plot_training.py --figure fig4 --csv campaign/paper_general_agent/progress.csv \
+        campaign/control_ceiling/progress.csv campaign/control_window/progress.csv campaign/control_flooring/progress.csv \
+        --out docs/images/paper_fig4.png
 
+`--figure progress` (the default):
 Top panel: place and pick success of the training episodes (thick and thin lines) and the evaluation place
 success (markers, where an evaluation ran); bottom panel: extrinsic return. One colour per curriculum stage,
 raw values faint, a trailing moving average of --window rows on top (over the whole run, ignoring empty cells),
 dashed vertical lines where the stage changes. Several --csv files overlay, one line style per run.
+
+`--figure fig3` (the paper's Fig. 3): one run's extrinsic return per training episode against env steps,
+one colour per curriculum stage, raw faint, moving average on top; beside it the intrinsic
+(curiosity) return where the run has one. `--figure fig4` (the paper's Fig. 4): the first run's
+last stage (the general agent's cp4) against the other runs (the control groups), each against env
+steps since the start of that stage or run.
 """
 
 from __future__ import annotations
@@ -14,7 +25,7 @@ from __future__ import annotations
 import csv
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Optional
+from typing import Literal, Optional
 
 import matplotlib
 
@@ -26,7 +37,8 @@ from matplotlib.lines import Line2D  # noqa: E402
 from matplotlib.patches import Patch  # noqa: E402
 
 REQUIRED = ("global_step", "stage", "pick_success", "place_success", "extrinsic_return", "eval_place_success")
-NUMERIC = [c for c in REQUIRED if c != "stage"]
+FIGURE_REQUIRED = ("global_step", "stage", "extrinsic_return")
+OPTIONAL = ("intrinsic_return",)
 STAGE_COLORS = {"cp1": "tab:blue", "cp2": "tab:orange", "cp3": "tab:green", "cp4": "tab:red"}
 EXTRA_COLORS = ["tab:purple", "tab:brown", "tab:pink", "tab:olive", "tab:cyan"]
 RUN_STYLES = [("-", "o"), ("--", "s"), (":", "^"), ("-.", "D")]
@@ -35,7 +47,9 @@ RUN_STYLES = [("-", "o"), ("--", "s"), (":", "^"), ("-.", "D")]
 @dataclass
 class Args:
     csv: list[Path]
-    """progress.csv of one or more runs (several overlay, one line style each)."""
+    """progress.csv of one or more runs (several overlay, one line style each; fig4: the general agent first)."""
+    figure: Literal["progress", "fig3", "fig4"] = "progress"
+    """what to draw (see the module docstring)."""
     out: Path = Path("docs/images/training.png")
     """the PNG to write (its folder is created)."""
     title: Optional[str] = None
@@ -44,19 +58,22 @@ class Args:
     """rows in the trailing moving average."""
 
 
-def load(path: Path) -> dict:
-    """The needed columns as arrays (float, NaN for empty cells; stage as strings), or SystemExit."""
+def load(path: Path, required: tuple[str, ...] = REQUIRED) -> dict:
+    """The `required` columns (and the optional ones it has) as arrays (float, NaN for empty cells;
+    stage as strings), or SystemExit."""
     if not path.is_file():
         raise SystemExit(f"{path}: no such file")
     with open(path, newline="") as f:
         reader = csv.DictReader(f)
-        missing = [c for c in REQUIRED if c not in (reader.fieldnames or [])]
+        fields = reader.fieldnames or []
+        missing = [c for c in required if c not in fields]
         if missing:
             raise SystemExit(f"{path}: missing columns: {', '.join(missing)}")
         rows = list(reader)
     if not rows:
         raise SystemExit(f"{path}: no rows")
-    data = {c: np.array([float(r[c]) if r[c] not in ("", None) else np.nan for r in rows]) for c in NUMERIC}
+    numeric = [c for c in required if c != "stage"] + [c for c in OPTIONAL if c in fields]
+    data = {c: np.array([float(r[c]) if r[c] not in ("", None) else np.nan for r in rows]) for c in numeric}
     data["stage"] = [r["stage"] for r in rows]
     return data
 
@@ -89,6 +106,76 @@ def main(args: Args) -> None:
         raise SystemExit(f"--window must be at least 1, got {args.window}")
     if not args.csv:
         raise SystemExit("--csv: give at least one progress.csv")
+    if args.figure == "fig3":
+        fig = figure3(args)
+    elif args.figure == "fig4":
+        fig = figure4(args)
+    else:
+        fig = progress_figure(args)
+    args.out.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(args.out, dpi=120)
+    plt.close(fig)
+    print(f"wrote {args.out}")
+
+
+def raw_and_average(ax, x: np.ndarray, y: np.ndarray, window: int, color: str, label: Optional[str] = None) -> None:
+    """`y` against `x`, raw faint (joined across empty cells) and its trailing moving average on top."""
+    ok = ~np.isnan(y)
+    ax.plot(x[ok], y[ok], color=color, lw=0.8, alpha=0.25)
+    ax.plot(x, moving_average(y, window), color=color, lw=2, label=label)
+
+
+def figure3(args: Args):
+    """The paper's Fig. 3 for one run: returns against env steps, a colour per stage."""
+    if len(args.csv) != 1:
+        raise SystemExit("--figure fig3: give one progress.csv (the general agent's)")
+    d = load(args.csv[0], FIGURE_REQUIRED)
+    intrinsic = "intrinsic_return" in d and not np.isnan(d["intrinsic_return"]).all()
+    fig, axes = plt.subplots(1, 2 if intrinsic else 1, figsize=(13 if intrinsic else 8, 4.5), constrained_layout=True,
+                             squeeze=False)
+    colors, x = dict(STAGE_COLORS), d["global_step"]
+    panels = [("extrinsic_return", "extrinsic return (Algorithm 1)")] + ([("intrinsic_return", "intrinsic (curiosity) return")]
+                                                                          if intrinsic else [])
+    for ax, (col, title) in zip(axes[0], panels):
+        smooth = moving_average(d[col], args.window)
+        for stage, s, e in stage_segments(d["stage"]):
+            c = stage_color(stage, colors)
+            seg = slice(s, min(e + 1, len(x)))
+            ok = ~np.isnan(d[col][seg])
+            ax.plot(x[seg][ok], d[col][seg][ok], color=c, lw=0.8, alpha=0.25)
+            ax.plot(x[seg], smooth[seg], color=c, lw=2, label=stage if col == "extrinsic_return" else None)
+        ax.set(xlabel="env steps", ylabel="return per episode", title=title)
+        ax.grid(alpha=0.3)
+    axes[0][0].axhline(3.0, color="grey", ls=":", lw=1)
+    axes[0][0].legend(title=f"stage (solid: {args.window}-row average)", fontsize=8)
+    fig.suptitle(args.title or f"{args.csv[0].parent.name}: training episodes' return")
+    return fig
+
+
+def figure4(args: Args):
+    """The paper's Fig. 4: the first run's last stage against the other runs, from each one's start."""
+    if len(args.csv) < 2:
+        raise SystemExit("--figure fig4: give the general agent's progress.csv first, then the control groups'")
+    general = load(args.csv[0], FIGURE_REQUIRED)
+    last = stage_segments(general["stage"])[-1]
+    fig, ax = plt.subplots(figsize=(9, 4.5), constrained_layout=True)
+    s = last[1]
+    start = general["global_step"][s - 1] if s > 0 else 0
+    raw_and_average(ax, general["global_step"][s:] - start, general["extrinsic_return"][s:], args.window, "tab:red",
+                    f"{args.csv[0].parent.name} ({last[0]} stage)")
+    for k, path in enumerate(args.csv[1:]):
+        d = load(path, FIGURE_REQUIRED)
+        raw_and_average(ax, d["global_step"], d["extrinsic_return"], args.window, EXTRA_COLORS[k % len(EXTRA_COLORS)],
+                        path.parent.name)
+    ax.axhline(3.0, color="grey", ls=":", lw=1)
+    ax.set(xlabel="env steps (from the start of the stage or run)", ylabel="extrinsic return per episode",
+           title=args.title or "cp4 of the general agent and the control groups")
+    ax.grid(alpha=0.3)
+    ax.legend(fontsize=8, title=f"solid: {args.window}-row average")
+    return fig
+
+
+def progress_figure(args: Args):
     runs = [(p.parent.name or str(p), load(p)) for p in args.csv]
     colors = dict(STAGE_COLORS)
     fig, (ax_s, ax_r) = plt.subplots(2, 1, figsize=(10, 7), sharex=True, constrained_layout=True)
@@ -127,10 +214,7 @@ def main(args: Args) -> None:
                            marker=RUN_STYLES[k % len(RUN_STYLES)][1], label=name) for k, (name, _) in enumerate(runs)]
     ax_s.legend(handles=handles, loc="center left", bbox_to_anchor=(1.01, 0.5), fontsize=8, frameon=False)
     fig.suptitle(args.title or " vs ".join(name for name, _ in runs))
-    args.out.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(args.out, dpi=120)
-    plt.close(fig)
-    print(f"wrote {args.out}")
+    return fig
 
 
 if __name__ == "__main__":

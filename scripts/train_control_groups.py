@@ -1,56 +1,48 @@
-"""Train the paper's control groups: controlGroup4.1/4.2/4.3, one single-task agent each for the
-ceiling, window and flooring tasks, from scratch, directly at cp4 (no curriculum), with the same
-total budget as the general agent.
+"""The paper's control groups 4.1 / 4.2 / 4.3: one agent each on CeilingInstallation-v1,
+WindowInstallation-v1 and Flooring-v1, at cp4 from the first step, otherwise the paper setting
+(baselines/ppo/paper_setting.py), one after the other, each resumed from its checkpoint in campaign/.
 
-    python scripts/train_control_groups.py                 # the three runs, one after another
-    python scripts/train_control_groups.py --dry-run       # print the plan only
-    python scripts/train_control_groups.py --total-timesteps 2000000 --curiosity none
+    python scripts/train_control_groups.py --dry-run                       # the plan, and where each run stands
+    python scripts/train_control_groups.py                                 # 2M steps each (Fig. 4's length)
+    python scripts/train_control_groups.py --total-timesteps 8000000       # continue them to the general agent's 8M
+
+A run is a chain of 2M-step cp4 stages, each restarting the learning-rate, clip and entropy schedules as
+the general agent's stages do, so the first 2M steps are the same whatever the total.
 """
 
-import dataclasses
 from dataclasses import dataclass
-from pathlib import Path
-from typing import Literal
+from typing import Optional
 
 import tyro
 
-from baselines.ppo import ppo
+from baselines.ppo.paper_setting import STAGE_STEPS, control_group_runs, describe, run_or_resume
 from ms_construction.envs import TASK_ENV_IDS
-
-GROUP_NAMES = {"ceiling": "controlGroup4.1", "window": "controlGroup4.2", "flooring": "controlGroup4.3"}
 
 
 @dataclass
 class Args:
-    total_timesteps: int = ppo.Args.total_timesteps
-    """per control group: the general agent's whole budget (the paper's comparison)."""
+    total_timesteps: int = STAGE_STEPS
+    """per control group, a multiple of 2M: 2M (the general agent's cp4 stage) or 8M (its whole budget)."""
+    tasks: tuple[str, ...] = tuple(TASK_ENV_IDS)
+    """which groups, in this order: ceiling (4.1), window (4.2), flooring (4.3)."""
+    num_envs: Optional[int] = None
+    """env processes (default: one per CPU core); a resumed run keeps its own."""
     seed: int = 1
-    curiosity: Literal["none", "icm"] = "icm"
-    """as the general agent."""
-    log_dir: str = "runs"
     dry_run: bool = False
-    """print the three runs and exit."""
-
-
-def plan(args: Args) -> list[ppo.Args]:
-    """The three PPO runs: single-task env, cp4 only, the general agent's budget."""
-    return [
-        ppo.Args(env_id=env_id, curriculum=("cp4",), total_timesteps=args.total_timesteps, seed=args.seed,
-                 curiosity=args.curiosity, log_dir=args.log_dir, exp_name=f"{GROUP_NAMES[kind]}_{kind}")
-        for kind, env_id in TASK_ENV_IDS.items()
-    ]
+    """print the plan and where each run stands, and exit."""
 
 
 def main(args: Args) -> None:
-    runs = plan(args)
+    unknown = [t for t in args.tasks if t not in TASK_ENV_IDS]
+    if unknown:
+        raise SystemExit(f"--tasks {' '.join(unknown)}: use among {', '.join(TASK_ENV_IDS)}")
+    plan = {r.name: r for r in control_group_runs(args.total_timesteps, args.num_envs, args.seed)}
+    runs = [plan[f"control_{t}"] for t in args.tasks]
     for run in runs:
-        print(f"{run.exp_name}: {run.env_id}, stages {' '.join(run.curriculum)}, {run.total_timesteps} steps, curiosity {run.curiosity}")
-    if args.dry_run:
-        return
-    for run in runs:
-        ckpt = Path(run.log_dir) / run.exp_name / "checkpoint.pt"
-        # an interrupted group continues where it stopped
-        ppo.main(dataclasses.replace(run, resume=str(ckpt)) if ckpt.is_file() else run)
+        print(describe(run))
+    if not args.dry_run:
+        for run in runs:
+            run_or_resume(run)
 
 
 if __name__ == "__main__":

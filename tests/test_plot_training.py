@@ -90,3 +90,26 @@ def test_plot_training_names_missing_columns(tmp_path):
 
     res = run("--csv", str(tmp_path / "nowhere.csv"), "--out", str(tmp_path / "x.png"))
     assert res.returncode != 0 and "nowhere.csv" in res.stderr
+
+
+def test_paper_figures_3_and_4_are_drawn_from_small_csvs(tmp_path):
+    from matplotlib.image import imread
+
+    fields = csv_fields()
+    rows = synthetic_rows(80)
+    for i, row in enumerate(rows):
+        row["stage"] = ("cp1", "cp2", "cp3", "cp4")[i // 20]
+        row["intrinsic_return"] = 0.5 * math.exp(-i / 30)
+    general = write_csv(tmp_path / "paper_general_agent" / "progress.csv", fields, rows)
+    controls = [write_csv(tmp_path / name / "progress.csv", fields, synthetic_rows(20))
+                for name in ("control_ceiling", "control_window", "control_flooring")]
+    fig3, fig4 = tmp_path / "fig3.png", tmp_path / "fig4.png"
+    res = run("--figure", "fig3", "--csv", str(general), "--out", str(fig3))
+    assert res.returncode == 0, res.stderr
+    img = imread(fig3)
+    assert img.shape[1] > 1.5 * img.shape[0], "extrinsic and intrinsic side by side"
+    res = run("--figure", "fig4", "--csv", str(general), *map(str, controls), "--out", str(fig4))
+    assert res.returncode == 0, res.stderr
+    assert (imread(fig4)[..., :3].min(axis=-1) < 0.95).mean() > 0.02
+    res = run("--figure", "fig4", "--csv", str(general), "--out", str(tmp_path / "x.png"))
+    assert res.returncode != 0 and "control groups" in res.stderr

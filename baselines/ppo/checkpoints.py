@@ -25,8 +25,21 @@ from baselines.ppo.networks import Agent, make_agent
 
 WHAT_A_CHECKPOINT_IS = ("a checkpoint is the .pt file that baselines/ppo/ppo.py or baselines/ppo/bc.py writes "
                         "(torch.save of a dict with args, obs_dim, act_dim and the agent's weights)")
-RENAMED_ARGS = {"finite_horizon_gae": "bootstrap_at_truncation"}
-"""ppo.py arguments saved under an earlier name: checkpoints written before the rename still load."""
+def upgrade_args(saved: dict) -> dict:
+    """A checkpoint's saved ppo.py args under their current names and meanings, so that checkpoints
+    written by earlier versions still load: `finite_horizon_gae` / `bootstrap_at_truncation` (booleans)
+    became `bootstrap_at_done`, `norm_adv` a choice of where advantages are normalized, and `icm`
+    meant the normalized variant (now `icm_normalized`) before ML-Agents' curiosity (with its
+    `icm_gamma`) took the name."""
+    args = dict(saved)
+    for old in ("finite_horizon_gae", "bootstrap_at_truncation"):
+        if old in args:
+            args["bootstrap_at_done"] = "truncated" if args.pop(old) else "never"
+    if isinstance(args.get("norm_adv"), bool):
+        args["norm_adv"] = "minibatch" if args["norm_adv"] else "none"
+    if args.get("curiosity") == "icm" and "icm_gamma" not in args:
+        args["curiosity"] = "icm_normalized"
+    return args
 
 
 @dataclass
@@ -77,7 +90,9 @@ def load_checkpoint(path, option: str = "--checkpoint", env_id: Optional[str] = 
     missing = [k for k in ("agent", "obs_dim", "act_dim", "args") if not isinstance(ckpt, dict) or k not in ckpt]
     if missing:
         raise SystemExit(f"{option}: {path} is not a checkpoint (missing {', '.join(missing)}); {WHAT_A_CHECKPOINT_IS}")
-    ckpt["args"] = {RENAMED_ARGS.get(k, k): v for k, v in ckpt["args"].items()}
+    ckpt["args"] = upgrade_args(ckpt["args"])
+    if ckpt.get("base_args") is not None:
+        ckpt["base_args"] = upgrade_args(ckpt["base_args"])
     if obs_dim is not None:
         check_fit(ckpt, path, env_id, obs_dim, act_dim, control_mode)
     return ckpt
@@ -108,7 +123,7 @@ def load_policy(path, env_id: str) -> tuple[Agent, str]:
     obs_dim, act_dim = env.observation_space.shape[-1], env.action_space.shape[-1]
     env.close()
     check_fit(ckpt, path, env_id, obs_dim, act_dim, control_mode)
-    agent = make_agent(ckpt["args"], ckpt["obs_dim"], ckpt["act_dim"])
+    agent = make_agent(ckpt["args"], ckpt["obs_dim"], ckpt["act_dim"], ckpt.get("base_args"))
     try:
         agent.load_state_dict(ckpt["agent"])
     except RuntimeError as e:
@@ -120,8 +135,12 @@ CSV_FIELDS = [
     "global_step", "iteration", "stage", "episodes", "pick_success", "place_success", "extrinsic_return",
     "intrinsic_return", "episode_length", "eval_pick_success", "eval_place_success", "eval_extrinsic_return",
     "smoothed_eval_success", "sps", "learning_rate", "value_loss", "policy_loss", "entropy", "approx_kl",
-    "icm_forward_loss", "icm_inverse_loss", "bc_loss",
+    "icm_forward_loss", "icm_inverse_loss", "bc_loss", "clip_coef", "ent_coef", "end_place_dist",
+    "end_place_angle_deg", "held_at_end",
 ]
+"""`end_*` and `held_at_end`: where the iteration's training episodes ended (mean place distance in m and
+angle error in degrees to the goal at the last step, share with the element held), what a run that
+places nothing still shows."""
 
 
 class CSVLog:

@@ -95,10 +95,12 @@ def reset(envs, seed: int) -> torch.Tensor:
 
 def finished_episodes(infos: dict) -> dict:
     """The episodes that ended in a vector env's step (its info has "final_info"): per env, whether
-    its episode ended (`ended`), and the ended episodes' place success, pick success, return and length."""
+    its episode ended (`ended`), and the ended episodes' place success, pick success, return and length,
+    and where they ended: place distance and angle error to the goal, whether the element was held."""
     fin = infos["final_info"]
     return dict(ended=infos["_final_info"], success=fin["episode"]["success_once"], picked=fin["picked"],
-                ep_return=fin["episode"]["return"], ep_length=fin["episode"]["episode_len"])
+                ep_return=fin["episode"]["return"], ep_length=fin["episode"]["episode_len"],
+                end_place_dist=fin["place_dist"], end_place_angle_deg=fin["place_angle_deg"], held_at_end=fin["is_grasped"])
 
 
 @torch.no_grad()

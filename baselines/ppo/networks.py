@@ -4,6 +4,7 @@ normalization, and the MLP they and ICM (baselines/ppo/curiosity.py) are built o
 from __future__ import annotations
 
 import math
+from typing import Optional
 
 import numpy as np
 import torch
@@ -22,13 +23,11 @@ def layer_init(layer, std=np.sqrt(2), bias_const=0.0):
     return layer
 
 
-def mlp(n_in: int, n_out: int, hidden: int, out_std: float = np.sqrt(2), act=nn.Tanh) -> nn.Sequential:
-    return nn.Sequential(
-        layer_init(nn.Linear(n_in, hidden)), act(),
-        layer_init(nn.Linear(hidden, hidden)), act(),
-        layer_init(nn.Linear(hidden, hidden)), act(),
-        layer_init(nn.Linear(hidden, n_out), std=out_std),
-    )
+def mlp(n_in: int, n_out: int, hidden: int, out_std: float = np.sqrt(2), act=nn.Tanh, layers: int = 3) -> nn.Sequential:
+    """`layers` hidden layers of `hidden` units (orthogonal init, as CleanRL's), then the output layer."""
+    sizes = [n_in] + [hidden] * layers
+    body = [m for a, b in zip(sizes, sizes[1:]) for m in (layer_init(nn.Linear(a, b)), act())]
+    return nn.Sequential(*body, layer_init(nn.Linear(hidden, n_out), std=out_std))
 
 
 class RunningMeanStd(nn.Module):
@@ -83,13 +82,15 @@ class Agent(nn.Module):
     at `quat_starts`) normalized by `obs_rms` (running mean and variance, clipped to +-10 as
     gymnasium's NormalizeObservation does; raw until it has seen data)."""
 
-    def __init__(self, obs_dim: int, act_dim: int, hidden: int, quat_starts: tuple[int, ...] = ()):
+    def __init__(self, obs_dim: int, act_dim: int, hidden: int, quat_starts: tuple[int, ...] = (), value_heads: int = 1,
+                 layers: int = 3):
         super().__init__()
         self.quat_starts = tuple(quat_starts)
         feature_dim = obs_dim + 2 * len(self.quat_starts)
         self.obs_rms = RunningMeanStd((feature_dim,))
-        self.critic = mlp(feature_dim, 1, hidden, out_std=1.0)
-        self.actor_mean = mlp(feature_dim, act_dim, hidden, out_std=0.01 * np.sqrt(2))
+        # one value per reward signal (ML-Agents' value heads): extrinsic, and curiosity's where it has its own
+        self.critic = mlp(feature_dim, value_heads, hidden, out_std=1.0, layers=layers)
+        self.actor_mean = mlp(feature_dim, act_dim, hidden, out_std=0.01 * np.sqrt(2), layers=layers)
         self.actor_logstd = nn.Parameter(torch.ones(1, act_dim) * -0.5)
 
     def features(self, x):
@@ -131,8 +132,23 @@ class Agent(nn.Module):
         return action, logprob.sum(1), self.critic(x)
 
 
-def make_agent(args, obs_dim: int, act_dim: int) -> Agent:
-    """The Agent that `args` (ppo.py's Args or a checkpoint's saved dict of them) describes."""
+def value_heads(args) -> int:
+    """Value heads of the agent `args` describes: two (extrinsic, curiosity) with ML-Agents' curiosity,
+    which has its own discount and ignores episode ends; one otherwise."""
     get = args.get if isinstance(args, dict) else lambda k, d=None: getattr(args, k, d)
+    return 2 if get("curiosity") == "icm" else 1
+
+
+def make_agent(args, obs_dim: int, act_dim: int, base_args: Optional[dict] = None) -> nn.Module:
+    """The Agent that `args` (ppo.py's Args or a checkpoint's saved dict of them) describes; with
+    `residual_of`, a ResidualAgent on a base that `base_args` (the base checkpoint's args) describes."""
+    get = args.get if isinstance(args, dict) else lambda k, d=None: getattr(args, k, d)
+    if get("residual_of"):
+        from baselines.ppo.residual import ResidualAgent
+
+        if base_args is None:
+            raise ValueError("a residual agent needs its base's args (the checkpoint's base_args)")
+        return ResidualAgent(make_agent(base_args, obs_dim, act_dim), get("hidden_size"), get("residual_scale"),
+                             value_heads=value_heads(args))
     starts = STATE_QUATERNION_STARTS if get("rotation_features", False) else ()
-    return Agent(obs_dim, act_dim, get("hidden_size"), starts)
+    return Agent(obs_dim, act_dim, get("hidden_size"), starts, value_heads(args), get("num_layers", 3))

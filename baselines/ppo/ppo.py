@@ -25,6 +25,7 @@ SIGTERM ends a run after the iteration in progress, with a checkpoint (a second 
 from __future__ import annotations
 
 import dataclasses
+import functools
 import math
 import os
 import random
@@ -50,7 +51,8 @@ from mani_skill.vector.wrappers.gymnasium import ManiSkillVectorEnv
 from baselines.ppo.checkpoints import CSVLog, Progress, check_fit, load_checkpoint, save_checkpoint
 from baselines.ppo.curiosity import ICM
 from baselines.ppo.evaluation import evaluate_envs, finished_episodes, reset
-from baselines.ppo.networks import Agent, make_agent
+from baselines.ppo.networks import Agent, make_agent, value_heads
+from baselines.ppo.start_states import StartFromStates
 from ms_construction.curriculum import STAGE_NAMES
 from ms_construction.envs import ENV_IDS
 from ms_construction.vector_env import CPUVectorEnv
@@ -122,8 +124,9 @@ class Args:
     """minibatches per update epoch."""
     update_epochs: int = 4
     """epochs per rollout."""
-    norm_adv: bool = True
-    """normalize advantages per minibatch."""
+    norm_adv: Literal["minibatch", "batch", "none"] = "minibatch"
+    """normalize advantages per minibatch (CleanRL's, ManiSkill's), once over the whole update batch
+    (ML-Agents'), or not at all."""
     clip_coef: float = 0.2
     """PPO clip coefficient."""
     clip_vloss: bool = False
@@ -132,20 +135,26 @@ class Args:
     """entropy bonus coefficient."""
     vf_coef: float = 0.5
     """value loss coefficient."""
-    max_grad_norm: float = 0.5
-    """gradient clipping."""
+    max_grad_norm: Optional[float] = 0.5
+    """gradient clipping of policy and value (None: none, as ML-Agents)."""
     target_kl: Optional[float] = 0.1
     """stop an update early when the approximate KL exceeds this."""
     reward_scale: float = 1.0
     """scale of the extrinsic reward."""
     eval_freq: int = 10
     """evaluate every this many iterations (and at stage ends)."""
-    bootstrap_at_truncation: bool = True
-    """bootstrap episodes cut by the time limit with the value of their last observation (they did
-    not end there); off treats truncation like termination. (Saved as `finite_horizon_gae` in
-    earlier checkpoints, a name that means a GAE variant in ManiSkill's baseline.)"""
+    bootstrap_at_done: Optional[Literal["always", "truncated", "never"]] = None
+    """which episode ends bootstrap with the value of their last observation. `truncated`: episodes cut
+    by the time limit (they did not end there); success is an end with nothing after it. `always`
+    (ManiSkill's PPO default, its name): every end, success included, so that a success state counts
+    as one that keeps paying what it paid; the dense rewards are made for it (see the task card).
+    `never`: no end. Default: `always` with the dense rewards, `truncated` with sparse (ML-Agents',
+    which bootstraps interrupted episodes only). (Earlier checkpoints saved a boolean
+    `finite_horizon_gae` or `bootstrap_at_truncation`: true is `truncated`.)"""
     hidden_size: int = 256
-    """width of the policy, value and ICM networks."""
+    """width of the policy and value networks."""
+    num_layers: int = 3
+    """hidden layers of the policy and value networks (ML-Agents' default: 2)."""
     norm_obs: bool = True
     """normalize observations by their running mean and variance (kept in the checkpoint), as CleanRL's
     continuous-control PPO does (with gymnasium's NormalizeObservation)."""
@@ -165,16 +174,41 @@ class Args:
     first steps follow advantages that mean something."""
     checkpoint_freq: int = 10
     """write a checkpoint every this many iterations (and at stage changes, the end, and Ctrl-C)."""
+    extend: bool = False
+    """with --resume: continue to this command's --total-timesteps and --curriculum (which must start
+    with the run's own stages) instead of the run's own, e.g. to take a finished run further."""
+    stage_schedules: bool = False
+    """ML-Agents' linear schedules, restarted at every curriculum stage (as when each stage is a run that
+    inherits the last): over a stage's --stage-timesteps the learning rate falls to 1e-10, the clip
+    coefficient to 0.1 and the entropy coefficient to 1e-5."""
 
-    curiosity: Literal["none", "icm"] = "icm"
-    """intrinsic reward: ICM's forward-model error, or none (plain PPO)."""
+    residual_of: Optional[str] = None
+    """a checkpoint (a behaviour clone) that stays frozen as the base policy; PPO learns a correction
+    added to its actions (baselines/ppo/residual.py, ResiP). Its observation statistics stay too."""
+    residual_scale: float = 0.1
+    """the correction's scale in action units."""
+    start_states: Optional[str] = None
+    """a bank of env states (baselines/ppo/start_states.py, where a policy failed) that a share of the
+    training episodes start from; evaluation always resets as usual. physx_cpu only."""
+    start_states_share: float = 0.5
+    """the share of training episodes that start from the bank."""
+
+    curiosity: Literal["none", "icm", "icm_normalized"] = "icm"
+    """intrinsic reward (baselines/ppo/curiosity.py): `icm` as ML-Agents computes it (the forward model's
+    raw error x strength, capped at 1, with its own value head and discount, ignoring episode ends);
+    `icm_normalized`, ours: the error divided by its running std, added to the extrinsic reward;
+    or none (plain PPO)."""
     icm_strength: float = 0.02
-    """scale of the normalized intrinsic reward. ML-Agents documents 1.0 as its curiosity strength's
-    default (typical 0.001 to 0.1) and uses 0.02 in an example config; we keep that 0.02."""
+    """curiosity's strength. ML-Agents documents 1.0 as its default (typical 0.001 to 0.1) and uses 0.02
+    in its example configuration with curiosity; we keep that 0.02."""
+    icm_gamma: float = 0.99
+    """discount of the curiosity reward (its own value head; ML-Agents' default)."""
     icm_forward_weight: float = 0.2
-    """beta: ICM loss = (1 - beta) inverse loss + beta forward loss."""
-    icm_feature_dim: int = 64
-    """size of ICM's feature space phi(s)."""
+    """beta: ICM loss = 10 ((1 - beta) inverse loss + beta forward loss) (ML-Agents)."""
+    icm_feature_dim: int = 128
+    """size of ICM's feature space phi(s) and of its encoder's layers (ML-Agents: 128)."""
+    icm_hidden_size: int = 256
+    """width of ICM's forward and inverse models (ML-Agents: 256)."""
     icm_learning_rate: float = 3e-4
     """Adam learning rate of ICM."""
 
@@ -200,7 +234,10 @@ def make_envs(args: Args, num_envs: int, device: torch.device, eval_mode: bool =
     kwargs = dict(obs_mode="state", control_mode=args.control_mode, reward_mode=args.reward_mode,
                   render_mode="rgb_array" if video_dir else None)
     if args.sim_backend == "physx_cpu":
-        return CPUVectorEnv(args.env_id, num_envs, kwargs, device=device, video_dir=video_dir)
+        wrappers = ()
+        if args.start_states and not eval_mode:
+            wrappers = (functools.partial(StartFromStates, bank=args.start_states, share=args.start_states_share),)
+        return CPUVectorEnv(args.env_id, num_envs, kwargs, device=device, video_dir=video_dir, wrappers=wrappers)
     env = gym.make(args.env_id, num_envs=num_envs, sim_backend=args.sim_backend, **kwargs)
     if video_dir is not None:
         from mani_skill.utils.wrappers import RecordEpisode
@@ -234,6 +271,18 @@ def should_promote(args: Args, progress: Progress) -> Optional[str]:
     return None
 
 
+SCHEDULE_FLOORS = dict(learning_rate=1e-10, clip_coef=0.1, ent_coef=1e-5)
+"""where ML-Agents' linear schedules end (its learning rate, epsilon and beta)."""
+
+
+def stage_schedule(args: Args, progress: Progress) -> Args:
+    """`args` with the learning rate, clip and entropy coefficients of ML-Agents' linear schedules at
+    this point of the current stage (--stage-schedules): from their values to SCHEDULE_FLOORS over
+    --stage-timesteps, restarting at every stage."""
+    frac = 1.0 - min(1.0, (progress.global_step - progress.stage_start_step) / args.stage_timesteps)
+    return dataclasses.replace(args, **{k: (getattr(args, k) - floor) * frac + floor for k, floor in SCHEDULE_FLOORS.items()})
+
+
 def validate(args: Args) -> None:
     """Refuse, before anything starts, what the run would otherwise fail on later (often in the env
     worker processes, with their tracebacks)."""
@@ -244,6 +293,15 @@ def validate(args: Args) -> None:
         allowed = get_args(hints[f.name]) if get_origin(hints[f.name]) is Literal else ()
         if allowed and getattr(args, f.name) not in allowed:
             raise SystemExit(f"--{f.name.replace('_', '-')} {getattr(args, f.name)}: use one of {', '.join(allowed)}")
+    for name in ("residual_of", "start_states"):
+        if getattr(args, name) is not None and not Path(getattr(args, name)).is_file():
+            raise SystemExit(f"--{name.replace('_', '-')}: no such file: {getattr(args, name)}")
+    if args.residual_of and args.bc_coef > 0:
+        raise SystemExit("--bc-coef works on the policy's own weights; a residual agent (--residual-of) has none to pull")
+    if not 0 <= args.start_states_share <= 1:
+        raise SystemExit(f"--start-states-share must lie in [0, 1], got {args.start_states_share}")
+    if args.start_states and args.sim_backend == "physx_cuda":
+        raise SystemExit("--start-states: physx_cpu only (the bank is restored in the env worker processes)")
     missing = [p for p in args.demos if not Path(p).is_file()]
     if missing:
         raise SystemExit(f"--demos: no such file(s): {', '.join(missing)} (record them with scripts/collect_demos.py)")
@@ -268,6 +326,33 @@ def resolve_defaults(args: Args) -> None:
         args.num_steps = 50 if gpu else 250
     if args.exp_name is None:
         args.exp_name = f"{args.env_id}__{args.curiosity}__{'-'.join(args.curriculum)}__s{args.seed}"
+    if args.bootstrap_at_done is None:
+        args.bootstrap_at_done = "truncated" if args.reward_mode == "sparse" else "always"
+
+
+# ------------------------------------------------------------------------------------------------- #
+# Advantages
+# ------------------------------------------------------------------------------------------------- #
+def bootstrap_mask(terminated: torch.Tensor, truncated: torch.Tensor, bootstrap_at_done: str) -> torch.Tensor:
+    """1 where an episode ended ([steps, envs]) and bootstraps with the value of its last observation."""
+    ends = {"always": terminated + truncated, "truncated": truncated, "never": torch.zeros_like(truncated)}
+    return ends[bootstrap_at_done].clamp(max=1)
+
+
+def gae(rewards: torch.Tensor, values: torch.Tensor, next_value: torch.Tensor, final_values: torch.Tensor,
+        dones: torch.Tensor, gamma: float, gae_lambda: float) -> torch.Tensor:
+    """Generalized advantage estimates of a rollout ([steps, envs]): `values` V(s_t), `next_value`
+    V(s) after the last step, `final_values` the value an episode that ended at step t bootstraps with
+    (V of its last observation where it does, see `bootstrap_mask`, else 0), `dones` where episodes ended."""
+    advantages = torch.zeros_like(rewards)
+    lastgaelam = torch.zeros_like(next_value)
+    for t in reversed(range(len(rewards))):
+        boot = next_value if t == len(rewards) - 1 else values[t + 1]
+        v = torch.where(dones[t].bool(), final_values[t], boot)
+        delta = rewards[t] + gamma * v - values[t]
+        lastgaelam = delta + gamma * gae_lambda * (1 - dones[t]) * lastgaelam
+        advantages[t] = lastgaelam
+    return advantages
 
 
 # ------------------------------------------------------------------------------------------------- #
@@ -276,14 +361,18 @@ def resolve_defaults(args: Args) -> None:
 def ppo_update(agent: Agent, optimizer: optim.Optimizer, batch: dict, args: Args, icm: Optional[ICM] = None,
                icm_optimizer: Optional[optim.Optimizer] = None, demos: Optional[tuple] = None,
                value_only: bool = False) -> dict[str, float]:
-    """PPO's clipped update on one rollout: `batch` holds obs, next_obs, actions, logprobs, advantages,
-    returns and values, flat over steps and envs. `args.update_epochs` epochs of `args.num_minibatches`
+    """PPO's clipped update on one rollout: `batch` holds obs, next_obs, actions, logprobs and advantages,
+    flat over steps and envs, and returns and values [batch, value heads] (the value loss is the mean of
+    the heads'). `args.update_epochs` epochs of `args.num_minibatches`
     shuffled minibatches (numpy's RNG), stopping after an epoch whose last minibatch's approximate KL
     exceeds `args.target_kl`; ICM learns on the same minibatches. `demos` (obs, actions) add a
     behaviour-cloning term; `value_only` trains the critic alone (the warm-up). The mean of each loss."""
     batch_size = len(batch["obs"])
     minibatch_size = batch_size // args.num_minibatches
     b_inds = np.arange(batch_size)
+    advantages = batch["advantages"]
+    if args.norm_adv == "batch":
+        advantages = (advantages - advantages.mean()) / (advantages.std() + 1e-8)
     losses = defaultdict(list)  # tensors, read once at the end: a .item() per loss per minibatch costs more
     for _epoch in range(args.update_epochs):
         np.random.shuffle(b_inds)
@@ -295,11 +384,11 @@ def ppo_update(agent: Agent, optimizer: optim.Optimizer, batch: dict, args: Args
             ratio = logratio.exp()
             with torch.no_grad():
                 approx_kl = ((ratio - 1) - logratio).mean()
-            mb_adv = batch["advantages"][mb]
-            if args.norm_adv:
+            mb_adv = advantages[mb]
+            if args.norm_adv == "minibatch":
                 mb_adv = (mb_adv - mb_adv.mean()) / (mb_adv.std() + 1e-8)
             pg_loss = torch.max(-mb_adv * ratio, -mb_adv * torch.clamp(ratio, 1 - args.clip_coef, 1 + args.clip_coef)).mean()
-            newvalue, mb_ret = newvalue.view(-1), batch["returns"][mb]
+            mb_ret = batch["returns"][mb]
             if args.clip_vloss:
                 mb_val = batch["values"][mb]
                 v_clipped = mb_val + torch.clamp(newvalue - mb_val, -args.clip_coef, args.clip_coef)
@@ -317,17 +406,13 @@ def ppo_update(agent: Agent, optimizer: optim.Optimizer, batch: dict, args: Args
                 loss = v_loss * args.vf_coef
             optimizer.zero_grad()
             loss.backward()
-            nn.utils.clip_grad_norm_(agent.parameters(), args.max_grad_norm)
+            if args.max_grad_norm is not None:
+                nn.utils.clip_grad_norm_(agent.parameters(), args.max_grad_norm)
             optimizer.step()
             if icm is not None:
-                fwd, inv = icm.losses(obs, batch["next_obs"][mb], actions)
-                icm_loss = (1 - args.icm_forward_weight) * inv + args.icm_forward_weight * fwd
-                icm_optimizer.zero_grad()
-                icm_loss.backward()
-                nn.utils.clip_grad_norm_(icm.parameters(), args.max_grad_norm)
-                icm_optimizer.step()
-                losses["icm_forward_loss"].append(fwd.detach())
-                losses["icm_inverse_loss"].append(inv.detach())
+                icm_losses = icm.update(icm_optimizer, obs, batch["next_obs"][mb], actions)
+                losses["icm_forward_loss"].append(icm_losses["forward"])
+                losses["icm_inverse_loss"].append(icm_losses["inverse"])
             losses["value_loss"].append(v_loss.detach())
             losses["policy_loss"].append(pg_loss.detach())
             losses["entropy"].append(entropy_loss.detach())
@@ -357,6 +442,8 @@ class Run:
     icm: Optional[ICM]
     icm_optimizer: Optional[optim.Optimizer]
     progress: Progress
+    base_args: Optional[dict] = None
+    """a residual agent's base policy's args (saved with the checkpoint, which holds the base's weights)."""
 
     @property
     def obs_dim(self) -> int:
@@ -369,7 +456,7 @@ class Run:
     def save(self) -> None:
         if self.args.save_model:
             save_checkpoint(checkpoint_path(self.args), self.args, self.progress, self.agent, self.optimizer, self.icm,
-                            self.icm_optimizer, self.obs_dim, self.act_dim)
+                            self.icm_optimizer, self.obs_dim, self.act_dim, base_args=self.base_args)
 
 
 def setup(args: Args) -> Run:
@@ -377,8 +464,13 @@ def setup(args: Args) -> Run:
     resume = load_checkpoint(args.resume, "--resume") if args.resume else None
     init = load_checkpoint(args.checkpoint) if args.checkpoint and resume is None else None
     if resume is not None:
-        saved = resume["args"]
-        args = Args(**{**saved, "resume": args.resume, "curriculum": tuple(saved["curriculum"])})
+        saved, extended = resume["args"], {}
+        if args.extend:
+            if tuple(args.curriculum[:len(saved["curriculum"])]) != tuple(saved["curriculum"]):
+                raise SystemExit(f"--extend: --curriculum {' '.join(args.curriculum)} must start with the run's own stages "
+                                 f"({' '.join(saved['curriculum'])})")
+            extended = dict(total_timesteps=args.total_timesteps, curriculum=tuple(args.curriculum))
+        args = Args(**{**saved, "resume": args.resume, "curriculum": tuple(saved["curriculum"]), **extended})
     validate(args)
     resolve_defaults(args)
 
@@ -396,11 +488,22 @@ def setup(args: Args) -> Run:
     obs_dim = int(np.prod(eval_envs.single_observation_space.shape))
     act_dim = int(np.prod(eval_envs.single_action_space.shape))
 
-    agent = make_agent(args, obs_dim, act_dim).to(device)
-    optimizer = optim.Adam(agent.parameters(), lr=args.learning_rate, eps=1e-5)
+    base = None  # a residual run's base policy: its checkpoint when the run starts, its args since
+    if resume is not None or init is not None:
+        base_args = (resume or init).get("base_args")
+    elif args.residual_of:
+        base = load_checkpoint(args.residual_of, "--residual-of", args.env_id, obs_dim, act_dim, args.control_mode)
+        base_args = base["args"]
+    else:
+        base_args = None
+    agent = make_agent(args, obs_dim, act_dim, base_args).to(device)
+    if base is not None:
+        agent.base.load_state_dict(base["agent"])
+    optimizer = optim.Adam([p for p in agent.parameters() if p.requires_grad], lr=args.learning_rate, eps=1e-5)
     icm = icm_optimizer = None
-    if args.curiosity == "icm":
-        icm = ICM(obs_dim, act_dim, args.icm_feature_dim, args.hidden_size).to(device)
+    if args.curiosity != "none":
+        icm = ICM(obs_dim, act_dim, args.icm_strength, args.icm_feature_dim, args.icm_hidden_size, args.icm_forward_weight,
+                  normalize=args.curiosity == "icm_normalized").to(device)
         icm_optimizer = optim.Adam(icm.parameters(), lr=args.icm_learning_rate)
 
     progress = Progress()
@@ -426,7 +529,7 @@ def setup(args: Args) -> Run:
             icm.load_state_dict(init["icm"])
         if args.evaluate:
             progress = Progress(**init["progress"])
-    return Run(args, eval_envs, agent, optimizer, icm, icm_optimizer, progress)
+    return Run(args, eval_envs, agent, optimizer, icm, icm_optimizer, progress, base_args)
 
 
 def main(args: Args) -> Progress:
@@ -478,7 +581,8 @@ def train(run: Run) -> Progress:
     rewards = torch.zeros_like(logprobs)
     dones = torch.zeros_like(logprobs)
     terminated = torch.zeros_like(logprobs)
-    values = torch.zeros_like(logprobs)
+    heads = value_heads(args)
+    values = torch.zeros((args.num_steps, args.num_envs, heads), device=device)
     intrinsic_running = torch.zeros(args.num_envs, device=device)
 
     stop: list[int] = []  # the signal that asked the run to end
@@ -498,6 +602,10 @@ def train(run: Run) -> Progress:
             t0 = time.time()
             if args.anneal_lr:
                 run.optimizer.param_groups[0]["lr"] = args.learning_rate * (1.0 - (progress.iteration - 1.0) / num_iterations)
+            update_args = args
+            if args.stage_schedules:
+                update_args = stage_schedule(args, progress)
+                run.optimizer.param_groups[0]["lr"] = update_args.learning_rate
             episodes = defaultdict(list)
 
             # ---- rollout ----
@@ -505,7 +613,7 @@ def train(run: Run) -> Progress:
                 progress.global_step += args.num_envs
                 obs_buf[step] = next_obs
                 action, logprob, value = agent.act(next_obs)
-                values[step] = value.flatten()
+                values[step] = value
                 actions[step], logprobs[step] = action, logprob
                 next_obs, reward, terminations, truncations, infos = envs.step(action.clamp(-1, 1))
                 rewards[step] = reward * args.reward_scale
@@ -514,58 +622,58 @@ def train(run: Run) -> Progress:
                 if "final_info" in infos:
                     ep = finished_episodes(infos)
                     next_obs_buf[step, ep["ended"]] = infos["final_observation"][ep["ended"]]
-                    for key in ("success", "picked", "ep_return", "ep_length"):
+                    for key in ("success", "picked", "ep_return", "ep_length", "end_place_dist", "end_place_angle_deg",
+                                "held_at_end"):
                         episodes[key] += ep[key][ep["ended"]].float().tolist()
 
             # ---- intrinsic reward (computed on the whole rollout) ----
             flat = lambda x: x.reshape(-1, *x.shape[2:])  # noqa: E731
             intrinsic = torch.zeros_like(rewards)
             if icm is not None:
-                intrinsic = icm.intrinsic_reward(flat(obs_buf), flat(next_obs_buf), flat(actions), args.icm_strength).view_as(rewards)
+                intrinsic = icm.intrinsic_reward(flat(obs_buf), flat(next_obs_buf), flat(actions)).view_as(rewards)
                 # intrinsic return of each finished episode (carried across rollouts)
                 for step in range(args.num_steps):
                     intrinsic_running += intrinsic[step]
                     ended = dones[step].bool()
                     episodes["intrinsic_return"] += intrinsic_running[ended].tolist()
                     intrinsic_running[ended] = 0
-            total_rewards = rewards + intrinsic
 
-            # ---- GAE ----
+            # ---- GAE, one value head per reward signal ----
             with torch.no_grad():
-                next_value = agent.get_value(next_obs).flatten()
-                # value of s_{t+1} for every step: V(final obs) where an episode was cut by the time
-                # limit (finite-horizon bootstrap), 0 where it terminated
-                v_next = agent.get_value(flat(next_obs_buf)).view_as(rewards)
-                cut = (dones - terminated) if args.bootstrap_at_truncation else torch.zeros_like(dones)
-                v_next = v_next * cut
-                advantages = torch.zeros_like(rewards)
-                lastgaelam = torch.zeros(args.num_envs, device=device)
-                for t in reversed(range(args.num_steps)):
-                    boot = next_value if t == args.num_steps - 1 else values[t + 1]
-                    v = torch.where(dones[t].bool(), v_next[t], boot)
-                    delta = total_rewards[t] + args.gamma * v - values[t]
-                    lastgaelam = delta + args.gamma * args.gae_lambda * (1 - dones[t]) * lastgaelam
-                    advantages[t] = lastgaelam
+                next_value = agent.get_value(next_obs)
+                # V(last observation) where an episode ended and bootstraps (see bootstrap_mask)
+                v_final = agent.get_value(flat(next_obs_buf)).view(args.num_steps, args.num_envs, heads)
+                truncated = dones - terminated
+                signals = [(rewards if args.curiosity != "icm_normalized" else rewards + intrinsic, args.gamma,
+                            bootstrap_mask(terminated, truncated, args.bootstrap_at_done))]
+                if heads == 2:  # ML-Agents' curiosity: its own discount, and every episode end bootstraps
+                    signals.append((intrinsic, args.icm_gamma, dones))
+                advantages = torch.stack([gae(r, values[..., h], next_value[:, h], v_final[..., h] * mask, dones, gamma,
+                                              args.gae_lambda) for h, (r, gamma, mask) in enumerate(signals)], -1)
                 returns = advantages + values
+                advantages = advantages.mean(-1)  # ML-Agents: the mean of the signals' advantages
 
             # ---- update ----
             batch = dict(obs=flat(obs_buf), next_obs=flat(next_obs_buf), actions=flat(actions),
                          logprobs=logprobs.reshape(-1), advantages=advantages.reshape(-1),
-                         returns=returns.reshape(-1), values=values.reshape(-1))
-            losses = ppo_update(agent, run.optimizer, batch, args, run.icm, run.icm_optimizer, demos,
+                         returns=returns.reshape(-1, heads), values=values.reshape(-1, heads))
+            losses = ppo_update(agent, run.optimizer, batch, update_args, run.icm, run.icm_optimizer, demos,
                                 value_only=progress.iteration <= args.critic_warmup_iterations)
             # statistics change after the update, so that each update sees its rollout's normalization
-            if args.norm_obs and not args.freeze_obs_norm:
+            if args.norm_obs and not args.freeze_obs_norm and not args.residual_of:
                 agent.obs_rms.update(agent.features(batch["obs"]))
 
             # ---- logs, evaluation, curriculum ----
             sps = batch_size / (time.time() - t0)
             row = dict(global_step=progress.global_step, iteration=progress.iteration, stage=stage, sps=round(sps, 1),
-                       learning_rate=run.optimizer.param_groups[0]["lr"], episodes=len(episodes["success"]))
+                       learning_rate=run.optimizer.param_groups[0]["lr"], episodes=len(episodes["success"]),
+                       clip_coef=update_args.clip_coef, ent_coef=update_args.ent_coef)
             row.update(losses)
             if episodes["success"]:
-                row.update(pick_success=float(np.mean(episodes["picked"])), place_success=float(np.mean(episodes["success"])),
-                           extrinsic_return=float(np.mean(episodes["ep_return"])), episode_length=float(np.mean(episodes["ep_length"])))
+                row.update({k: float(np.mean(episodes[key])) for k, key in (
+                    ("pick_success", "picked"), ("place_success", "success"), ("extrinsic_return", "ep_return"),
+                    ("episode_length", "ep_length"), ("end_place_dist", "end_place_dist"),
+                    ("end_place_angle_deg", "end_place_angle_deg"), ("held_at_end", "held_at_end"))})
                 if episodes["intrinsic_return"]:
                     row["intrinsic_return"] = float(np.mean(episodes["intrinsic_return"]))
             if progress.iteration % args.eval_freq == 0 or progress.iteration == num_iterations:

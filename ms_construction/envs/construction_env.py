@@ -401,7 +401,8 @@ class ConstructionTaskEnv(BaseEnv):
 
     def compute_dense_reward(self, obs: Any, action: torch.Tensor, info: dict):
         """Staged: reach and face the grasp surface (<= 1); held: 2 + carry (<= 1) + orient (<= 1);
-        placed: 5."""
+        placed: 5, more than any other step, for a learner that bootstraps at success (ManiSkill's
+        convention; see the task card)."""
         tcp = self.agent.tcp.pose.raw_pose
         grasp = self._grasp_frame()
         el, goal = self.obj.pose.raw_pose, self._goal_table[self.task_id, self.goal_slot]

@@ -43,8 +43,12 @@ curriculum stage (`curriculum_stage`, Table I; default cp4: {_CP4["pick"]:.2f} m
 {_CP4["angle_deg"]:g} degrees).
 
 **Rewards:** sparse = Algorithm 1 (-1/{_STEPS} every step, 1 on the first grasp, 2 on placement);
-dense = staged reach, grasp, carry and orient, place (max {ConstructionTaskEnv.DENSE_REWARD_MAX:g});
-normalized_dense = dense / {ConstructionTaskEnv.DENSE_REWARD_MAX:g}.
+dense = staged reach and face (<= 1), held (2 + carry <= 1 + orient <= 1), placed
+({ConstructionTaskEnv.DENSE_REWARD_MAX:g}, the most any step pays); normalized_dense = dense / {ConstructionTaskEnv.DENSE_REWARD_MAX:g}. Convention (ManiSkill's):
+the dense rewards are for a learner that bootstraps at every episode end, success included
+(ManiSkill's PPO `bootstrap_at_done="always"`, ppo.py's default for them), so that a placed element
+counts as a state that keeps paying the most; a learner that values success as an end with nothing
+after it finds holding the element near its goal worth more than placing it.
 """
 
 

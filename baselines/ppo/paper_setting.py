@@ -1,0 +1,133 @@
+"""The paper's experiment as ppo.py runs it: its settings, its runs, and how a campaign of them resumes.
+
+The paper (Unity ML-Agents) fixes the reward (Algorithm 1: our `sparse`), the curiosity bonus, the
+curriculum (Table I, each stage 2M steps inheriting every parameter) and the evaluation. It is silent
+on the rest; there we follow ML-Agents' documented PPO defaults where they carry over, ppo.py's
+otherwise:
+
+| setting | value | source |
+|---|---|---|
+| reward | sparse (Algorithm 1) | the paper |
+| curriculum | cp1 -> cp4, promoted after exactly 2M env steps each, no success gate | the paper |
+| curiosity | ICM as ML-Agents computes it, strength 0.02, gamma 0.99, own value head, ignores episode ends | the paper; strength: ML-Agents' example configuration |
+| curiosity network | encoder 2 x 128, forward and inverse models 256, lr 3e-4, loss 10 x (0.2 fwd + 0.8 inv) | ML-Agents' defaults |
+| policy and value | 2 hidden layers of 128, no observation normalization, raw quaternions | ML-Agents: hidden_units 128, num_layers 2, normalize false |
+| samples per update | 10,000 (buffer), minibatches of 1,000, 3 epochs | ML-Agents: buffer_size 10240, batch_size 1024, num_epoch 3; rounded so that a stage is exactly 200 updates |
+| learning rate | 3e-4, linear to 0 over each stage | ML-Agents: learning_rate 3e-4, linear schedule over a run's max_steps (each stage a run that inherits the last) |
+| clip (epsilon) | 0.2, linear to 0.1 over each stage | ML-Agents: epsilon 0.2, its schedule follows the learning rate's, floor 0.1 |
+| entropy (beta) | 5e-3, linear to 1e-5 over each stage | ML-Agents: beta 5e-3, floor 1e-5 |
+| GAE | lambda 0.95, gamma 0.99 | ML-Agents: lambd 0.95, extrinsic gamma 0.99 |
+| advantages | normalized over the whole update batch | ML-Agents |
+| value loss | clipped, weight 0.5; no gradient-norm clipping; no KL early stop | ML-Agents |
+| time-limit cut | bootstrapped with the value of the last observation | ML-Agents (an interrupted episode is not done) |
+| control mode | pd_joint_delta_pos | ppo.py (the paper's Unity arm is not ours) |
+| action noise | Gaussian, log std starts at -0.5, actions clipped to [-1, 1] | ppo.py (ML-Agents: std 1, actions clipped to [-3, 3] / 3) |
+| activation | tanh | ppo.py (ML-Agents: Swish) |
+| trajectory cuts | a rollout's GAE runs over the whole rollout | ppo.py (ML-Agents cuts trajectories every time_horizon = 64 steps) |
+| envs | one per CPU core on physx_cpu | ppo.py (the paper does not say) |
+
+Runs (`RUNS`): `general` is the paper's general agent (8M steps); `no_curiosity` is its cp1 stage again
+without curiosity, same seed (what curiosity does here); the control groups 4.1/4.2/4.3 train one
+agent per task at cp4 from the first step, in 2M-step stages of cp4 (the general agent's cp4
+stage is 2M steps; 4 stages match its whole 8M), each stage restarting the schedules as the
+general agent's stages do.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import os
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Optional
+
+from baselines.ppo import ppo
+from baselines.ppo.checkpoints import load_checkpoint
+from ms_construction.envs import TASK_ENV_IDS
+
+STAGE_STEPS = 2_000_000
+"""the paper's steps per curriculum stage."""
+UPDATE_SAMPLES = 10_000
+"""samples per PPO update (ML-Agents' buffer_size, 10240, rounded to divide a stage)."""
+CAMPAIGN_DIR = Path("campaign")
+"""where the campaign's runs live; their latest checkpoint and progress CSV are committed."""
+CONTROL_GROUPS = {"ceiling": "controlGroup4.1", "window": "controlGroup4.2", "flooring": "controlGroup4.3"}
+
+
+def paper_args(num_envs: Optional[int] = None, **overrides) -> ppo.Args:
+    """ppo.Args of the paper setting (see the module docstring), for `num_envs` env processes (default:
+    one per CPU core); `overrides` replace any field afterwards."""
+    num_envs = num_envs or os.cpu_count() or 1
+    if UPDATE_SAMPLES % num_envs:
+        raise SystemExit(f"--num-envs {num_envs}: the paper setting's {UPDATE_SAMPLES} samples per update must "
+                         f"divide evenly among the envs (use 1, 2, 4, 5, 8, 10, 16, 20, 25, 40, 50, ...)")
+    args = ppo.Args(
+        env_id="ConstructionPickPlace-v1", reward_mode="sparse", control_mode="pd_joint_delta_pos",
+        sim_backend="physx_cpu", cuda=False,
+        curriculum=("cp1", "cp2", "cp3", "cp4"), stage_timesteps=STAGE_STEPS, total_timesteps=4 * STAGE_STEPS,
+        promote_success=2.0,  # never: promotion by step count only
+        curiosity="icm", icm_strength=0.02, icm_gamma=0.99, icm_feature_dim=128, icm_hidden_size=256,
+        icm_learning_rate=3e-4, icm_forward_weight=0.2,
+        hidden_size=128, num_layers=2, norm_obs=False, rotation_features=False,
+        num_envs=num_envs, num_steps=UPDATE_SAMPLES // num_envs, num_minibatches=UPDATE_SAMPLES // 1000, update_epochs=3,
+        learning_rate=3e-4, stage_schedules=True, clip_coef=0.2, ent_coef=5e-3, gamma=0.99, gae_lambda=0.95,
+        norm_adv="batch", clip_vloss=True, vf_coef=0.5, max_grad_norm=None, target_kl=None,
+        bootstrap_at_done="truncated", eval_freq=10, checkpoint_freq=5, log_dir=str(CAMPAIGN_DIR),
+    )
+    return dataclasses.replace(args, **overrides)
+
+
+@dataclass
+class Run:
+    """One run of the campaign: its name and its ppo.Args."""
+
+    name: str
+    args: ppo.Args
+    what: str
+
+
+def general_runs(num_envs: Optional[int] = None, seed: int = 1) -> list[Run]:
+    """Run 1 (the paper's general agent) and run 3 (its cp1 stage without curiosity)."""
+    return [
+        Run("paper_general_agent", paper_args(num_envs, seed=seed, exp_name="paper_general_agent"),
+            "the paper setting: general task, cp1 -> cp4, 2M steps each"),
+        Run("paper_cp1_no_curiosity", paper_args(num_envs, seed=seed, exp_name="paper_cp1_no_curiosity", curiosity="none",
+                                                 curriculum=("cp1",), total_timesteps=STAGE_STEPS),
+            "run 1's cp1 stage without curiosity, same seed"),
+    ]
+
+
+def control_group_runs(total_timesteps: int = STAGE_STEPS, num_envs: Optional[int] = None, seed: int = 1) -> list[Run]:
+    """Runs 2: one agent per task at cp4 from the first step, in 2M-step stages of cp4."""
+    if total_timesteps % STAGE_STEPS:
+        raise SystemExit(f"--total-timesteps {total_timesteps}: use a multiple of {STAGE_STEPS} (one cp4 stage each)")
+    stages = ("cp4",) * (total_timesteps // STAGE_STEPS)
+    return [
+        Run(f"control_{kind}", paper_args(num_envs, seed=seed, env_id=env_id, exp_name=f"control_{kind}", curriculum=stages,
+                                          total_timesteps=total_timesteps),
+            f"{CONTROL_GROUPS[kind]}: {env_id}, cp4 from the first step")
+        for kind, env_id in TASK_ENV_IDS.items()
+    ]
+
+
+def checkpoint_of(run: Run) -> Path:
+    return Path(run.args.log_dir) / run.args.exp_name / "checkpoint.pt"
+
+
+def describe(run: Run) -> str:
+    """One line: the run, its budget and stages, and where it stands."""
+    a, ckpt = run.args, checkpoint_of(run)
+    done = load_checkpoint(ckpt)["progress"]["global_step"] if ckpt.is_file() else 0
+    return (f"{run.name}: {run.what}; {a.env_id}, stages {' '.join(a.curriculum)} ({a.stage_timesteps:,} steps each), "
+            f"{a.total_timesteps:,} steps, curiosity {a.curiosity}, seed {a.seed}, {a.num_envs} envs x {a.num_steps} steps "
+            f"per update; {'resumes at step ' + format(done, ',') if done else 'starts fresh'} ({ckpt})")
+
+
+def run_or_resume(run: Run) -> None:
+    """Train `run` to the end of its budget, resuming its checkpoint if it has one. A run that was
+    planned with a larger budget than its checkpoint's (control groups from 2M to 8M) continues to it."""
+    ckpt = checkpoint_of(run)
+    if not ckpt.is_file():
+        ppo.main(run.args)
+        return
+    ppo.main(dataclasses.replace(run.args, resume=str(ckpt), extend=True))

@@ -1,0 +1,150 @@
+"""Reinforcement learning that refines the behaviour clone: one command from the clone to the shipped agent.
+
+    python -m baselines.ppo.refine                  # bank -> PPO -> validation -> ship if it beats the clone
+    python -m baselines.ppo.refine --no-ship        # everything but the last step
+
+1. bank: the clone's deterministic episodes on training seeds; where it fails, its states before the
+   element's closest approach to its goal (baselines/ppo/start_states.py);
+2. PPO (baselines/ppo/ppo.py) on the general task at cp4 with the task's own sparse reward: a
+   residual policy on the frozen clone (--residual-of, ResiP), whose critic first learns the clone's
+   returns alone (--critic-warmup-iterations), a share of the training episodes starting from the bank;
+3. validation: the result on the validation seeds (500,000 on), beside the clone's, scripts/evaluate.py's
+   way (ordinary resets, deterministic actions);
+4. ship: if it places more than the clone on its worst task and no less on average, it becomes
+   assets/checkpoints/general_agent.pt, with its campaign record (env steps, wall time, hardware);
+   the clone stays beside it as general_agent_clone.pt.
+Each step is skipped when its output is in --run-dir, and PPO resumes from its checkpoint, so the
+same command continues an interrupted refinement.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+import os
+import platform
+import shlex
+import shutil
+import sys
+import time
+from dataclasses import dataclass
+from pathlib import Path
+
+import torch
+import tyro
+
+from baselines.ppo import evaluation, ppo
+from baselines.ppo.start_states import collect_failure_states
+
+CLONE = Path("assets/checkpoints/general_agent_clone.pt")
+SHIPPED = Path("assets/checkpoints/general_agent.pt")
+VALIDATION_SEED = 500_000
+
+
+@dataclass
+class Args:
+    clone: Path = CLONE
+    """the behaviour clone to refine (it stays frozen)."""
+    run_dir: Path = Path("runs/refine")
+    """where the steps write."""
+    bank_episodes: int = 1500
+    """the clone's episodes on training seeds whose failures fill the bank."""
+    total_timesteps: int = 600_000
+    """env steps of PPO (the issue's budget for the RL stage: 2M)."""
+    num_envs: int = 4
+    """env processes (physx_cpu): more than the cores keeps them busy while the learner works."""
+    num_steps: int = 250
+    """steps per env per rollout: a batch of num_envs x num_steps."""
+    learning_rate: float = 1e-4
+    """of the residual and the critic."""
+    residual_scale: float = 0.1
+    """the correction's scale in action units."""
+    start_states_share: float = 0.5
+    """the share of training episodes that start from the bank."""
+    critic_warmup_iterations: int = 20
+    """first iterations that train only the critic, on the clone's own rollouts."""
+    bootstrap_at_done: str = "truncated"
+    """with the sparse reward: `truncated` (success is an end) or `always` (ManiSkill's); chosen by the probes
+    in docs/RESULTS.md."""
+    validation_episodes: int = 200
+    """episodes per task of the validation."""
+    seed: int = 1
+    ship: bool = True
+    """copy the result to assets/checkpoints/general_agent.pt if it beats the clone on validation."""
+
+
+def ppo_args(args: Args, bank: Path) -> ppo.Args:
+    return ppo.Args(
+        residual_of=str(args.clone), residual_scale=args.residual_scale, start_states=str(bank),
+        start_states_share=args.start_states_share, env_id="ConstructionPickPlace-v1", reward_mode="sparse",
+        curiosity="none", curriculum=("cp4",), total_timesteps=args.total_timesteps, num_envs=args.num_envs,
+        num_steps=args.num_steps, num_minibatches=4, update_epochs=4, learning_rate=args.learning_rate,
+        target_kl=0.05, critic_warmup_iterations=args.critic_warmup_iterations, bootstrap_at_done=args.bootstrap_at_done,
+        eval_freq=10**9, checkpoint_freq=5, seed=args.seed, log_dir=str(args.run_dir), exp_name="ppo",
+        sim_backend="physx_cpu", cuda=False)
+
+
+def validate(checkpoint: Path, out: Path, episodes: int) -> dict:
+    if not out.exists():
+        evaluation.main(evaluation.Args(checkpoint=checkpoint, all=True, episodes=episodes, seed=VALIDATION_SEED, json=out))
+    return {k: v["place_success"] for k, v in json.loads(out.read_text())["tasks"].items()}
+
+
+def main(args: Args) -> Path:
+    args.run_dir.mkdir(parents=True, exist_ok=True)
+    record_path = args.run_dir / "campaign.json"
+    record = json.loads(record_path.read_text()) if record_path.exists() else {"wall_s": {}}
+
+    def timed(step: str, fn):
+        t = time.time()
+        try:
+            return fn()
+        finally:
+            record["wall_s"][step] = record["wall_s"].get(step, 0.0) + time.time() - t
+            record_path.write_text(json.dumps(record, indent=1) + "\n")
+
+    bank = args.run_dir / "failure_states.pt"
+    if not bank.exists():
+        result = timed("bank", lambda: collect_failure_states(args.clone, args.bank_episodes))
+        torch.save(result, bank)
+    ckpt = args.run_dir / "ppo" / "checkpoint.pt"
+    run = ppo_args(args, bank)
+    timed("PPO", lambda: ppo.main(dataclasses.replace(run, resume=str(ckpt), extend=True) if ckpt.exists() else run))
+    n = args.validation_episodes
+    clone_val = timed("validation", lambda: validate(args.clone, args.run_dir / f"val{n}_clone.json", n))
+    refined_val = timed("validation", lambda: validate(ckpt, args.run_dir / f"val{n}_refined.json", n))
+    print("validation place success (clone -> refined): "
+          + ", ".join(f"{k} {clone_val[k]:.3f} -> {refined_val[k]:.3f}" for k in clone_val))
+    better = (min(refined_val.values()) > min(clone_val.values())
+              and sum(refined_val.values()) >= sum(clone_val.values()))
+    if args.ship and better:
+        ship(args, ckpt, bank, record, clone_val, refined_val)
+    elif args.ship:
+        print(f"not shipped: it does not beat the clone on validation; {SHIPPED} stays as it is")
+    return ckpt
+
+
+def ship(args: Args, ckpt_path: Path, bank: Path, record: dict, clone_val: dict, refined_val: dict) -> None:
+    """`ckpt_path` with its campaign record to assets/checkpoints/general_agent.pt; its CSV beside it."""
+    ckpt = torch.load(ckpt_path, map_location="cpu", weights_only=False)
+    clone = torch.load(args.clone, map_location="cpu", weights_only=False)
+    bank_info = torch.load(bank, map_location="cpu", weights_only=False)
+    ppo_steps = ckpt["progress"]["global_step"]
+    wall = record["wall_s"]
+    ckpt["campaign"] = dict(command="python -m baselines.ppo.refine " + " ".join(shlex.quote(a) for a in sys.argv[1:]), record={
+        "the clone": f"{args.clone}: " + clone.get("campaign", {}).get("record", {}).get("env steps in all", "?") + " env steps",
+        "failure bank": f"{len(bank_info['states'])} states from {bank_info['failed']} failed of {bank_info['episodes']} "
+                        "episodes of the clone on training seeds",
+        "PPO (residual on the frozen clone)": f"{ppo_steps} env steps",
+        "validation place success, clone -> refined": ", ".join(f"{k} {clone_val[k]:.3f} -> {refined_val[k]:.3f}"
+                                                                for k in clone_val),
+        "wall time": ", ".join(f"{k} {v / 60:.0f} min" for k, v in wall.items()) + f"; {sum(wall.values()) / 3600:.2f} h",
+        "hardware": f"{platform.machine()}, {os.cpu_count()} CPU cores, no GPU; physx_cpu",
+    })
+    torch.save(ckpt, SHIPPED)
+    shutil.copyfile(ckpt_path.parent / "progress.csv", SHIPPED.with_name("general_agent_refine_progress.csv"))
+    print(f"shipped {ckpt_path} -> {SHIPPED}")
+
+
+if __name__ == "__main__":
+    main(tyro.cli(Args))

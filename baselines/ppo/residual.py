@@ -1,0 +1,82 @@
+"""A residual policy on a frozen base policy (ResiP, Ankile et al. 2024): PPO learns a small Gaussian
+correction to the actions of a behaviour clone, which stays as it is.
+
+The policy's mean is `base(x) + scale * residual(z, base(x))`, where z is the observation as the base
+normalizes it (its rotation features and frozen statistics), and its standard deviation is
+`scale * exp(log_std)`. The residual's output layer starts at zero, so before any update the policy's
+deterministic action is exactly the clone's; the critic sees the same inputs. To PPO it is an Agent
+like any other (same methods), so rollouts, updates, checkpoints and evaluation do not change.
+"""
+
+from __future__ import annotations
+
+import torch
+import torch.nn as nn
+from torch.distributions.normal import Normal
+
+from baselines.ppo.networks import LOG_SQRT_2PI, Agent, mlp
+
+
+class ResidualAgent(nn.Module):
+    """`base` (frozen) plus a learnt correction; see the module docstring.
+
+    Args:
+        base: the base policy (its weights are never updated; its observation statistics stay).
+        hidden: width of the residual's and the critic's hidden layers.
+        scale: the correction's scale in action units (ResiP: 0.1), so that the residual's own
+            outputs and noise live on the scale of the other networks'.
+        init_log_std: the correction's log standard deviation before scaling, at the start.
+        value_heads: the critic's outputs (one per reward signal).
+    """
+
+    def __init__(self, base: Agent, hidden: int, scale: float = 0.1, init_log_std: float = -0.5, value_heads: int = 1):
+        super().__init__()
+        self.base = base.requires_grad_(False)
+        act_dim = base.actor_logstd.shape[-1]
+        in_dim = base.obs_rms.mean.shape[0] + act_dim
+        self.scale = scale
+        self.residual_mean = mlp(in_dim, act_dim, hidden)
+        nn.init.zeros_(self.residual_mean[-1].weight)
+        nn.init.zeros_(self.residual_mean[-1].bias)
+        self.actor_logstd = nn.Parameter(torch.full((1, act_dim), init_log_std))
+        self.critic = mlp(in_dim, value_heads, hidden, out_std=1.0)
+
+    @property
+    def obs_rms(self):
+        return self.base.obs_rms
+
+    def features(self, x):
+        return self.base.features(x)
+
+    def _inputs_and_mean(self, x):
+        with torch.no_grad():
+            z = self.base.normalize(x)
+            base_action = self.base.actor_mean(z)
+        inputs = torch.cat([z, base_action], -1)
+        return inputs, base_action + self.scale * self.residual_mean(inputs)
+
+    def _std(self, mean):
+        return self.scale * torch.exp(self.actor_logstd.expand_as(mean))
+
+    def get_value(self, x):
+        return self.critic(self._inputs_and_mean(x)[0])
+
+    def get_action(self, x, deterministic=False):
+        _, mean = self._inputs_and_mean(x)
+        return mean if deterministic else torch.normal(mean, self._std(mean))
+
+    def get_action_and_value(self, x, action=None):
+        inputs, mean = self._inputs_and_mean(x)
+        probs = Normal(mean, self._std(mean))
+        if action is None:
+            action = probs.sample()
+        return action, probs.log_prob(action).sum(1), probs.entropy().sum(1), self.critic(inputs)
+
+    @torch.no_grad()
+    def act(self, x):
+        """(action, log-probability, value), as `Agent.act` gives them."""
+        inputs, mean = self._inputs_and_mean(x)
+        std = self._std(mean)
+        action = torch.normal(mean, std)
+        logprob = -((action - mean) ** 2) / (2 * std**2) - std.log() - LOG_SQRT_2PI
+        return action, logprob.sum(1), self.critic(inputs)

@@ -1,0 +1,138 @@
+"""Training episodes that start where a policy failed: a bank of its states, and the wrapper that resets
+a share of episodes into them.
+
+A behaviour clone that places 96-99% teaches PPO little from ordinary resets: most episodes succeed
+the same way. `collect_failure_states` runs the policy deterministically on training seeds and, where
+an episode does not place, keeps the env states a few steps before the element came closest to its
+goal (where the policy went wrong, as the expert takeovers of ms_construction/planning/demos.py
+choose them). `StartFromStates` (a worker-side wrapper, see CPUVectorEnv's `wrappers`) resets a share
+of episodes into a state drawn from that bank; the episode then has its whole time limit. Evaluation
+never uses it.
+
+    python -m baselines.ppo.start_states --checkpoint assets/checkpoints/general_agent_clone.pt --episodes 1500 \\
+        --out runs/failure_states.pt
+"""
+
+from __future__ import annotations
+
+import multiprocessing as mp
+from dataclasses import dataclass
+from pathlib import Path
+
+import gymnasium as gym
+import numpy as np
+import torch
+import tyro
+from tqdm import tqdm
+
+FIRST_SEED = 430_000
+"""training seeds of the bank's episodes: below the validation (500,000) and test (1,000,000) seeds, apart from
+the demonstrations' and takeovers' (scripts/train_general_agent.py)."""
+
+
+def _to_cpu(x):
+    return {k: _to_cpu(v) for k, v in x.items()} if isinstance(x, dict) else x.detach().cpu().clone()
+
+
+_worker: dict = {}
+
+
+def _failure_states(job: tuple) -> dict:
+    """One deterministic episode of the policy; the states `offsets` steps before the element's
+    closest approach to its goal if it did not place (found by replaying the episode's actions from
+    its seeded reset, which physx_cpu reproduces: cheaper than saving every step's state)."""
+    from baselines.ppo.checkpoints import load_policy
+
+    checkpoint, env_id, seed, offsets = job
+    torch.set_num_threads(1)
+    if "env" not in _worker:
+        agent, control_mode = load_policy(Path(checkpoint), env_id)
+        _worker.update(agent=agent, env=gym.make(env_id, obs_mode="state", control_mode=control_mode,
+                                                   reward_mode="sparse", num_envs=1, sim_backend="physx_cpu"))
+    agent, env = _worker["agent"], _worker["env"]
+    obs, _ = env.reset(seed=seed)
+    actions, dists = [], []
+    while True:
+        with torch.no_grad():
+            actions.append(agent.get_action(obs.float(), deterministic=True).clamp(-1, 1))
+        obs, _, terminated, truncated, info = env.step(actions[-1])
+        dists.append(float(info["place_dist"][0]))
+        if bool(terminated[0]) or bool(truncated[0]):
+            break
+    placed, task_id = bool(info["success"][0]), int(info["task_id"][0])
+    kept = []
+    if not placed:
+        closest = int(np.argmin(dists))
+        wanted = sorted({max(0, closest + k) for k in offsets})
+        env.reset(seed=seed)
+        for t in range(wanted[-1] + 1):  # the state at step t is the one after t actions
+            if t in wanted:
+                kept.append(_to_cpu(env.unwrapped.get_state_dict()))
+            if t < wanted[-1]:
+                env.step(actions[t])
+    return dict(seed=seed, task_id=task_id, placed=placed, states=kept)
+
+
+def collect_failure_states(checkpoint: Path, episodes: int, env_id: str = "ConstructionPickPlace-v1",
+                           seed: int = FIRST_SEED, offsets: tuple[int, ...] = (-30, -10), workers: int = 2) -> dict:
+    """The bank: states of the failed episodes among `episodes` (see `_failure_states`), with counts."""
+    jobs = [(str(checkpoint), env_id, seed + i, offsets) for i in range(episodes)]
+    bank, failed, per_task = [], 0, np.zeros((3, 2), dtype=int)  # per task: episodes, failures
+    with mp.get_context("spawn").Pool(workers) as pool:
+        bar = tqdm(pool.imap(_failure_states, jobs), total=episodes, desc="failure states", unit="ep")
+        for r in bar:
+            per_task[r["task_id"], 0] += 1
+            if not r["placed"]:
+                failed += 1
+                per_task[r["task_id"], 1] += 1
+                bank += r["states"]
+            bar.set_postfix(failed=failed)
+    return dict(states=bank, env_id=env_id, checkpoint=str(checkpoint), episodes=episodes, failed=failed,
+                per_task=per_task.tolist(), offsets=list(offsets), first_seed=seed)
+
+
+class StartFromStates(gym.Wrapper):
+    """Resets a share of episodes into a state drawn from a bank (`collect_failure_states`'s file).
+    Wraps a ManiSkill env of one env (physx_cpu); picklable as `functools.partial(StartFromStates,
+    bank=..., share=...)` for CPUVectorEnv's workers."""
+
+    def __init__(self, env: gym.Env, bank: str, share: float):
+        super().__init__(env)
+        if not 0 <= share <= 1:
+            raise ValueError(f"share of episodes started from the bank must lie in [0, 1], got {share}")
+        self.states = torch.load(bank, map_location="cpu", weights_only=False)["states"]
+        if not self.states:
+            raise ValueError(f"{bank}: the bank holds no states")
+        self.share, self.rng = share, np.random.default_rng()
+
+    def reset(self, **kwargs):
+        if kwargs.get("seed") is not None:  # a seeded reset (each worker its own seed) seeds the draws too
+            self.rng = np.random.default_rng([int(np.ravel(kwargs["seed"])[0]), 7])
+        obs, info = self.env.reset(**kwargs)
+        if self.rng.random() >= self.share:
+            return obs, info
+        u = self.env.unwrapped
+        u.set_state_dict(self.states[self.rng.integers(len(self.states))])
+        return u.get_obs(), u.get_info()
+
+
+@dataclass
+class Args:
+    checkpoint: Path
+    """the policy whose failures start the episodes (a behaviour clone)."""
+    out: Path
+    """where the bank goes (torch file)."""
+    episodes: int = 1500
+    """deterministic episodes of the policy on training seeds."""
+    env_id: str = "ConstructionPickPlace-v1"
+    seed: int = FIRST_SEED
+    workers: int = 2
+
+
+if __name__ == "__main__":
+    a = tyro.cli(Args)
+    result = collect_failure_states(a.checkpoint, a.episodes, a.env_id, a.seed, workers=a.workers)
+    a.out.parent.mkdir(parents=True, exist_ok=True)
+    torch.save(result, a.out)
+    print(f"{result['failed']} of {a.episodes} episodes failed (per task [episodes, failures]: {result['per_task']}); "
+          f"{len(result['states'])} states in {a.out}")

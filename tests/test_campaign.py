@@ -1,0 +1,82 @@
+"""The paper's experiment: the run plans (stages, budgets, env ids, promotion by steps) and resuming
+a campaign run from its checkpoint."""
+
+import dataclasses
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+import torch
+
+from baselines.ppo import paper_setting as ps
+from baselines.ppo import ppo
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def test_the_general_agent_runs_the_four_table_i_stages_of_exactly_2m_steps_promoted_by_steps_only():
+    general, no_curiosity = ps.general_runs(num_envs=2)
+    a = general.args
+    assert a.env_id == "ConstructionPickPlace-v1" and a.reward_mode == "sparse" and a.curiosity == "icm"
+    assert a.curriculum == ("cp1", "cp2", "cp3", "cp4") and a.stage_timesteps == 2_000_000 and a.total_timesteps == 8_000_000
+    assert a.icm_strength == 0.02 and a.stage_schedules
+    assert a.num_envs * a.num_steps == ps.UPDATE_SAMPLES and a.stage_timesteps % ps.UPDATE_SAMPLES == 0
+    # promotion at exactly 2M steps whatever the success, never before
+    assert ppo.should_promote(a, ppo.Progress(global_step=1_990_000, smoothed_success=1.0)) is None
+    assert ppo.should_promote(a, ppo.Progress(global_step=2_000_000, smoothed_success=0.0)) == "steps"
+    b = no_curiosity.args
+    assert b.curiosity == "none" and b.curriculum == ("cp1",) and b.total_timesteps == 2_000_000 and b.seed == a.seed
+    assert dataclasses.replace(b, curiosity="icm", curriculum=a.curriculum, total_timesteps=a.total_timesteps,
+                               exp_name=a.exp_name) == a, "the ablation differs from run 1 in curiosity and length only"
+
+
+@pytest.mark.parametrize("total, stages", [(2_000_000, 1), (8_000_000, 4)])
+def test_control_groups_are_single_task_cp4_runs_in_2m_step_stages(total, stages):
+    runs = ps.control_group_runs(total, num_envs=2)
+    assert [r.args.env_id for r in runs] == ["CeilingInstallation-v1", "WindowInstallation-v1", "Flooring-v1"]
+    assert [r.what.split(":")[0] for r in runs] == ["controlGroup4.1", "controlGroup4.2", "controlGroup4.3"]
+    general = ps.general_runs(num_envs=2)[0].args
+    for r in runs:
+        assert r.args.curriculum == ("cp4",) * stages and r.args.total_timesteps == total
+        same = {f.name for f in dataclasses.fields(ppo.Args)} - {"env_id", "curriculum", "total_timesteps", "exp_name"}
+        assert all(getattr(r.args, k) == getattr(general, k) for k in same), "otherwise the paper setting"
+    with pytest.raises(SystemExit, match="multiple of 2000000"):
+        ps.control_group_runs(3_000_000)
+
+
+def test_an_env_count_that_does_not_divide_the_update_is_refused():
+    with pytest.raises(SystemExit, match="--num-envs 3"):
+        ps.paper_args(num_envs=3)
+
+
+def test_dry_runs_print_the_plans():
+    for script, names in [("train_paper_agent.py", ["paper_general_agent", "paper_cp1_no_curiosity"]),
+                          ("train_control_groups.py", ["control_ceiling", "control_window", "control_flooring"])]:
+        res = subprocess.run([sys.executable, str(ROOT / "scripts" / script), "--dry-run", "--num-envs", "2"],
+                             capture_output=True, text=True, timeout=300, cwd=ROOT, env={**os.environ, "PYTHONPATH": str(ROOT)})
+        assert res.returncode == 0, res.stderr
+        for name in names:
+            assert name in res.stdout
+        assert "2,000,000 steps each" in res.stdout
+
+
+def test_a_campaign_run_resumes_from_its_checkpoint_with_its_step_count_and_stage(tmp_path):
+    """A tiny paper-setting run (two stages of 80 steps) stopped after its first stage, as a session's
+    end leaves it, continues from the checkpoint to the end of its plan: same stage, same step count."""
+    small = dict(num_envs=2, num_steps=20, num_minibatches=2, num_eval_envs=1, eval_freq=100, checkpoint_freq=1,
+                 env_id="Flooring-v1", log_dir=str(tmp_path), exp_name="tiny", stage_timesteps=80,
+                 curriculum=("cp1", "cp2"), total_timesteps=80)
+    run = ps.Run("tiny", ps.paper_args(**small), "test")
+    ps.run_or_resume(run)
+    ckpt = ps.checkpoint_of(run)
+    first = torch.load(ckpt, weights_only=False)
+    assert first["progress"]["global_step"] == 80
+    planned = ps.Run("tiny", dataclasses.replace(run.args, total_timesteps=160), "test")
+    assert "resumes at step 80" in ps.describe(planned)
+    ps.run_or_resume(planned)
+    last = torch.load(ckpt, weights_only=False)
+    assert last["progress"]["global_step"] == 160
+    assert last["progress"]["stage_changes"] == [[0, "cp1"], [80, "cp2"]] or last["progress"]["stage_changes"] == [(0, "cp1"), (80, "cp2")]
+    assert last["args"]["icm_strength"] == 0.02 and last["args"]["stage_schedules"]

@@ -1,0 +1,62 @@
+"""The dense rewards' optimum is placing, under the learner's own return computation.
+
+Along the planning expert's placed episode of each task, at every step k: the return of going on as
+the expert did and placing beats the return of stopping at step k's state and staying there for
+ever (holding the element still, wherever it is), for dense and normalized_dense, when the learner
+bootstraps at success as ManiSkill's PPO does (`bootstrap_at_done="always"`, ppo.py's default for the
+dense rewards), with the success state worth what it pays for ever. Without that bootstrap (success
+an end with nothing after it), holding near the goal pays more than placing: the reason for the
+convention, checked too.
+"""
+
+import pytest
+import torch
+
+from baselines.ppo import ppo
+from ms_construction.planning import MotionPlanningExpert
+
+from tests.helpers import PLAN_TRIES, TEST_EXPERT_CONFIG, StepLog, make_env
+
+GAMMA = 0.99
+
+
+def expert_rewards(env_id: str) -> torch.Tensor:
+    """Dense rewards of the expert's placed episode (seed 0)."""
+    env = StepLog(make_env(env_id, reward_mode="dense"))
+    expert = MotionPlanningExpert(env, TEST_EXPERT_CONFIG)
+    for _ in range(PLAN_TRIES):
+        result = expert.run(0)
+        if result.placed:
+            break
+    rewards, terminated = list(env.rewards), list(env.terminated)
+    env.close()
+    expert.close()
+    assert result.placed and terminated[-1] and not any(terminated[:-1]), result.failure
+    return torch.tensor(rewards)
+
+
+def returns(rewards: torch.Tensor, bootstrap_at_done: str, success_value: float) -> torch.Tensor:
+    """The learner's discounted return from every step of one episode that ends in success (ppo.py's
+    GAE with lambda 1 and a zero critic, but for the value it bootstraps with at the episode's end)."""
+    T = len(rewards)
+    terminated = torch.zeros(T, 1)
+    terminated[-1] = 1
+    mask = ppo.bootstrap_mask(terminated, torch.zeros(T, 1), bootstrap_at_done)
+    return ppo.gae(rewards[:, None], values=torch.zeros(T, 1), next_value=torch.zeros(1), final_values=mask * success_value,
+                   dones=terminated, gamma=GAMMA, gae_lambda=1.0)[:, 0]
+
+
+@pytest.mark.parametrize("env_id", ["CeilingInstallation-v1", "WindowInstallation-v1", "Flooring-v1"])
+def test_placing_beats_holding_still_anywhere_along_the_expert_s_episode(env_id):
+    dense = expert_rewards(env_id)
+    u_max = dense[-1].item()
+    assert u_max == 5.0, "placing pays the dense reward's maximum"
+    assert dense[:-1].max() < u_max
+    for name, r in [("dense", dense), ("normalized_dense", dense / 5.0)]:
+        stay = r[:-1] / (1 - GAMMA)  # stopping at step k's state (k before placing) and holding still there for ever
+        placing = returns(r, "always", success_value=r[-1].item() / (1 - GAMMA))[:-1]
+        worst = int(torch.argmin(placing - stay))
+        assert torch.all(placing > stay), (name, worst, placing[worst].item(), stay[worst].item())
+        # without the bootstrap at success, holding still near the goal pays more than placing
+        ended = returns(r, "truncated", success_value=r[-1].item() / (1 - GAMMA))[:-1]
+        assert torch.any(ended < stay), name

@@ -1,0 +1,74 @@
+"""PPO on the clone: the residual policy (baselines/ppo/residual.py) and the failure-state starts
+(baselines/ppo/start_states.py)."""
+
+import dataclasses
+from pathlib import Path
+
+import gymnasium as gym
+import torch
+
+from baselines.ppo import evaluation, ppo
+from baselines.ppo.checkpoints import load_checkpoint, load_policy
+from baselines.ppo.networks import make_agent
+from baselines.ppo.start_states import StartFromStates
+
+ROOT = Path(__file__).resolve().parents[1]
+CLONE = ROOT / "assets/checkpoints/general_agent_clone.pt"
+
+
+def residual_args(tmp_path, **kw) -> ppo.Args:
+    return ppo.Args(**{**dict(residual_of=str(CLONE), env_id="Flooring-v1", reward_mode="sparse", curiosity="none",
+                              curriculum=("cp4",), num_envs=2, num_eval_envs=1, num_steps=40, num_minibatches=2,
+                              update_epochs=2, eval_freq=100, checkpoint_freq=1, total_timesteps=80,
+                              sim_backend="physx_cpu", log_dir=str(tmp_path), exp_name="residual"), **kw})
+
+
+def test_the_residual_starts_as_the_clone_and_trains_only_its_own_weights():
+    base = load_checkpoint(CLONE)
+    torch.manual_seed(0)
+    agent = make_agent(dict(base["args"], residual_of=str(CLONE), residual_scale=0.1, curiosity="none"), 43, 6,
+                       base_args=base["args"])
+    agent.base.load_state_dict(base["agent"])
+    clone, _ = load_policy(CLONE, "Flooring-v1")
+    obs = torch.randn(64, 43)
+    with torch.no_grad():
+        assert torch.equal(agent.get_action(obs, deterministic=True), clone.get_action(obs, deterministic=True))
+        action, logprob, value = agent.act(obs)
+    assert action.shape == (64, 6) and logprob.shape == (64,) and value.shape == (64, 1)
+    assert not any(p.requires_grad for p in agent.base.parameters())
+    assert all(p.requires_grad for n, p in agent.named_parameters() if not n.startswith("base."))
+
+
+def test_a_short_residual_run_changes_the_policy_resumes_and_evaluates(tmp_path):
+    ppo.main(residual_args(tmp_path))
+    ckpt_path = tmp_path / "residual" / "checkpoint.pt"
+    ckpt = load_checkpoint(ckpt_path)
+    assert ckpt["base_args"] is not None and ckpt["progress"]["global_step"] == 80
+    base = load_checkpoint(CLONE)
+    for k, v in base["agent"].items():
+        assert torch.equal(ckpt["agent"][f"base.{k}"], v), f"the base stays as it was: {k}"
+    assert ckpt["agent"]["residual_mean.6.weight"].abs().sum() > 0, "the correction has learnt"
+    progress = ppo.main(dataclasses.replace(residual_args(tmp_path, total_timesteps=160), resume=str(ckpt_path), extend=True))
+    assert progress.global_step == 160
+    agent, _ = load_policy(ckpt_path, "Flooring-v1")  # what scripts/evaluate.py loads
+    result = evaluation.main(evaluation.Args(checkpoint=ckpt_path, env_id="Flooring-v1", episodes=2, workers=1))
+    assert result["Flooring-v1"]["episodes"] == 2
+
+
+def test_a_share_of_resets_start_from_the_bank(tmp_path):
+    env = gym.make("Flooring-v1", obs_mode="state", num_envs=1, sim_backend="physx_cpu")
+    env.reset(seed=3)
+    for _ in range(5):
+        env.step(env.action_space.sample())
+    state = env.unwrapped.get_state_dict()
+    marker = env.unwrapped.obj.pose.p.clone()
+    bank = tmp_path / "bank.pt"
+    torch.save(dict(states=[state]), bank)
+    wrapped = StartFromStates(env, str(bank), share=1.0)
+    obs, _ = wrapped.reset(seed=0)
+    assert torch.allclose(env.unwrapped.obj.pose.p, marker, atol=1e-5), "reset into the bank's state"
+    assert torch.allclose(obs, env.unwrapped.get_obs())
+    never = StartFromStates(env, str(bank), share=0.0)
+    never.reset(seed=3)
+    assert not torch.allclose(env.unwrapped.obj.pose.p, marker, atol=1e-3), "an ordinary reset"
+    env.close()
