@@ -110,10 +110,10 @@ def main(args: Args) -> Path:
     steps_per_epoch = int(np.ceil(len(train_idx) / args.batch_size))
     sched = torch.optim.lr_scheduler.CosineAnnealingLR(optimizer, args.epochs * steps_per_epoch)
 
-    def losses(idx, noise=0.0):
+    def losses(idx, noise=0.0):  # the critic's head 0 is the extrinsic return (a second one is curiosity's)
         x = agent.normalize(obs_t[idx])
         x = x + noise * torch.randn_like(x) if noise else x
-        return ((agent.actor_mean(x) - act_t[idx]) ** 2).mean(), ((agent.critic(x).squeeze(-1) - ret_t[idx]) ** 2).mean()
+        return ((agent.actor_mean(x) - act_t[idx]) ** 2).mean(), ((agent.critic(x)[:, 0] - ret_t[idx]) ** 2).mean()
 
     t0 = time.time()
     bar = tqdm(range(args.epochs), desc="behaviour cloning", unit="epoch", dynamic_ncols=True)
