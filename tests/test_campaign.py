@@ -1,6 +1,7 @@
 """The paper's experiment: the run plans (stages, budgets, env ids, promotion by steps) and resuming
 a campaign run from its checkpoint."""
 
+import csv
 import dataclasses
 import os
 import subprocess
@@ -80,3 +81,30 @@ def test_a_campaign_run_resumes_from_its_checkpoint_with_its_step_count_and_stag
     assert last["progress"]["global_step"] == 160
     assert last["progress"]["stage_changes"] == [[0, "cp1"], [80, "cp2"]] or last["progress"]["stage_changes"] == [(0, "cp1"), (80, "cp2")]
     assert last["args"]["icm_strength"] == 0.02 and last["args"]["stage_schedules"]
+
+
+def test_the_campaign_report_summarizes_each_run_and_stage_and_draws_figure_3(tmp_path):
+    """scripts/paper_report.py on a small progress.csv: the run's row, its stages, and Figure 3."""
+    from baselines.ppo.checkpoints import CSV_FIELDS
+
+    run_dir = tmp_path / "campaign" / "paper_general_agent"
+    run_dir.mkdir(parents=True)
+    with open(run_dir / "progress.csv", "w", newline="") as f:
+        w = csv.DictWriter(f, fieldnames=CSV_FIELDS)
+        w.writeheader()
+        for i in range(1, 401):  # 2M steps of cp1, then 2M of cp2 with placements
+            stage = "cp1" if i <= 200 else "cp2"
+            w.writerow(dict(global_step=10_000 * i, iteration=i, stage=stage, episodes=40, pick_success=0.5,
+                            place_success=0.0 if stage == "cp1" else 0.25, extrinsic_return=0.5, intrinsic_return=0.1,
+                            end_place_dist=1.0, end_place_angle_deg=30.0, held_at_end=0.5))
+    results = tmp_path / "RESULTS.md"
+    res = subprocess.run([sys.executable, str(ROOT / "scripts/paper_report.py"), "--campaign-dir", str(tmp_path / "campaign"),
+                          "--write-results", "--results", str(results), "--images", str(tmp_path / "images")],
+                         capture_output=True, text=True, cwd=ROOT, env={**os.environ, "PYTHONPATH": str(ROOT)})
+    assert res.returncode == 0, res.stderr
+    text = results.read_text()
+    assert "| paper_general_agent | the paper setting" in text and "4,000,000 / 8,000,000 | cp2 | 200,000 | 800 |" in text
+    assert "| paper_general_agent | cp1 | 0-2,000,000 | 8,000 | 50.0 | 0.0 |" in text
+    assert "| paper_general_agent | cp2 | 2,000,000-4,000,000 | 8,000 | 50.0 | 25.0 |" in text
+    assert "| control_ceiling | controlGroup4.1" in text and "not started" in text
+    assert (tmp_path / "images" / "paper_fig3.png").stat().st_size > 0

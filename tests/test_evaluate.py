@@ -59,3 +59,19 @@ def test_bad_arguments_are_refused_with_the_allowed_values(tmp_path):
 def test_wilson_interval_holds_the_estimate(k, n):
     lo, hi = evaluation.wilson(k, n)
     assert 0 <= lo <= k / n <= hi <= 1 and hi - lo < 0.5
+
+
+def test_sampled_actions_are_seeded_by_the_episode_and_stay_out_of_the_published_table(tmp_path):
+    """--sample-actions (a diagnostic): the same seeds give the same episodes, other than the mean's."""
+    runs = []
+    for name, sample in (("a", True), ("b", True), ("mean", False)):
+        out = tmp_path / f"{name}.json"
+        evaluation.main(evaluation.Args(env_id="Flooring-v1", episodes=2, seed=1_000_000, json=out, workers=1,
+                                        sample_actions=sample))
+        runs.append(json.loads(out.read_text()))
+    lengths = [[(e["length"], e["final_place_dist"]) for e in r["episode_results"]] for r in runs]
+    assert runs[0]["sample_actions"] and not runs[2]["sample_actions"]
+    assert lengths[0] == lengths[1], "sampled episodes are reproducible"
+    assert lengths[0] != lengths[2], "sampled actions are not the policy's mean"
+    with pytest.raises(SystemExit, match="diagnostic"):
+        evaluation.main(evaluation.Args(env_id="Flooring-v1", episodes=1, sample_actions=True, write_results=True))

@@ -73,6 +73,9 @@ class Args:
     """episodes per task recorded when --video-dir is given."""
     workers: int = 2
     """processes, one env each."""
+    sample_actions: bool = False
+    """sample each action from the policy's Gaussian (seeded by the episode's seed) instead of taking its
+    mean: a diagnostic of how the policy behaves as it was trained; the published protocol is the mean."""
     write_results: bool = False
     """write the table (with how the agent was trained, from its checkpoint) into docs/RESULTS.md."""
 
@@ -137,7 +140,7 @@ def _episode(job: tuple) -> dict:
     """One seeded episode in a worker process (env and policy kept for the next job)."""
     import gymnasium as gym
 
-    checkpoint, env_id, stage, seed, video_dir = job
+    checkpoint, env_id, stage, seed, video_dir, sample = job
     torch.set_num_threads(1)
     key = (checkpoint, env_id, video_dir is not None)
     if key not in _worker:
@@ -155,11 +158,12 @@ def _episode(job: tuple) -> dict:
         _worker[key] = (agent, env)
     agent, env = _worker[key]
     obs, _ = env.reset(seed=seed)
+    torch.manual_seed(seed)
     ret, steps, policy_time, picked = 0.0, 0, 0.0, False
     while True:
         t = time.perf_counter()
         with torch.no_grad():
-            action = agent.get_action(obs.float(), deterministic=True).clamp(-1, 1)
+            action = agent.get_action(obs.float(), deterministic=not sample).clamp(-1, 1)
         policy_time += time.perf_counter() - t
         obs, reward, terminated, truncated, info = env.step(action)
         ret, steps = ret + float(reward[0]), steps + 1
@@ -195,7 +199,8 @@ def evaluate(args: Args, env_id: str, pool) -> dict:
     progress = lambda: sum(e["length"] for e in episodes) if by_steps else len(episodes)  # noqa: E731
 
     def job(i: int, video: bool) -> tuple:
-        return (str(args.checkpoint), env_id, args.curriculum_stage, args.seed + i, str(args.video_dir) if video else None)
+        return (str(args.checkpoint), env_id, args.curriculum_stage, args.seed + i, str(args.video_dir) if video else None,
+                args.sample_actions)
 
     for i in range(min(args.videos, target) if args.video_dir else 0):  # the recorded episodes come first
         episodes.append(pool.apply(_episode, (job(i, True),)))
@@ -251,6 +256,8 @@ def main(args: Args) -> dict[str, dict]:
         raise SystemExit(f"--curriculum-stage {args.curriculum_stage}: use one of {', '.join(STAGE_NAMES)}")
     if args.episodes < 1 or (args.steps is not None and args.steps < 1) or args.workers < 1:
         raise SystemExit("--episodes, --steps and --workers must be positive")
+    if args.sample_actions and args.write_results:
+        raise SystemExit("--sample-actions is a diagnostic: the published table (--write-results) takes the policy's mean")
     for env_id in env_ids:  # a checkpoint that does not fit fails here, before any worker starts
         load_policy(args.checkpoint, env_id)
     results = {}
@@ -263,7 +270,8 @@ def main(args: Args) -> dict[str, dict]:
         command = "python scripts/evaluate.py " + " ".join(shlex.quote(a) for a in sys.argv[1:])
         out = results[env_ids[0]] if len(env_ids) == 1 else {"tasks": results}
         args.json.write_text(json.dumps({"command": command, "checkpoint": str(args.checkpoint),
-                                         "curriculum_stage": args.curriculum_stage, **out}, indent=1) + "\n")
+                                         "curriculum_stage": args.curriculum_stage,
+                                         "sample_actions": args.sample_actions, **out}, indent=1) + "\n")
         print(f"wrote {args.json}")
     if args.video_dir:
         print(f"videos: {args.video_dir.resolve()}")

@@ -1,0 +1,175 @@
+"""The refinement runs in docs/: what each run of `python -m baselines.ppo.refine` did on the validation
+seeds, as a table and failures by kind in docs/RESULTS.md and a curve as a PNG.
+
+    python scripts/refine_report.py --runs runs/refine runs/refine2 --write-results
+
+A run folder is summarized (the settings its PPO checkpoint saved; the clone's validation and each
+snapshot's, with every failed episode) into docs/data/refine/<folder name>.json; a .json path is read as
+such a summary, so the docs regenerate from docs/data alone once the runs are gone:
+
+    python scripts/refine_report.py --runs docs/data/refine/refine.json docs/data/refine/refine2.json --write-results
+
+Failure kinds at cp4 (Table I: 0.10 m, 20 degrees): dropped (the element not on the plate at the end),
+short (its centre further than 0.10 m from the goal), turned (near enough, more than 20 degrees off).
+Collisions are not recorded apart: an element stopped by the structure ends as short or turned.
+"""
+
+from __future__ import annotations
+
+import json
+import re
+from dataclasses import dataclass
+from pathlib import Path
+
+import matplotlib
+
+matplotlib.use("Agg")
+import matplotlib.pyplot as plt  # noqa: E402
+import torch  # noqa: E402
+import tyro  # noqa: E402
+
+from ms_construction.curriculum import stage_tolerances  # noqa: E402
+from ms_construction.reporting import update_section  # noqa: E402
+
+SETTINGS = ("learning_rate", "gamma", "start_states_share", "residual_scale", "num_envs", "num_steps",
+            "critic_warmup_iterations", "bootstrap_at_done", "target_kl")
+TASKS = {"CeilingInstallation-v1": "ceiling", "WindowInstallation-v1": "window", "Flooring-v1": "flooring"}
+
+
+@dataclass
+class Args:
+    runs: tuple[Path, ...]
+    """refine.py run folders (summarized into --data-dir) or their summaries (.json), in the table's order."""
+    data_dir: Path = Path("docs/data/refine")
+    """where run folders' summaries go."""
+    out: Path = Path("docs/images/refine_validation.png")
+    """the curve: each run's validation place success per task against its PPO env steps."""
+    write_results: bool = False
+    """write the section `refinement` of docs/RESULTS.md."""
+    results: Path = Path("docs/RESULTS.md")
+
+
+def failure_kind(episode: dict, tol: dict) -> str:
+    if not episode["held_at_end"]:
+        return "dropped"
+    return "short" if episode["final_place_dist"] > tol["place"] else "turned"
+
+
+def validation_summary(path: Path) -> dict:
+    data = json.loads(path.read_text())
+    tol = stage_tolerances("cp4")
+    out = {}
+    for env_id, r in data["tasks"].items():
+        failed = [e for e in r["episode_results"] if not e["placed"]]
+        out[env_id] = dict(episodes=r["episodes"], place_success=r["place_success"], ci95=r["place_success_ci95"],
+                           pick_success=r["pick_success"],
+                           failures=[dict(seed=e["seed"], kind=failure_kind(e, tol), dist=round(e["final_place_dist"], 3),
+                                          angle_deg=round(e["final_place_angle_deg"], 1)) for e in failed])
+    return out
+
+
+def summarize(run: Path) -> dict:
+    """A refine.py run folder as one JSON-able record."""
+    ckpt = torch.load(run / "ppo" / "checkpoint.pt", map_location="cpu", weights_only=False)
+    saved = ckpt["args"]
+    validations, clone = {}, None
+    for path in sorted(run.glob("val*_*.json")):
+        which = path.stem.split("_", 1)[1]
+        if which == "clone":
+            clone = validation_summary(path)
+        elif which == "refined":  # a run before refine.py validated snapshots: its one validation, at its end
+            validations[int(ckpt["progress"]["global_step"])] = validation_summary(path)
+        elif re.fullmatch(r"\d+", which):
+            validations[int(which)] = validation_summary(path)
+    if clone is None:
+        raise SystemExit(f"{run}: no validation of the clone (val<episodes>_clone.json); run refine.py there first")
+    return dict(run=run.name, settings={k: saved.get(k) for k in SETTINGS}, ppo_steps=int(ckpt["progress"]["global_step"]),
+                clone=clone, validations={str(k): v for k, v in sorted(validations.items())})
+
+
+def load(path: Path, data_dir: Path) -> dict:
+    if path.suffix == ".json":
+        return json.loads(path.read_text())
+    if not (path / "ppo" / "checkpoint.pt").exists():
+        raise SystemExit(f"{path}: neither a refine.py run folder (no ppo/checkpoint.pt) nor a summary (.json)")
+    summary = summarize(path)
+    data_dir.mkdir(parents=True, exist_ok=True)
+    (data_dir / f"{path.name}.json").write_text(json.dumps(summary, indent=1) + "\n")
+    return summary
+
+
+def pct(v: float) -> str:
+    return f"{100 * v:.1f}"
+
+
+def kinds(failures: list) -> str:
+    """'8 short (0.18-1.93 m), 1 turned (25-25 deg)': per kind, the count and the range of its error."""
+    parts = []
+    for kind in ("short", "turned", "dropped"):
+        of = [f for f in failures if f["kind"] == kind]
+        if of:
+            key, unit = ("angle_deg", "deg") if kind == "turned" else ("dist", "m")
+            parts.append(f"{len(of)} {kind} ({min(f[key] for f in of):g}-{max(f[key] for f in of):g} {unit})")
+    return ", ".join(parts) or "none"
+
+
+def report(runs: list[dict]) -> str:
+    lines = ["| run | settings | env steps | " + " | ".join(f"{t} placed % [95% CI]" for t in TASKS.values()) + " |",
+             "|---|---|---|" + "---|" * len(TASKS)]
+    for r in runs:
+        s = r["settings"]
+        setting = (f"lr {s['learning_rate']:g}, gamma {s['gamma']}, bank share {s['start_states_share']}, "
+                   f"scale {s['residual_scale']}, {s['num_envs']} envs x {s['num_steps']}")
+        rows = [("the clone", r["clone"])] + [(f"{int(k):,}", v) for k, v in r["validations"].items()]
+        for i, (steps, v) in enumerate(rows):
+            cells = " | ".join(f"{pct(v[e]['place_success'])} [{pct(v[e]['ci95'][0])}, {pct(v[e]['ci95'][1])}]"
+                               for e in TASKS)
+            lines.append(f"| {r['run'] if i == 0 else ''} | {setting if i == 0 else ''} | {steps} | {cells} |")
+    lines += ["", "Failures by kind (cp4: short of the goal by more than 0.10 m, turned by more than 20 degrees, "
+              "dropped), the clone against each run's best validation (its worst task first, then its mean):", "",
+              "| run | task | the clone | best refined (env steps) |", "|---|---|---|---|"]
+    for r in runs:
+        best = max(r["validations"], key=lambda k: (min(v["place_success"] for v in r["validations"][k].values()),
+                                                    sum(v["place_success"] for v in r["validations"][k].values())))
+        for e, name in TASKS.items():
+            lines.append(f"| {r['run']} | {name} | {kinds(r['clone'][e]['failures'])} | "
+                         f"{kinds(r['validations'][best][e]['failures'])} ({int(best):,}) |")
+    return "\n".join(lines)
+
+
+def plot(runs: list[dict], out: Path) -> None:
+    fig, axes = plt.subplots(1, len(TASKS), figsize=(4 * len(TASKS), 3.4), sharey=True)
+    for ax, (env_id, name) in zip(axes, TASKS.items()):
+        for i, r in enumerate(runs):
+            steps = [0] + [int(k) for k in r["validations"]]
+            success = [r["clone"][env_id]["place_success"]] + [v[env_id]["place_success"] for v in r["validations"].values()]
+            ax.plot(steps, [100 * s for s in success], marker="o", color=f"C{i}", label=r["run"])
+        ax.axhline(99, color="k", linestyle=":", linewidth=1)
+        ax.set_title(name)
+        ax.set_xlabel("PPO env steps (0: the clone)")
+    axes[0].set_ylabel("validation place success %")
+    axes[0].legend(fontsize=8)
+    fig.tight_layout()
+    out.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(out, dpi=120)
+    plt.close(fig)
+
+
+def main(args: Args) -> str:
+    runs = [load(p, args.data_dir) for p in args.runs]
+    body = report(runs)
+    plot(runs, args.out)
+    print(body)
+    if args.write_results:
+        command = "python scripts/refine_report.py --runs " + " ".join(str(p) for p in args.runs) + " --write-results"
+        update_section(args.results, "refinement", "\n".join([
+            "## PPO refinement of the clone: validation", "", f"Command: `{command}`", "",
+            "Each run of `python -m baselines.ppo.refine` (a residual policy on the frozen clone, PPO on the sparse "
+            "reward at cp4): the clone and the PPO snapshots on the same validation episodes (seeds 500000 on, "
+            "ordinary resets, deterministic actions).", "", body, "",
+            f"![validation place success against PPO env steps]({Path(*args.out.parts[1:])})"]), "Results")
+    return body
+
+
+if __name__ == "__main__":
+    main(tyro.cli(Args))

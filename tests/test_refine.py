@@ -1,0 +1,105 @@
+"""The refinement recipe's bookkeeping (baselines/ppo/refine.py: snapshots, validation, the best of them,
+shipping only what beats the clone) with PPO and the evaluations stood in for, and its report
+(scripts/refine_report.py) on a small summary."""
+
+import importlib.util
+import json
+import sys
+from pathlib import Path
+
+import pytest
+import torch
+
+from baselines.ppo import refine
+
+ROOT = Path(__file__).resolve().parents[1]
+spec = importlib.util.spec_from_file_location("refine_report", ROOT / "scripts" / "refine_report.py")
+refine_report = importlib.util.module_from_spec(spec)
+sys.modules["refine_report"] = refine_report  # dataclasses look their module up
+spec.loader.exec_module(refine_report)
+
+TASKS = ("CeilingInstallation-v1", "WindowInstallation-v1", "Flooring-v1")
+CLONE_VAL = dict(zip(TASKS, (0.96, 0.96, 0.985)))
+
+
+@pytest.fixture
+def stand_ins(tmp_path, monkeypatch):
+    """PPO that only counts steps into its checkpoint; validations read from a table by snapshot."""
+    runs, val_table = [], {}
+
+    def fake_ppo(args):
+        ckpt = Path(args.log_dir) / args.exp_name / "checkpoint.pt"
+        start = torch.load(args.resume)["step"] if args.resume else 0
+        runs.append((start, args.total_timesteps, bool(args.resume)))
+        ckpt.parent.mkdir(parents=True, exist_ok=True)
+        torch.save(dict(step=args.total_timesteps, progress=dict(global_step=args.total_timesteps)), ckpt)
+
+    def fake_validate(checkpoint, out, episodes):
+        name = Path(checkpoint).name
+        return CLONE_VAL if name.endswith("clone.pt") else val_table[int(name.split("_")[1].split(".")[0])]
+
+    monkeypatch.setattr(refine.ppo, "main", fake_ppo)
+    monkeypatch.setattr(refine, "validate", fake_validate)
+    shipped = tmp_path / "general_agent.pt"
+    monkeypatch.setattr(refine, "SHIPPED", shipped)
+    monkeypatch.setattr(refine, "ship", lambda args, ckpt, *a: shipped.write_bytes(Path(ckpt).read_bytes()))
+    run_dir = tmp_path / "run"
+    run_dir.mkdir()
+    torch.save(dict(states=[{}]), run_dir / "failure_states.pt")  # the bank exists: not collected again
+    args = refine.Args(clone=tmp_path / "clone.pt", run_dir=run_dir, total_timesteps=300, validate_every=100)
+    return args, runs, val_table, shipped
+
+
+def test_snapshots_are_validated_and_the_best_beating_the_clone_is_shipped(stand_ins):
+    args, runs, val_table, shipped = stand_ins
+    val_table.update({100: dict(zip(TASKS, (0.97, 0.97, 0.99))), 200: dict(zip(TASKS, (0.99, 0.985, 0.99))),
+                      300: dict(zip(TASKS, (0.90, 0.99, 1.0)))})
+    best = refine.main(args)
+    assert runs == [(0, 100, False), (100, 200, True), (200, 300, True)], "PPO continues from its checkpoint"
+    assert best.name == "checkpoint_200.pt", "the best worst task wins"
+    assert torch.load(shipped)["step"] == 200
+    refine.main(args)  # everything is in the run folder: no PPO again
+    assert len(runs) == 3
+
+
+def test_nothing_is_shipped_when_no_snapshot_beats_the_clone(stand_ins):
+    args, runs, val_table, shipped = stand_ins
+    val_table.update({k: dict(zip(TASKS, (0.87, 0.925, 0.975))) for k in (100, 200, 300)})
+    refine.main(args)
+    assert not shipped.exists()
+
+
+def summary(run: str, steps_and_success: dict) -> dict:
+    def validation(success):
+        return {t: dict(episodes=200, place_success=s, ci95=[s - 0.03, min(1.0, s + 0.02)], pick_success=1.0,
+                        failures=[dict(seed=1, kind="short", dist=0.5, angle_deg=10.0)] * round(200 * (1 - s)))
+                for t, s in zip(TASKS, success)}
+    return dict(run=run, settings=dict(learning_rate=3e-5, gamma=0.999, start_states_share=0.25, residual_scale=0.1,
+                                       num_envs=4, num_steps=250),
+                ppo_steps=max(steps_and_success), clone=validation((0.96, 0.96, 0.985)),
+                validations={str(k): validation(v) for k, v in steps_and_success.items()})
+
+
+def test_the_report_tables_each_validation_and_the_failures_of_the_best(tmp_path):
+    path = tmp_path / "probe.json"
+    path.write_text(json.dumps(summary("probe", {100_000: (0.97, 0.95, 0.99), 200_000: (0.98, 0.97, 0.99)})))
+    results = tmp_path / "RESULTS.md"
+    out = tmp_path / "docs" / "images" / "refine.png"
+    body = refine_report.main(refine_report.Args(runs=(path,), out=out, results=results, write_results=True))
+    assert "| probe |" in body and "| 100,000 |" in body and "| 200,000 |" in body
+    assert "98.0 [95.0, 100.0]" in body
+    assert "| probe | ceiling | 8 short (0.5-0.5 m) | 4 short (0.5-0.5 m) (200,000) |" in body
+    assert out.stat().st_size > 0
+    assert "<!-- begin refinement (generated) -->" in results.read_text()
+
+
+def test_failure_kinds_follow_the_cp4_tolerances():
+    tol = dict(place=0.10, angle_deg=20.0)
+    assert refine_report.failure_kind(dict(held_at_end=False, final_place_dist=0.05), tol) == "dropped"
+    assert refine_report.failure_kind(dict(held_at_end=True, final_place_dist=0.3), tol) == "short"
+    assert refine_report.failure_kind(dict(held_at_end=True, final_place_dist=0.05), tol) == "turned"
+
+
+def test_a_folder_that_is_not_a_refine_run_is_refused(tmp_path):
+    with pytest.raises(SystemExit, match="neither a refine.py run folder"):
+        refine_report.load(tmp_path, tmp_path / "data")
