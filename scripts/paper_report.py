@@ -21,6 +21,7 @@ from pathlib import Path
 
 import tyro
 
+from baselines.ppo import paper_setting
 from baselines.ppo.paper_setting import CAMPAIGN_DIR, STAGE_STEPS, control_group_runs, general_runs
 from ms_construction.reporting import update_section
 
@@ -104,6 +105,11 @@ def report(campaign_dir: Path) -> tuple[str, dict[str, Path]]:
     return "\n".join(lines), csvs
 
 
+def settings_table() -> str:
+    """The settings table of baselines/ppo/paper_setting.py's docstring (the one place it is written)."""
+    return "\n".join(line for line in paper_setting.__doc__.splitlines() if line.startswith("|"))
+
+
 def figures(csvs: dict[str, Path], images: Path) -> list[str]:
     """Draw Figure 3 (and 4 when a control group has run) with plot_training.py; their commands."""
     commands = []
@@ -133,7 +139,9 @@ def main(args: Args) -> str:
             "settings: baselines/ppo/paper_setting.py). Training episodes: the policy's sampled actions; "
             f"'lately' is the last {LAST:,} env steps; 'end' is where the element was when the episode ended "
             "(its distance and angle to the goal, whether the plate held it), the mean over the episodes.", "",
-            body, "", *pictures]), "Results")
+            body, "", *pictures, "",
+            "The settings, from baselines/ppo/paper_setting.py (where the paper is silent: ML-Agents' documented "
+            "defaults where they carry over, ppo.py's otherwise):", "", settings_table()]), "Results")
     return body
 
 

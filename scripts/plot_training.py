@@ -78,6 +78,12 @@ def load(path: Path, required: tuple[str, ...] = REQUIRED) -> dict:
     return data
 
 
+def run_label(path: Path, paths: list[Path]) -> str:
+    """A run's name: its folder (runs/<run>/progress.csv), or the file's own name where several share a folder."""
+    shared = sum(p.parent == path.parent for p in paths) > 1
+    return path.stem if shared or not path.parent.name else path.parent.name
+
+
 def moving_average(x: np.ndarray, window: int) -> np.ndarray:
     """Trailing mean over the last `window` values, ignoring NaN; NaN where the window holds none."""
     valid = ~np.isnan(x)
@@ -176,7 +182,7 @@ def figure4(args: Args):
 
 
 def progress_figure(args: Args):
-    runs = [(p.parent.name or str(p), load(p)) for p in args.csv]
+    runs = [(run_label(p, args.csv), load(p)) for p in args.csv]
     colors = dict(STAGE_COLORS)
     fig, (ax_s, ax_r) = plt.subplots(2, 1, figsize=(10, 7), sharex=True, constrained_layout=True)
     for k, (name, d) in enumerate(runs):

@@ -71,8 +71,8 @@ class Args:
     critic_warmup_iterations: int = 20
     """first iterations that train only the critic, on the clone's own rollouts."""
     bootstrap_at_done: str = "truncated"
-    """with the sparse reward: `truncated` (success is an end) or `always` (ManiSkill's); chosen by the probes
-    in docs/RESULTS.md."""
+    """with the sparse reward: `truncated` (success is an end; both runs in docs/RESULTS.md) or `always`
+    (ManiSkill's; not yet measured here)."""
     validation_episodes: int = 200
     """episodes per task of each validation."""
     validate_every: int = 100_000
