@@ -38,7 +38,6 @@ import platform
 import shlex
 import shutil
 import sys
-import time
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -47,6 +46,7 @@ import tyro
 
 from baselines.ppo import bc, checkpoints, evaluation, ppo
 from ms_construction.planning.demos import load_demos, policy_steps, record_demos, tried_episodes
+from ms_construction.reporting import WallTimes
 
 SHIPPED = Path("assets/checkpoints/general_agent.pt")
 VALIDATION_SEED = 500_000
@@ -109,16 +109,8 @@ TAKEOVER_SETS = (("window_takeovers", "WindowInstallation-v1", 400_000, 10_000, 
 
 def main(args: Args) -> Path:
     args.run_dir.mkdir(parents=True, exist_ok=True)
-    record_path = args.run_dir / "campaign.json"
-    record = json.loads(record_path.read_text()) if record_path.exists() else {"wall_s": {}}
-
-    def timed(stage: str, fn):
-        t = time.time()
-        try:
-            return fn()
-        finally:
-            record["wall_s"][stage] = record["wall_s"].get(stage, 0.0) + time.time() - t
-            record_path.write_text(json.dumps(record, indent=1) + "\n")
+    wall_times = WallTimes(args.run_dir / "campaign.json")
+    timed, record = wall_times.timed, wall_times.record
 
     def collect(sets, policy=None, dagger_round: int = 0) -> list[Path]:
         """The demonstrations of `sets` (or, in DAgger round r >= 1, the expert's takeovers of `policy`)."""

@@ -103,3 +103,15 @@ def test_failure_kinds_follow_the_cp4_tolerances():
 def test_a_folder_that_is_not_a_refine_run_is_refused(tmp_path):
     with pytest.raises(SystemExit, match="neither a refine.py run folder"):
         refine_report.load(tmp_path, tmp_path / "data")
+
+
+def test_wall_times_add_up_across_resumed_commands_and_are_kept_when_a_step_fails(tmp_path):
+    from ms_construction.reporting import WallTimes
+
+    path = tmp_path / "campaign.json"
+    assert WallTimes(path).timed("PPO", lambda: 7) == 7
+    with pytest.raises(RuntimeError):
+        WallTimes(path).timed("PPO", lambda: (_ for _ in ()).throw(RuntimeError("interrupted")))
+    WallTimes(path).timed("validation", lambda: None)
+    record = json.loads(path.read_text())
+    assert set(record["wall_s"]) == {"PPO", "validation"} and record["wall_s"]["PPO"] >= 0

@@ -28,7 +28,6 @@ import platform
 import shlex
 import shutil
 import sys
-import time
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -37,6 +36,7 @@ import tyro
 
 from baselines.ppo import evaluation, ppo
 from baselines.ppo.start_states import collect_failure_states
+from ms_construction.reporting import WallTimes
 
 CLONE = Path("assets/checkpoints/general_agent_clone.pt")
 SHIPPED = Path("assets/checkpoints/general_agent.pt")
@@ -102,16 +102,8 @@ def validate(checkpoint: Path, out: Path, episodes: int) -> dict:
 
 def main(args: Args) -> Path:
     args.run_dir.mkdir(parents=True, exist_ok=True)
-    record_path = args.run_dir / "campaign.json"
-    record = json.loads(record_path.read_text()) if record_path.exists() else {"wall_s": {}}
-
-    def timed(step: str, fn):
-        t = time.time()
-        try:
-            return fn()
-        finally:
-            record["wall_s"][step] = record["wall_s"].get(step, 0.0) + time.time() - t
-            record_path.write_text(json.dumps(record, indent=1) + "\n")
+    wall_times = WallTimes(args.run_dir / "campaign.json")
+    timed, record = wall_times.timed, wall_times.record
 
     bank = args.run_dir / "failure_states.pt"
     if not bank.exists():
