@@ -75,3 +75,15 @@ def test_sampled_actions_are_seeded_by_the_episode_and_stay_out_of_the_published
     assert lengths[0] != lengths[2], "sampled actions are not the policy's mean"
     with pytest.raises(SystemExit, match="diagnostic"):
         evaluation.main(evaluation.Args(env_id="Flooring-v1", episodes=1, sample_actions=True, write_results=True))
+
+
+def test_earlier_agents_rows_come_from_their_json_and_a_bad_spec_is_refused(tmp_path):
+    r = dict(episodes=330, pick_success=1.0, pick_success_ci95=[0.988, 1.0], place_success=0.979,
+             place_success_ci95=[0.957, 0.99])
+    path = tmp_path / "clone.json"
+    path.write_text(json.dumps({"command": "python scripts/evaluate.py --all", "tasks": {"Flooring-v1": r}}))
+    beside = evaluation.read_beside((f"the clone={path}",))
+    assert "| the clone | Flooring-v1 | 330 | 100.0 [98.8, 100.0] | 97.9 [95.7, 99.0] |" in evaluation.beside_table(beside)
+    for spec in ("no-equals-sign", f"x={tmp_path / 'missing.json'}"):
+        with pytest.raises(SystemExit, match="--beside"):
+            evaluation.read_beside((spec,))

@@ -73,6 +73,9 @@ class Args:
     """episodes per task recorded when --video-dir is given."""
     workers: int = 2
     """processes, one env each."""
+    beside: tuple[str, ...] = ()
+    """with --write-results: earlier agents' rows beside the table, each LABEL=JSON, a file that
+    `scripts/evaluate.py --all --json` wrote (say, on the same seeds and steps)."""
     sample_actions: bool = False
     """sample each action from the policy's Gaussian (seeded by the episode's seed) instead of taking its
     mean: a diagnostic of how the policy behaves as it was trained; the published protocol is the mean."""
@@ -258,6 +261,7 @@ def main(args: Args) -> dict[str, dict]:
         raise SystemExit("--episodes, --steps and --workers must be positive")
     if args.sample_actions and args.write_results:
         raise SystemExit("--sample-actions is a diagnostic: the published table (--write-results) takes the policy's mean")
+    beside = read_beside(args.beside)
     for env_id in env_ids:  # a checkpoint that does not fit fails here, before any worker starts
         load_policy(args.checkpoint, env_id)
     results = {}
@@ -276,11 +280,35 @@ def main(args: Args) -> dict[str, dict]:
     if args.video_dir:
         print(f"videos: {args.video_dir.resolve()}")
     if args.write_results:
-        write_results(args, results)
+        write_results(args, results, beside)
     return results
 
 
-def write_results(args: Args, results: dict[str, dict]) -> None:
+def read_beside(specs: tuple[str, ...]) -> dict[str, dict]:
+    """--beside LABEL=JSON ...: each label's per-task results, from a JSON of `--all --json`."""
+    out = {}
+    for spec in specs:
+        label, _, path = spec.partition("=")
+        if not label or not path:
+            raise SystemExit(f"--beside {spec}: use LABEL=JSON (a file written by scripts/evaluate.py --all --json)")
+        if not Path(path).is_file() or "tasks" not in json.loads(Path(path).read_text()):
+            raise SystemExit(f"--beside {spec}: {path} is not a JSON that scripts/evaluate.py --all --json wrote")
+        data = json.loads(Path(path).read_text())
+        out[label] = dict(path=path, command=data.get("command", "?"), tasks=data["tasks"])
+    return out
+
+
+def beside_table(beside: dict[str, dict]) -> str:
+    """Each earlier agent's row per task, pick and place with 95% intervals."""
+    lines = ["| agent | task | episodes | pick success % [95% CI] | place success % [95% CI] |", "|---|---|---|---|---|"]
+    for label, b in beside.items():
+        for env_id, r in b["tasks"].items():
+            lines.append(f"| {label} | {env_id} | {r['episodes']} | {pct(r['pick_success'], r['pick_success_ci95'])} | "
+                         f"{pct(r['place_success'], r['place_success_ci95'])} |")
+    return "\n".join(lines)
+
+
+def write_results(args: Args, results: dict[str, dict], beside: Optional[dict[str, dict]] = None) -> None:
     """The general agent's section of docs/RESULTS.md: our Table II and the checkpoint's training record."""
     campaign = load_checkpoint(args.checkpoint).get("campaign", {})
     command = "python scripts/evaluate.py " + " ".join(shlex.quote(a) for a in sys.argv[1:])
@@ -294,6 +322,9 @@ def write_results(args: Args, results: dict[str, dict]) -> None:
     lines += [f"Compute per episode: the policy's forward passes take {policy_ms:.0f} ms per episode on one CPU "
               "thread (mean over the three tasks), against the planning expert's planning time per episode in "
               "the table above; both also spend the same simulation time.", ""]
+    if beside:
+        lines += ["Beside it, earlier agents on the same protocol (" + "; ".join(
+            f"{label}: `{b['command']}`, {b['path']}" for label, b in beside.items()) + "):", "", beside_table(beside), ""]
     if campaign:
         lines += ["Training (`" + campaign["command"] + "`):", ""]
         lines += [f"- {k}: {v}" for k, v in campaign["record"].items()]
