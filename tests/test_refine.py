@@ -25,7 +25,7 @@ CLONE_VAL = dict(zip(TASKS, (0.96, 0.96, 0.985)))
 @pytest.fixture
 def stand_ins(tmp_path, monkeypatch):
     """PPO that only counts steps into its checkpoint; validations read from a table by snapshot."""
-    runs, val_table = [], {}
+    runs, val_table, confirm_table = [], {}, {}
 
     def fake_ppo(args):
         ckpt = Path(args.log_dir) / args.exp_name / "checkpoint.pt"
@@ -34,9 +34,12 @@ def stand_ins(tmp_path, monkeypatch):
         ckpt.parent.mkdir(parents=True, exist_ok=True)
         torch.save(dict(step=args.total_timesteps, progress=dict(global_step=args.total_timesteps)), ckpt)
 
-    def fake_validate(checkpoint, out, episodes):
+    def fake_validate(checkpoint, out, episodes, seed=refine.VALIDATION_SEED):
         name = Path(checkpoint).name
-        return CLONE_VAL if name.endswith("clone.pt") else val_table[int(name.split("_")[1].split(".")[0])]
+        if name.endswith("clone.pt"):
+            return CLONE_VAL
+        table = val_table if seed == refine.VALIDATION_SEED else confirm_table
+        return table[int(name.split("_")[1].split(".")[0])]
 
     monkeypatch.setattr(refine.ppo, "main", fake_ppo)
     monkeypatch.setattr(refine, "validate", fake_validate)
@@ -47,13 +50,14 @@ def stand_ins(tmp_path, monkeypatch):
     run_dir.mkdir()
     torch.save(dict(states=[{}]), run_dir / "failure_states.pt")  # the bank exists: not collected again
     args = refine.Args(clone=tmp_path / "clone.pt", run_dir=run_dir, total_timesteps=300, validate_every=100)
-    return args, runs, val_table, shipped
+    return args, runs, val_table, confirm_table, shipped
 
 
-def test_snapshots_are_validated_and_the_best_beating_the_clone_is_shipped(stand_ins):
-    args, runs, val_table, shipped = stand_ins
+def test_snapshots_are_validated_and_the_best_beating_the_clone_on_fresh_seeds_too_is_shipped(stand_ins):
+    args, runs, val_table, confirm_table, shipped = stand_ins
     val_table.update({100: dict(zip(TASKS, (0.97, 0.97, 0.99))), 200: dict(zip(TASKS, (0.99, 0.985, 0.99))),
                       300: dict(zip(TASKS, (0.90, 0.99, 1.0)))})
+    confirm_table[200] = dict(zip(TASKS, (0.98, 0.97, 0.99)))
     best = refine.main(args)
     assert runs == [(0, 100, False), (100, 200, True), (200, 300, True)], "PPO continues from its checkpoint"
     assert best.name == "checkpoint_200.pt", "the best worst task wins"
@@ -62,8 +66,16 @@ def test_snapshots_are_validated_and_the_best_beating_the_clone_is_shipped(stand
     assert len(runs) == 3
 
 
+def test_a_validation_winner_that_loses_on_fresh_seeds_is_not_shipped(stand_ins):
+    args, runs, val_table, confirm_table, shipped = stand_ins
+    val_table.update({k: dict(zip(TASKS, (0.995, 0.985, 0.98))) for k in (100, 200, 300)})
+    confirm_table[100] = dict(zip(TASKS, (0.99, 0.92, 0.98)))
+    refine.main(args)
+    assert not shipped.exists()
+
+
 def test_nothing_is_shipped_when_no_snapshot_beats_the_clone(stand_ins):
-    args, runs, val_table, shipped = stand_ins
+    args, runs, val_table, confirm_table, shipped = stand_ins
     val_table.update({k: dict(zip(TASKS, (0.87, 0.925, 0.975))) for k in (100, 200, 300)})
     refine.main(args)
     assert not shipped.exists()
