@@ -72,3 +72,11 @@ def test_a_share_of_resets_start_from_the_bank(tmp_path):
     never.reset(seed=3)
     assert not torch.allclose(env.unwrapped.obj.pose.p, marker, atol=1e-3), "an ordinary reset"
     env.close()
+
+
+def test_the_kept_refined_agent_loads_and_places_through_scripts_evaluate(tmp_path):
+    """assets/checkpoints/general_agent_refined.pt (the PPO-refined row in docs/RESULTS.md)."""
+    refined = ROOT / "assets/checkpoints/general_agent_refined.pt"
+    assert load_checkpoint(refined)["campaign"]["record"]["PPO (residual on the frozen clone)"].endswith("env steps")
+    result = evaluation.main(evaluation.Args(checkpoint=refined, env_id="Flooring-v1", episodes=3, workers=1))
+    assert result["Flooring-v1"]["episodes"] == 3 and result["Flooring-v1"]["place_success"] > 0
