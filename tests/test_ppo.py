@@ -323,7 +323,7 @@ def test_one_update_on_a_fixed_batch_gives_the_losses_and_weights_of_the_origina
                         bc_coef=0.1 if setting["bc"] else 0.0, clip_vloss=setting["clip_vloss"],
                         target_kl=setting["target_kl"], icm_feature_dim=16)
         agent = ppo.make_agent(args, 43, 6)
-        optimizer = torch.optim.Adam(agent.parameters(), lr=args.learning_rate, eps=1e-5)
+        optimizer = ppo.adam(agent.parameters(), lr=args.learning_rate, eps=1e-5)
         batch = fixed_batch()
         agent.obs_rms.update(agent.features(batch["obs"]))
         g = torch.Generator().manual_seed(1)

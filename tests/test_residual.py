@@ -33,7 +33,7 @@ def test_the_residual_starts_as_the_clone_and_trains_only_its_own_weights():
     obs = torch.randn(64, 43)
     with torch.no_grad():
         assert torch.equal(agent.get_action(obs, deterministic=True), clone.get_action(obs, deterministic=True))
-        action, logprob, value = agent.act(obs)
+        action, logprob, _, value = agent.get_action_and_value(obs)
     assert action.shape == (64, 6) and logprob.shape == (64,) and value.shape == (64, 1)
     assert not any(p.requires_grad for p in agent.base.parameters())
     assert all(p.requires_grad for n, p in agent.named_parameters() if not n.startswith("base."))

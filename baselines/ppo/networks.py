@@ -3,7 +3,6 @@ normalization, and the MLP they and ICM (baselines/ppo/curiosity.py) are built o
 
 from __future__ import annotations
 
-import math
 from typing import Optional
 
 import numpy as np
@@ -13,8 +12,6 @@ from torch.distributions.normal import Normal
 
 from ms_construction.envs.construction_env import STATE_QUATERNION_STARTS
 from ms_construction.rotations import qmat
-
-LOG_SQRT_2PI = math.log(math.sqrt(2 * math.pi))
 
 
 def layer_init(layer, std=np.sqrt(2), bias_const=0.0):
@@ -106,10 +103,12 @@ class Agent(nn.Module):
         return self.critic(self.normalize(x))
 
     def get_action(self, x, deterministic=False):
+        """The policy's mean, or a draw from it (the draw `get_action_and_value` makes, without building a
+        Normal: its argument checks cost more than the networks at a rollout step's batch of a few envs)."""
         mean = self.actor_mean(self.normalize(x))
         if deterministic:
             return mean
-        return Normal(mean, torch.exp(self.actor_logstd.expand_as(mean))).sample()
+        return torch.normal(mean, torch.exp(self.actor_logstd.expand_as(mean)))
 
     def get_action_and_value(self, x, action=None):
         x = self.normalize(x)
@@ -118,18 +117,6 @@ class Agent(nn.Module):
         if action is None:
             action = probs.sample()
         return action, probs.log_prob(action).sum(1), probs.entropy().sum(1), self.critic(x)
-
-    @torch.no_grad()
-    def act(self, x):
-        """(action, log-probability, value) as `get_action_and_value(x)` gives them, the same draw
-        from the same RNG stream, without building a Normal: Normal's argument checks cost more
-        than the networks at a rollout step's batch of a few envs."""
-        x = self.normalize(x)
-        mean = self.actor_mean(x)
-        scale = torch.exp(self.actor_logstd.expand_as(mean))
-        action = torch.normal(mean, scale)
-        logprob = -((action - mean) ** 2) / (2 * scale**2) - scale.log() - LOG_SQRT_2PI
-        return action, logprob.sum(1), self.critic(x)
 
 
 def value_heads(args) -> int:

@@ -14,7 +14,7 @@ import torch
 import torch.nn as nn
 from torch.distributions.normal import Normal
 
-from baselines.ppo.networks import LOG_SQRT_2PI, Agent, mlp
+from baselines.ppo.networks import Agent, mlp
 
 
 class ResidualAgent(nn.Module):
@@ -71,12 +71,3 @@ class ResidualAgent(nn.Module):
         if action is None:
             action = probs.sample()
         return action, probs.log_prob(action).sum(1), probs.entropy().sum(1), self.critic(inputs)
-
-    @torch.no_grad()
-    def act(self, x):
-        """(action, log-probability, value), as `Agent.act` gives them."""
-        inputs, mean = self._inputs_and_mean(x)
-        std = self._std(mean)
-        action = torch.normal(mean, std)
-        logprob = -((action - mean) ** 2) / (2 * std**2) - std.log() - LOG_SQRT_2PI
-        return action, logprob.sum(1), self.critic(inputs)
