@@ -83,8 +83,14 @@ def summarize(run: Path) -> dict:
             validations[int(which)] = validation_summary(path)
     if clone is None:
         raise SystemExit(f"{run}: no validation of the clone (val<episodes>_clone.json); run refine.py there first")
-    return dict(run=run.name, settings={k: saved.get(k) for k in SETTINGS}, ppo_steps=int(ckpt["progress"]["global_step"]),
-                clone=clone, validations={str(k): v for k, v in sorted(validations.items())})
+    summary = dict(run=run.name, settings={k: saved.get(k) for k in SETTINGS}, ppo_steps=int(ckpt["progress"]["global_step"]),
+                   clone=clone, validations={str(k): v for k, v in sorted(validations.items())})
+    # refine.py's confirmation: the best snapshot and the clone again, on fresh seeds (confirm<episodes>_<which>.json)
+    confirmed = {path.stem.split("_", 1)[1]: validation_summary(path) for path in sorted(run.glob("confirm*_*.json"))}
+    if "clone" in confirmed and len(confirmed) == 2:
+        step = next(k for k in confirmed if k != "clone")
+        summary["confirmation"] = dict(env_steps=int(step), clone=confirmed["clone"], snapshot=confirmed[step])
+    return summary
 
 
 def load(path: Path, data_dir: Path) -> dict:
@@ -134,6 +140,18 @@ def report(runs: list[dict]) -> str:
         for e, name in TASKS.items():
             lines.append(f"| {r['run']} | {name} | {kinds(r['clone'][e]['failures'])} | "
                          f"{kinds(r['validations'][best][e]['failures'])} ({int(best):,}) |")
+    confirmed = [r for r in runs if "confirmation" in r]
+    if confirmed:
+        lines += ["", "Confirmation (refine.py ships a snapshot only if it wins here too): the best snapshot and the clone "
+                  "again, on fresh episodes (seeds 600000 on), place %:", "",
+                  "| run | snapshot (env steps) | " + " | ".join(f"{t}: clone -> snapshot" for t in TASKS.values())
+                  + " | beats the clone |", "|---|---|" + "---|" * (len(TASKS) + 1)]
+        for r in confirmed:
+            c = r["confirmation"]
+            clone, snap = ({e: c[k][e]["place_success"] for e in TASKS} for k in ("clone", "snapshot"))
+            wins = min(snap.values()) > min(clone.values()) and sum(snap.values()) >= sum(clone.values())
+            lines.append(f"| {r['run']} | {c['env_steps']:,} | "
+                         + " | ".join(f"{pct(clone[e])} -> {pct(snap[e])}" for e in TASKS) + f" | {'yes' if wins else 'no'} |")
     return "\n".join(lines)
 
 

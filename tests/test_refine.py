@@ -105,6 +105,16 @@ def test_the_report_tables_each_validation_and_the_failures_of_the_best(tmp_path
     assert "<!-- begin refinement (generated) -->" in results.read_text()
 
 
+def test_the_report_tables_a_confirmation_beside_the_clone_where_a_run_has_one(tmp_path):
+    run = summary("probe", {100_000: (0.97, 0.97, 0.99)})
+    run["confirmation"] = dict(env_steps=100_000, clone=summary("c", {1: (0.955, 0.95, 0.98)})["validations"]["1"],
+                               snapshot=summary("s", {1: (0.96, 0.935, 0.97)})["validations"]["1"])
+    path = tmp_path / "probe.json"
+    path.write_text(json.dumps(run))
+    body = refine_report.main(refine_report.Args(runs=(path,), out=tmp_path / "refine.png"))
+    assert "| probe | 100,000 | 95.5 -> 96.0 | 95.0 -> 93.5 | 98.0 -> 97.0 | no |" in body
+
+
 def test_failure_kinds_follow_the_cp4_tolerances():
     tol = dict(place=0.10, angle_deg=20.0)
     assert refine_report.failure_kind(dict(held_at_end=False, final_place_dist=0.05), tol) == "dropped"
