@@ -184,6 +184,9 @@ def figure4(args: Args):
 def progress_figure(args: Args):
     runs = [(run_label(p, args.csv), load(p)) for p in args.csv]
     colors = dict(STAGE_COLORS)
+    used = list(dict.fromkeys(s for _, d in runs for s in d["stage"]))
+    # runs that all train in one stage (the refinements at cp4) are told apart by colour, not by line style alone
+    by_run = len(used) == 1 and len(runs) > 1
     fig, (ax_s, ax_r) = plt.subplots(2, 1, figsize=(10, 7), sharex=True, constrained_layout=True)
     for k, (name, d) in enumerate(runs):
         ls, marker = RUN_STYLES[k % len(RUN_STYLES)]
@@ -191,7 +194,7 @@ def progress_figure(args: Args):
         curves = [(ax_s, "place_success", 2.0), (ax_s, "pick_success", 1.0), (ax_r, "extrinsic_return", 2.0)]
         smooth = {col: moving_average(d[col], args.window) for _, col, _ in curves}
         for stage, s, e in stage_segments(d["stage"]):
-            c = stage_color(stage, colors)
+            c = f"C{k}" if by_run else stage_color(stage, colors)
             seg = slice(s, min(e + 1, len(x)))  # reach the next stage's first point: no gap between colours
             for ax, col, lw in curves:
                 ok = ~np.isnan(d[col][seg])  # join the raw line across empty cells
@@ -209,14 +212,13 @@ def progress_figure(args: Args):
     ax_r.set(ylabel="extrinsic return", xlabel="env steps", title="extrinsic return")
     for ax in (ax_s, ax_r):
         ax.grid(alpha=0.3)
-    used = list(dict.fromkeys(s for _, d in runs for s in d["stage"]))
-    handles = [Patch(color=stage_color(s, colors), label=s) for s in used]
+    handles = [] if by_run else [Patch(color=stage_color(s, colors), label=s) for s in used]
     handles += [Line2D([], [], color="black", lw=2, label="place success (train)"),
                 Line2D([], [], color="black", lw=1, label="pick success (train)"),
                 Line2D([], [], color="grey", ls="none", marker="o", mec="black", label="place success (eval)"),
                 Line2D([], [], color="black", alpha=0.25, label=f"raw; solid = {args.window}-row average")]
     if len(runs) > 1:
-        handles += [Line2D([], [], color="black", ls=RUN_STYLES[k % len(RUN_STYLES)][0],
+        handles += [Line2D([], [], color=f"C{k}" if by_run else "black", ls=RUN_STYLES[k % len(RUN_STYLES)][0],
                            marker=RUN_STYLES[k % len(RUN_STYLES)][1], label=name) for k, (name, _) in enumerate(runs)]
     ax_s.legend(handles=handles, loc="center left", bbox_to_anchor=(1.01, 0.5), fontsize=8, frameon=False)
     fig.suptitle(args.title or " vs ".join(name for name, _ in runs))
