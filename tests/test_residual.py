@@ -5,6 +5,7 @@ import dataclasses
 from pathlib import Path
 
 import gymnasium as gym
+import pytest
 import torch
 
 from baselines.ppo import evaluation, ppo
@@ -80,3 +81,41 @@ def test_the_kept_refined_agent_loads_and_places_through_scripts_evaluate(tmp_pa
     assert load_checkpoint(refined)["campaign"]["record"]["PPO (residual on the frozen clone)"].endswith("env steps")
     result = evaluation.main(evaluation.Args(checkpoint=refined, env_id="Flooring-v1", episodes=3, workers=1))
     assert result["Flooring-v1"]["episodes"] == 3 and result["Flooring-v1"]["place_success"] > 0
+
+
+def residual_snapshot(path: Path, shift: float, base_shift: float = 0.0) -> Path:
+    """A residual checkpoint on the clone whose own weights are all `shift` (its base's first weight moved
+    by `base_shift`)."""
+    base = load_checkpoint(CLONE)
+    args = dict(base["args"], residual_of=str(CLONE), residual_scale=0.1, curiosity="none")
+    agent = make_agent(args, 43, 6, base_args=base["args"])
+    agent.base.load_state_dict(base["agent"])
+    state = {k: v if k.startswith("base.") or not v.is_floating_point() else torch.full_like(v, shift)
+             for k, v in agent.state_dict().items()}
+    state["base.actor_mean.0.weight"] = state["base.actor_mean.0.weight"] + base_shift
+    torch.save(dict(args=args, base_args=base["args"], obs_dim=43, act_dim=6, agent=state, progress={}), path)
+    return path
+
+
+def test_averaged_snapshots_hold_the_mean_of_their_weights_and_the_base_unchanged(tmp_path):
+    from baselines.ppo.checkpoints import average_checkpoints
+
+    paths = [residual_snapshot(tmp_path / f"s{i}.pt", shift) for i, shift in enumerate((0.1, 0.2, 0.6))]
+    out = tmp_path / "average.pt"
+    average_checkpoints(paths, out)
+    avg = load_checkpoint(out)
+    assert torch.allclose(avg["agent"]["residual_mean.0.weight"], torch.full_like(avg["agent"]["residual_mean.0.weight"], 0.3))
+    assert torch.allclose(avg["agent"]["actor_logstd"], torch.full_like(avg["agent"]["actor_logstd"], 0.3))
+    base = load_checkpoint(CLONE)
+    for k, v in base["agent"].items():
+        assert torch.equal(avg["agent"][f"base.{k}"], v), k
+    assert avg["averaged_from"] == [str(p) for p in paths]
+    load_policy(out, "Flooring-v1")  # what scripts/evaluate.py loads
+
+
+def test_snapshots_whose_frozen_base_differs_are_not_averaged(tmp_path):
+    from baselines.ppo.checkpoints import average_checkpoints
+
+    paths = [residual_snapshot(tmp_path / "a.pt", 0.1), residual_snapshot(tmp_path / "b.pt", 0.2, base_shift=0.5)]
+    with pytest.raises(SystemExit, match="base.actor_mean.0.weight differs"):
+        average_checkpoints(paths, tmp_path / "average.pt")

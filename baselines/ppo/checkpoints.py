@@ -131,6 +131,27 @@ def load_policy(path, env_id: str) -> tuple[Agent, str]:
     return agent.eval(), control_mode
 
 
+def average_checkpoints(paths: list, out: Path) -> dict:
+    """The policy whose weights are the mean of the checkpoints' at `paths` (snapshots of one run: same
+    networks, same frozen parts), written to `out`, with the last checkpoint's other entries and
+    `averaged_from` naming the snapshots. The weights that every snapshot shares (a residual's frozen
+    base, frozen observation statistics) must be equal in all of them, and are kept as they are."""
+    ckpts = [load_checkpoint(p) for p in paths]
+    last = ckpts[-1]["agent"]
+    for p, c in zip(paths, ckpts):
+        if c["agent"].keys() != last.keys() or any(c["agent"][k].shape != v.shape for k, v in last.items()):
+            raise SystemExit(f"{p}: its networks differ from {paths[-1]}'s; average snapshots of one run")
+    frozen = {k for k in last if k.startswith("base.") or k.startswith("obs_rms.")}
+    for k in frozen:
+        if not all(torch.equal(c["agent"][k], last[k]) for c in ckpts):
+            raise SystemExit(f"{k} differs between the snapshots: they are not of one run with that part frozen")
+    agent = {k: v if k in frozen or not v.is_floating_point() else sum(c["agent"][k] for c in ckpts) / len(ckpts)
+             for k, v in last.items()}
+    averaged = dict(ckpts[-1], agent=agent, averaged_from=[str(p) for p in paths])
+    torch.save(averaged, out)
+    return averaged
+
+
 CSV_FIELDS = [
     "global_step", "iteration", "stage", "episodes", "pick_success", "place_success", "extrinsic_return",
     "intrinsic_return", "episode_length", "eval_pick_success", "eval_place_success", "eval_extrinsic_return",
