@@ -28,6 +28,7 @@ import matplotlib.pyplot as plt  # noqa: E402
 import torch  # noqa: E402
 import tyro  # noqa: E402
 
+from baselines.ppo.refine import beats  # noqa: E402
 from ms_construction.curriculum import stage_tolerances  # noqa: E402
 from ms_construction.reporting import update_section  # noqa: E402
 
@@ -149,7 +150,7 @@ def report(runs: list[dict]) -> str:
         for r in confirmed:
             c = r["confirmation"]
             clone, snap = ({e: c[k][e]["place_success"] for e in TASKS} for k in ("clone", "snapshot"))
-            wins = min(snap.values()) > min(clone.values()) and sum(snap.values()) >= sum(clone.values())
+            wins = beats(snap, clone)
             lines.append(f"| {r['run']} | {c['env_steps']:,} | "
                          + " | ".join(f"{pct(clone[e])} -> {pct(snap[e])}" for e in TASKS) + f" | {'yes' if wins else 'no'} |")
     return "\n".join(lines)
