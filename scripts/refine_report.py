@@ -28,7 +28,7 @@ import matplotlib.pyplot as plt  # noqa: E402
 import torch  # noqa: E402
 import tyro  # noqa: E402
 
-from baselines.ppo.refine import beats  # noqa: E402
+from baselines.ppo.refine import beats, best_snapshot  # noqa: E402
 from ms_construction.curriculum import stage_tolerances  # noqa: E402
 from ms_construction.reporting import update_section  # noqa: E402
 
@@ -136,8 +136,7 @@ def report(runs: list[dict]) -> str:
               "dropped), the clone against each run's best validation (its worst task first, then its mean):", "",
               "| run | task | the clone | best refined (env steps) |", "|---|---|---|---|"]
     for r in runs:
-        best = max(r["validations"], key=lambda k: (min(v["place_success"] for v in r["validations"][k].values()),
-                                                    sum(v["place_success"] for v in r["validations"][k].values())))
+        best = best_snapshot({k: {e: v["place_success"] for e, v in val.items()} for k, val in r["validations"].items()})
         for e, name in TASKS.items():
             lines.append(f"| {r['run']} | {name} | {kinds(r['clone'][e]['failures'])} | "
                          f"{kinds(r['validations'][best][e]['failures'])} ({int(best):,}) |")

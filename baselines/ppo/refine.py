@@ -133,7 +133,7 @@ def main(args: Args) -> Path:
         validated[step] = timed("validation", lambda: validate(snapshot, args.run_dir / f"val{n}_{step}.json", n))
         print(f"validation place success at {step} env steps: "
               + ", ".join(f"{k} {clone_val[k]:.3f} -> {v:.3f}" for k, v in validated[step].items()))
-    best = max(validated, key=lambda k: (min(validated[k].values()), sum(validated[k].values())))
+    best = best_snapshot(validated)
     refined_val = validated[best]
     print(f"best at {best} env steps (clone -> refined): "
           + ", ".join(f"{k} {clone_val[k]:.3f} -> {refined_val[k]:.3f}" for k in clone_val))
@@ -153,6 +153,11 @@ def main(args: Args) -> Path:
     elif args.ship:
         print(f"not shipped: it does not beat the clone on validation and confirmation; {SHIPPED} stays as it is")
     return best_ckpt
+
+
+def best_snapshot(validated: dict) -> int:
+    """The snapshot (its env steps) whose validation places most on its worst task, then on average."""
+    return max(validated, key=lambda k: (min(validated[k].values()), sum(validated[k].values())))
 
 
 def beats(refined: dict, clone: dict) -> bool:
