@@ -12,7 +12,7 @@ convention, checked too.
 import pytest
 import torch
 
-from baselines.ppo import ppo
+from baselines.ppo import update
 from ms_construction.planning import MotionPlanningExpert
 
 from tests.helpers import PLAN_TRIES, TEST_EXPERT_CONFIG, StepLog, make_env
@@ -41,8 +41,8 @@ def returns(rewards: torch.Tensor, bootstrap_at_done: str, success_value: float)
     T = len(rewards)
     terminated = torch.zeros(T, 1)
     terminated[-1] = 1
-    mask = ppo.bootstrap_mask(terminated, torch.zeros(T, 1), bootstrap_at_done)
-    return ppo.gae(rewards[:, None], values=torch.zeros(T, 1), next_value=torch.zeros(1), final_values=mask * success_value,
+    mask = update.bootstrap_mask(terminated, torch.zeros(T, 1), bootstrap_at_done)
+    return update.gae(rewards[:, None], values=torch.zeros(T, 1), next_value=torch.zeros(1), final_values=mask * success_value,
                    dones=terminated, gamma=GAMMA, gae_lambda=1.0)[:, 0]
 
 

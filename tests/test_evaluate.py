@@ -6,9 +6,10 @@ import pytest
 import torch
 
 from baselines.ppo import evaluation
-from baselines.ppo.checkpoints import Progress, save_checkpoint
+from baselines.ppo.checkpoints import Progress, load_policy, save_checkpoint
 from baselines.ppo.networks import Agent
 from baselines.ppo.ppo import Args as PPOArgs
+from ms_construction.vector_env import CPUVectorEnv
 
 
 def test_shipped_general_agent_places_on_every_task(tmp_path):
@@ -37,6 +38,31 @@ def test_single_task_json_has_the_fields_at_top_level(tmp_path):
                 "pick_success_ci95", "place_success_ci95"):
         assert key in data
     assert data["episodes"] == 2 and [e["seed"] for e in data["episode_results"]] == [1_000_000, 1_000_001]
+
+
+def test_training_and_scripts_evaluate_py_run_the_same_episode_loop(tmp_path):
+    """ppo.py's evaluation envs (worker processes behind ManiSkillVectorEnv's interface) and
+    scripts/evaluate.py's worker (ManiSkillVectorEnv on one env, no auto reset) play the same seeded
+    episodes through `run_episodes` and report the same thing."""
+    out = tmp_path / "eval.json"
+    evaluation.main(evaluation.Args(env_id="Flooring-v1", episodes=2, seed=1_000_000, json=out, workers=1))
+    by_script = json.loads(out.read_text())["episode_results"]
+    agent, control_mode = load_policy(evaluation.DEFAULT_CHECKPOINT, "Flooring-v1")
+    # one env, as scripts/evaluate.py's workers: the policy's batch size changes its last float bits
+    envs = CPUVectorEnv("Flooring-v1", 1, dict(obs_mode="state", control_mode=control_mode, reward_mode="sparse",
+                                               curriculum_stage="cp4"))
+    try:
+        in_training = [e for seed in (1_000_000, 1_000_001) for e in evaluation.run_episodes(agent, envs, 250, seed=seed)]
+        summary = evaluation.evaluate_envs(agent, envs, 250, seed=1_000_001)
+    finally:
+        envs.close()
+    assert [e["seed"] for e in in_training] == [1_000_000, 1_000_001]
+    for a, b in zip(by_script, in_training):
+        for key in ("task_id", "picked", "placed", "length", "held_at_end"):
+            assert a[key] == b[key], key
+        for key in ("ret", "final_place_dist", "final_place_angle_deg"):
+            assert a[key] == pytest.approx(b[key], abs=1e-5), key
+    assert summary["eval_episodes"] == 1 and summary["eval_place_success"] == float(by_script[1]["placed"])
 
 
 def test_a_checkpoint_of_the_wrong_shape_is_a_clear_error(tmp_path):

@@ -17,7 +17,7 @@ import numpy as np
 import pytest
 import torch
 
-from baselines.ppo import evaluation, ppo
+from baselines.ppo import evaluation, ppo, update
 from ms_construction.curriculum import stage_tolerances
 from ms_construction.vector_env import CPUVectorEnv
 
@@ -323,7 +323,7 @@ def test_one_update_on_a_fixed_batch_gives_the_losses_and_weights_of_the_origina
                         bc_coef=0.1 if setting["bc"] else 0.0, clip_vloss=setting["clip_vloss"],
                         target_kl=setting["target_kl"], icm_feature_dim=16)
         agent = ppo.make_agent(args, 43, 6)
-        optimizer = ppo.adam(agent.parameters(), lr=args.learning_rate, eps=1e-5)
+        optimizer = update.adam(agent.parameters(), lr=args.learning_rate, eps=1e-5)
         batch = fixed_batch()
         agent.obs_rms.update(agent.features(batch["obs"]))
         g = torch.Generator().manual_seed(1)
@@ -331,7 +331,7 @@ def test_one_update_on_a_fixed_batch_gives_the_losses_and_weights_of_the_origina
         n_steps = []
         step = optimizer.step
         optimizer.step = lambda *a, **k: (n_steps.append(1), step(*a, **k))[1]
-        losses = ppo.ppo_update(agent, optimizer, batch, args, demos=demos)
+        losses = update.ppo_update(agent, optimizer, batch, args, demos=demos)
     finally:
         torch.set_num_threads(threads)
     with torch.no_grad():
@@ -343,10 +343,11 @@ def test_one_update_on_a_fixed_batch_gives_the_losses_and_weights_of_the_origina
 
 
 def test_a_checkpoint_written_before_the_split_loads_through_the_checkpoint_api():
-    """The shipped agent predates baselines/ppo/checkpoints.py and the rename of finite_horizon_gae."""
+    """The clone (the shipped agent until PPO refined it) predates baselines/ppo/checkpoints.py and the rename of
+    finite_horizon_gae."""
     from baselines.ppo import checkpoints
 
-    path = ROOT / "assets/checkpoints/general_agent.pt"
+    path = ROOT / "assets/checkpoints/general_agent_clone.pt"
     assert "finite_horizon_gae" in torch.load(path, map_location="cpu", weights_only=False)["args"]
     ckpt = checkpoints.load_checkpoint(path, env_id="Flooring-v1", obs_dim=43, act_dim=6, control_mode="pd_joint_delta_pos")
     assert ckpt["args"]["bootstrap_at_done"] == "truncated" and "finite_horizon_gae" not in ckpt["args"]

@@ -8,7 +8,7 @@ import gymnasium as gym
 import pytest
 import torch
 
-from baselines.ppo import evaluation, ppo
+from baselines.ppo import evaluation, ppo, update
 from baselines.ppo.checkpoints import load_checkpoint, load_policy
 from baselines.ppo.networks import make_agent
 from baselines.ppo.start_states import StartFromStates
@@ -38,6 +38,28 @@ def test_the_residual_starts_as_the_clone_and_trains_only_its_own_weights():
     assert action.shape == (64, 6) and logprob.shape == (64,) and value.shape == (64, 1)
     assert not any(p.requires_grad for p in agent.base.parameters())
     assert all(p.requires_grad for n, p in agent.named_parameters() if not n.startswith("base."))
+
+
+def test_the_l2_anchor_pulls_the_correction_back_to_the_clone():
+    """With advantages of zero the policy loss has no gradient, so an update with --residual-l2-coef moves
+    only the correction, and towards zero (the clone's own action)."""
+    base = load_checkpoint(CLONE)
+    torch.manual_seed(0)
+    agent = make_agent(dict(base["args"], residual_of=str(CLONE), residual_scale=0.1, curiosity="none"), 43, 6,
+                       base_args=base["args"])
+    agent.base.load_state_dict(base["agent"])
+    torch.nn.init.normal_(agent.residual_mean[-1].weight, std=0.5)  # a correction that has moved away from zero
+    obs = torch.randn(256, 43)
+    with torch.no_grad():
+        actions, logprobs, _, values = agent.get_action_and_value(obs)
+    batch = dict(obs=obs, next_obs=obs, actions=actions, logprobs=logprobs, advantages=torch.zeros(256),
+                 returns=values, values=values)
+    before = agent.correction(obs).pow(2).sum(-1).mean().item()
+    args = ppo.Args(residual_of=str(CLONE), residual_l2_coef=1.0, num_minibatches=1, update_epochs=5, target_kl=None,
+                    norm_adv="none")
+    losses = update.ppo_update(agent, update.adam([p for p in agent.parameters() if p.requires_grad], lr=1e-3), batch, args)
+    after = agent.correction(obs).pow(2).sum(-1).mean().item()
+    assert 0 < losses["residual_l2"] <= before and after < 0.9 * before
 
 
 def test_a_short_residual_run_changes_the_policy_resumes_and_evaluates(tmp_path):

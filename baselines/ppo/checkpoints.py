@@ -75,6 +75,15 @@ def save_checkpoint(path: Path, args, progress: Progress, agent: Agent, optimize
     os.replace(tmp, path)
 
 
+def restore_rng(rng: dict) -> None:
+    """The random generators (Python, numpy, torch, CUDA) as `save_checkpoint` saved them, for an exact resume."""
+    random.setstate(rng["python"])
+    np.random.set_state(rng["numpy"])
+    torch.set_rng_state(rng["torch"])
+    if rng["cuda"] is not None and torch.cuda.is_available():
+        torch.cuda.set_rng_state_all(rng["cuda"])
+
+
 def load_checkpoint(path, option: str = "--checkpoint", env_id: Optional[str] = None, obs_dim: Optional[int] = None,
                     act_dim: Optional[int] = None, control_mode: Optional[str] = None) -> dict:
     """The checkpoint at `path` (given as `option`), its args under their current names. With

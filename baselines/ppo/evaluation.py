@@ -12,8 +12,8 @@ demonstrations' seeds lie below), the default `--seed`. Return is the extrinsic 
 Algorithm 1) return. The checkpoint must fit the env: observation and action sizes and the
 control mode it was trained in.
 
-`evaluate_envs` is ppo.py's evaluation during training: the same deterministic policy on a vector
-env (either backend), the first episode of each env, for the curriculum's smoothed success.
+One loop runs the episodes of both (`run_episodes`): scripts/evaluate.py's, one env per worker
+process, and ppo.py's evaluation during training (`evaluate_envs`), on its vector envs of either backend.
 """
 
 from __future__ import annotations
@@ -24,7 +24,6 @@ import multiprocessing as mp
 import shlex
 import sys
 import time
-from collections import defaultdict
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Optional
@@ -106,34 +105,50 @@ def finished_episodes(infos: dict) -> dict:
     fin = infos["final_info"]
     return dict(ended=infos["_final_info"], success=fin["episode"]["success_once"], picked=fin["picked"],
                 ep_return=fin["episode"]["return"], ep_length=fin["episode"]["episode_len"],
-                end_place_dist=fin["place_dist"], end_place_angle_deg=fin["place_angle_deg"], held_at_end=fin["is_grasped"])
+                end_place_dist=fin["place_dist"], end_place_angle_deg=fin["place_angle_deg"], held_at_end=fin["is_grasped"],
+                task_id=fin["task_id"])
 
 
 @torch.no_grad()
-def evaluate_envs(agent, envs, num_steps: int, seed: int) -> dict:
-    """ppo.py's evaluation during training, on a vector env (`envs`, either backend): deterministic
-    policy, the first episode of every env (at most `num_steps` steps): pick and place success, return."""
+def run_episodes(agent, envs, num_steps: int, seed: int, deterministic: bool = True) -> list[dict]:
+    """The one evaluation loop, for ppo.py's evaluation during training and scripts/evaluate.py's seeded
+    episodes: every env of `envs` (a vector env of either backend, or ManiSkillVectorEnv without auto
+    reset) from a reset with seed `seed + i`, the policy's mean (or samples from its Gaussian) until
+    each env's first episode has ended or `num_steps` have passed. A record per ended episode, in env
+    order; `policy_time_s` is each episode's share of the policy's forward passes."""
     obs = reset(envs, seed)
-    finished = torch.zeros(envs.num_envs, dtype=torch.bool, device=obs.device)
-    stats = defaultdict(lambda: torch.zeros(envs.num_envs, device=obs.device))
+    n = envs.num_envs
+    records: list[Optional[dict]] = [None] * n
+    policy_time = torch.zeros(n, dtype=torch.float64)
     for _ in range(num_steps):
-        obs, _, _, _, infos = envs.step(agent.get_action(obs, deterministic=True).clamp(-1, 1))
-        if "final_info" not in infos:
-            continue
-        ep = finished_episodes(infos)
-        new = ep["ended"] & ~finished
-        for key in ("success", "picked", "ep_return"):
-            stats[key] = torch.where(new, ep[key].float(), stats[key])
-        finished |= ep["ended"]
-        if finished.all():
+        t = time.perf_counter()
+        action = agent.get_action(obs.float(), deterministic=deterministic).clamp(-1, 1)
+        policy_time += (time.perf_counter() - t) / n
+        obs, _, terminated, truncated, infos = envs.step(action)
+        if "final_info" not in infos:  # an env that does not reset on its own reports its end in the step's info
+            done = (terminated | truncated).cpu()
+            if not done.any():
+                continue
+            infos = dict(final_info=infos, _final_info=done)
+        ep = {k: v.cpu() for k, v in finished_episodes(infos).items()}
+        for i in map(int, ep["ended"].nonzero()[:, 0]):
+            if records[i] is None:
+                records[i] = dict(seed=seed + i, task_id=int(ep["task_id"][i]), picked=bool(ep["picked"][i]),
+                                  placed=bool(ep["success"][i]), ret=float(ep["ep_return"][i]), length=int(ep["ep_length"][i]),
+                                  policy_time_s=float(policy_time[i]), final_place_dist=float(ep["end_place_dist"][i]),
+                                  final_place_angle_deg=float(ep["end_place_angle_deg"][i]), held_at_end=bool(ep["held_at_end"][i]))
+        if all(r is not None for r in records):
             break
-    mean = lambda x: float(x[finished].mean()) if finished.any() else float("nan")  # noqa: E731
-    return dict(
-        eval_pick_success=mean(stats["picked"]),
-        eval_place_success=mean(stats["success"]),
-        eval_extrinsic_return=mean(stats["ep_return"]),
-        eval_episodes=int(finished.sum()),
-    )
+    return [r for r in records if r is not None]
+
+
+def evaluate_envs(agent, envs, num_steps: int, seed: int) -> dict:
+    """ppo.py's evaluation during training (`run_episodes` on its evaluation envs, deterministic policy):
+    the first episode of every env: pick and place success, return."""
+    episodes = run_episodes(agent, envs, num_steps, seed)
+    mean = lambda key: float(np.mean([e[key] for e in episodes])) if episodes else float("nan")  # noqa: E731
+    return dict(eval_pick_success=mean("picked"), eval_place_success=mean("placed"), eval_extrinsic_return=mean("ret"),
+                eval_episodes=len(episodes))
 
 
 _worker: dict = {}
@@ -142,6 +157,8 @@ _worker: dict = {}
 def _episode(job: tuple) -> dict:
     """One seeded episode in a worker process (env and policy kept for the next job)."""
     import gymnasium as gym
+    from mani_skill.utils.gym_utils import find_max_episode_steps_value
+    from mani_skill.vector.wrappers.gymnasium import ManiSkillVectorEnv
 
     checkpoint, env_id, stage, seed, video_dir, sample = job
     torch.set_num_threads(1)
@@ -152,32 +169,19 @@ def _episode(job: tuple) -> dict:
         _worker.clear()
         agent, control_mode = load_policy(Path(checkpoint), env_id)
         env = gym.make(env_id, obs_mode="state", control_mode=control_mode, reward_mode="sparse", num_envs=1,
-                       sim_backend="physx_cpu", curriculum_stage=stage,
-                       render_mode="rgb_array" if video_dir else None)
+                       sim_backend="physx_cpu", curriculum_stage=stage, render_mode="rgb_array" if video_dir else None)
         if video_dir:
             from mani_skill.utils.wrappers import RecordEpisode
 
             env = RecordEpisode(env, str(video_dir), save_trajectory=False, save_on_reset=False, video_fps=20)
-        _worker[key] = (agent, env)
+        # no auto reset: the episode's last frame ends the video, and no reset is wasted after it
+        _worker[key] = (agent, ManiSkillVectorEnv(env, 1, auto_reset=False, record_metrics=True))
     agent, env = _worker[key]
-    obs, _ = env.reset(seed=seed)
     torch.manual_seed(seed)
-    ret, steps, policy_time, picked = 0.0, 0, 0.0, False
-    while True:
-        t = time.perf_counter()
-        with torch.no_grad():
-            action = agent.get_action(obs.float(), deterministic=not sample).clamp(-1, 1)
-        policy_time += time.perf_counter() - t
-        obs, reward, terminated, truncated, info = env.step(action)
-        ret, steps = ret + float(reward[0]), steps + 1
-        picked |= bool(info["picked"][0])
-        if bool(terminated[0]) or bool(truncated[0]):
-            break
+    [episode] = run_episodes(agent, env, find_max_episode_steps_value(env._env), seed, deterministic=not sample)
     if video_dir:
-        env.flush_video(name=f"{env_id}_seed{seed}")
-    return dict(seed=seed, task_id=int(info["task_id"][0]), picked=picked, placed=bool(info["success"][0]),
-                ret=ret, length=steps, policy_time_s=policy_time, final_place_dist=float(info["place_dist"][0]),
-                final_place_angle_deg=float(info["place_angle_deg"][0]), held_at_end=bool(info["is_grasped"][0]))
+        env.call("flush_video", name=f"{env_id}_seed{seed}")
+    return episode
 
 
 def summarize(episodes: list[dict]) -> dict:

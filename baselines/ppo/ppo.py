@@ -1,8 +1,8 @@
 """PPO with a curiosity bonus (ICM) and the paper's tolerance curriculum, for the construction tasks.
 
 In the shape of ManiSkill's PPO baseline (CleanRL style: read top to bottom, one `Args` dataclass);
-the networks are in networks.py, ICM in curiosity.py, checkpoints and the CSV log in checkpoints.py,
-the evaluation in evaluation.py. Additions: `--curiosity icm` (Pathak et al. 2017), `--curriculum
+the networks are in networks.py, the update (GAE and the clipped objective) in update.py, ICM in
+curiosity.py, checkpoints and the CSV log in checkpoints.py, the evaluation in evaluation.py. Additions: `--curiosity icm` (Pathak et al. 2017), `--curriculum
 cp1 cp2 cp3 cp4` (Table I of the paper, each stage inheriting every parameter of the previous one),
 sparse reward by default (the paper's Algorithm 1), atomic checkpoints and exact `--resume`, a CSV
 log per run.
@@ -40,7 +40,6 @@ from typing import Literal, Optional, Union, get_args, get_origin, get_type_hint
 import gymnasium as gym
 import numpy as np
 import torch
-import torch.nn as nn
 import torch.optim as optim
 import tyro
 from torch.utils.tensorboard import SummaryWriter
@@ -48,10 +47,11 @@ from tqdm import tqdm
 
 from mani_skill.vector.wrappers.gymnasium import ManiSkillVectorEnv
 
-from baselines.ppo.checkpoints import CSVLog, Progress, check_fit, load_checkpoint, save_checkpoint
+from baselines.ppo.checkpoints import CSVLog, Progress, check_fit, load_checkpoint, restore_rng, save_checkpoint
 from baselines.ppo.curiosity import ICM
 from baselines.ppo.evaluation import evaluate_envs, finished_episodes, reset
 from baselines.ppo.networks import Agent, make_agent, value_heads
+from baselines.ppo.update import adam, bootstrap_mask, gae, ppo_update
 from baselines.ppo.start_states import StartFromStates
 from ms_construction.curriculum import STAGE_NAMES
 from ms_construction.envs import ENV_IDS
@@ -101,9 +101,7 @@ class Args:
     learning_rate: float = 3e-4
     """Adam learning rate of policy and value."""
     num_envs: Optional[int] = None
-    """parallel training envs (default: one per CPU core on physx_cpu, 512 on physx_cuda). On physx_cpu, twice
-    as many as cores keeps more of the simulator's speed while the learner infers and updates (see
-    docs/BENCHMARKS.md), with a batch twice as large per update."""
+    """parallel training envs (default: one per CPU core on physx_cpu, 512 on physx_cuda)."""
     num_eval_envs: Optional[int] = None
     """parallel evaluation envs (default: 2 on physx_cpu, 16 on physx_cuda)."""
     partial_reset: bool = True
@@ -149,8 +147,7 @@ class Args:
     (ManiSkill's PPO default, its name): every end, success included, so that a success state counts
     as one that keeps paying what it paid; the dense rewards are made for it (see the task card).
     `never`: no end. Default: `always` with the dense rewards, `truncated` with sparse (ML-Agents',
-    which bootstraps interrupted episodes only). (Earlier checkpoints saved a boolean
-    `finite_horizon_gae` or `bootstrap_at_truncation`: true is `truncated`.)"""
+    which bootstraps interrupted episodes only)."""
     hidden_size: int = 256
     """width of the policy and value networks."""
     num_layers: int = 3
@@ -187,6 +184,9 @@ class Args:
     added to its actions (baselines/ppo/residual.py, ResiP). Its observation statistics stay too."""
     residual_scale: float = 0.1
     """the correction's scale in action units."""
+    residual_l2_coef: float = 0.0
+    """weight of the correction's mean square (before scaling) in the policy loss: an anchor at the clone,
+    so that the residual moves only where the advantages keep asking it to."""
     start_states: Optional[str] = None
     """a bank of env states (baselines/ppo/start_states.py, where a policy failed) that a share of the
     training episodes start from; evaluation always resets as usual. physx_cpu only."""
@@ -296,6 +296,8 @@ def validate(args: Args) -> None:
     for name in ("residual_of", "start_states"):
         if getattr(args, name) is not None and not Path(getattr(args, name)).is_file():
             raise SystemExit(f"--{name.replace('_', '-')}: no such file: {getattr(args, name)}")
+    if args.residual_l2_coef and not args.residual_of:
+        raise SystemExit("--residual-l2-coef weighs a residual's correction: give --residual-of")
     if args.residual_of and args.bc_coef > 0:
         raise SystemExit("--bc-coef works on the policy's own weights; a residual agent (--residual-of) has none to pull")
     if not 0 <= args.start_states_share <= 1:
@@ -331,106 +333,14 @@ def resolve_defaults(args: Args) -> None:
 
 
 # ------------------------------------------------------------------------------------------------- #
-# Advantages
-# ------------------------------------------------------------------------------------------------- #
-def bootstrap_mask(terminated: torch.Tensor, truncated: torch.Tensor, bootstrap_at_done: str) -> torch.Tensor:
-    """1 where an episode ended ([steps, envs]) and bootstraps with the value of its last observation."""
-    ends = {"always": terminated + truncated, "truncated": truncated, "never": torch.zeros_like(truncated)}
-    return ends[bootstrap_at_done].clamp(max=1)
-
-
-def gae(rewards: torch.Tensor, values: torch.Tensor, next_value: torch.Tensor, final_values: torch.Tensor,
-        dones: torch.Tensor, gamma: float, gae_lambda: float) -> torch.Tensor:
-    """Generalized advantage estimates of a rollout ([steps, envs]): `values` V(s_t), `next_value`
-    V(s) after the last step, `final_values` the value an episode that ended at step t bootstraps with
-    (V of its last observation where it does, see `bootstrap_mask`, else 0), `dones` where episodes ended."""
-    advantages = torch.zeros_like(rewards)
-    lastgaelam = torch.zeros_like(next_value)
-    for t in reversed(range(len(rewards))):
-        boot = next_value if t == len(rewards) - 1 else values[t + 1]
-        v = torch.where(dones[t].bool(), final_values[t], boot)
-        delta = rewards[t] + gamma * v - values[t]
-        lastgaelam = delta + gamma * gae_lambda * (1 - dones[t]) * lastgaelam
-        advantages[t] = lastgaelam
-    return advantages
-
-
-# ------------------------------------------------------------------------------------------------- #
-# PPO update
-# ------------------------------------------------------------------------------------------------- #
-def ppo_update(agent: Agent, optimizer: optim.Optimizer, batch: dict, args: Args, icm: Optional[ICM] = None,
-               icm_optimizer: Optional[optim.Optimizer] = None, demos: Optional[tuple] = None,
-               value_only: bool = False) -> dict[str, float]:
-    """PPO's clipped update on one rollout: `batch` holds obs, next_obs, actions, logprobs and advantages,
-    flat over steps and envs, and returns and values [batch, value heads] (the value loss is the mean of
-    the heads'). `args.update_epochs` epochs of `args.num_minibatches`
-    shuffled minibatches (numpy's RNG), stopping after an epoch whose last minibatch's approximate KL
-    exceeds `args.target_kl`; ICM learns on the same minibatches. `demos` (obs, actions) add a
-    behaviour-cloning term; `value_only` trains the critic alone (the warm-up). The mean of each loss."""
-    batch_size = len(batch["obs"])
-    minibatch_size = batch_size // args.num_minibatches
-    b_inds = np.arange(batch_size)
-    advantages = batch["advantages"]
-    if args.norm_adv == "batch":
-        advantages = (advantages - advantages.mean()) / (advantages.std() + 1e-8)
-    losses = defaultdict(list)  # tensors, read once at the end: a .item() per loss per minibatch costs more
-    for _epoch in range(args.update_epochs):
-        np.random.shuffle(b_inds)
-        for start in range(0, batch_size, minibatch_size):
-            mb = torch.from_numpy(b_inds[start:start + minibatch_size]).to(batch["obs"].device)
-            obs, actions = batch["obs"][mb], batch["actions"][mb]
-            _, newlogprob, entropy, newvalue = agent.get_action_and_value(obs, actions)
-            logratio = newlogprob - batch["logprobs"][mb]
-            ratio = logratio.exp()
-            with torch.no_grad():
-                approx_kl = ((ratio - 1) - logratio).mean()
-            mb_adv = advantages[mb]
-            if args.norm_adv == "minibatch":
-                mb_adv = (mb_adv - mb_adv.mean()) / (mb_adv.std() + 1e-8)
-            pg_loss = torch.max(-mb_adv * ratio, -mb_adv * torch.clamp(ratio, 1 - args.clip_coef, 1 + args.clip_coef)).mean()
-            mb_ret = batch["returns"][mb]
-            if args.clip_vloss:
-                mb_val = batch["values"][mb]
-                v_clipped = mb_val + torch.clamp(newvalue - mb_val, -args.clip_coef, args.clip_coef)
-                v_loss = 0.5 * torch.max((newvalue - mb_ret) ** 2, (v_clipped - mb_ret) ** 2).mean()
-            else:
-                v_loss = 0.5 * ((newvalue - mb_ret) ** 2).mean()
-            entropy_loss = entropy.mean()
-            loss = pg_loss - args.ent_coef * entropy_loss + v_loss * args.vf_coef
-            if demos is not None and args.bc_coef > 0:
-                d = torch.randint(len(demos[0]), (len(mb),), device=mb.device)
-                bc_loss = ((agent.actor_mean(agent.normalize(demos[0][d])) - demos[1][d]) ** 2).mean()
-                loss = loss + args.bc_coef * bc_loss
-                losses["bc_loss"].append(bc_loss.detach())
-            if value_only:
-                loss = v_loss * args.vf_coef
-            optimizer.zero_grad()
-            loss.backward()
-            if args.max_grad_norm is not None:
-                nn.utils.clip_grad_norm_(agent.parameters(), args.max_grad_norm)
-            optimizer.step()
-            if icm is not None:
-                icm_losses = icm.update(icm_optimizer, obs, batch["next_obs"][mb], actions)
-                losses["icm_forward_loss"].append(icm_losses["forward"])
-                losses["icm_inverse_loss"].append(icm_losses["inverse"])
-            losses["value_loss"].append(v_loss.detach())
-            losses["policy_loss"].append(pg_loss.detach())
-            losses["entropy"].append(entropy_loss.detach())
-            losses["approx_kl"].append(approx_kl)
-        if args.target_kl is not None and approx_kl > args.target_kl:
-            break
-    return {k: torch.stack(v).double().mean().item() for k, v in losses.items()}
-
-
-def adam(params, lr: float, eps: float = 1e-8) -> optim.Optimizer:
-    """Adam as the policy and ICM learn with it, fused (one kernel for all tensors per step): at minibatches
-    of a few dozen samples the default's loop over tensors costs about a fifth of the update."""
-    return optim.Adam(params, lr=lr, eps=eps, fused=True)
-
-
-# ------------------------------------------------------------------------------------------------- #
 # Training
 # ------------------------------------------------------------------------------------------------- #
+EPISODE_STATS = dict(pick_success="picked", place_success="success", extrinsic_return="ep_return", episode_length="ep_length",
+                     end_place_dist="end_place_dist", end_place_angle_deg="end_place_angle_deg", held_at_end="held_at_end")
+"""progress.csv's columns of the training episodes that ended in an iteration (their means), from
+`finished_episodes`' keys."""
+
+
 def checkpoint_path(args: Args) -> Path:
     """The run's checkpoint (the one resumed from, when resuming); its other files sit beside it."""
     return Path(args.resume) if args.resume else Path(args.log_dir) / args.exp_name / "checkpoint.pt"
@@ -523,12 +433,7 @@ def setup(args: Args) -> Run:
             icm.load_state_dict(resume["icm"])
             icm_optimizer.load_state_dict(resume["icm_optimizer"])
         progress = Progress(**resume["progress"])
-        rng = resume["rng"]
-        random.setstate(rng["python"])
-        np.random.set_state(rng["numpy"])
-        torch.set_rng_state(rng["torch"])
-        if rng["cuda"] is not None and torch.cuda.is_available():
-            torch.cuda.set_rng_state_all(rng["cuda"])
+        restore_rng(resume["rng"])
     elif init is not None:
         agent.load_state_dict(init["agent"])
         if icm is not None and init["icm"] is not None:
@@ -627,8 +532,7 @@ def train(run: Run) -> Progress:
                 if "final_info" in infos:
                     ep = finished_episodes(infos)
                     next_obs_buf[step, ep["ended"]] = infos["final_observation"][ep["ended"]]
-                    for key in ("success", "picked", "ep_return", "ep_length", "end_place_dist", "end_place_angle_deg",
-                                "held_at_end"):
+                    for key in EPISODE_STATS.values():
                         episodes[key] += ep[key][ep["ended"]].float().tolist()
 
             # ---- log-probabilities and values, and the intrinsic reward, on the whole rollout ----
@@ -678,10 +582,7 @@ def train(run: Run) -> Progress:
                        clip_coef=update_args.clip_coef, ent_coef=update_args.ent_coef)
             row.update(losses)
             if episodes["success"]:
-                row.update({k: float(np.mean(episodes[key])) for k, key in (
-                    ("pick_success", "picked"), ("place_success", "success"), ("extrinsic_return", "ep_return"),
-                    ("episode_length", "ep_length"), ("end_place_dist", "end_place_dist"),
-                    ("end_place_angle_deg", "end_place_angle_deg"), ("held_at_end", "held_at_end"))})
+                row.update({column: float(np.mean(episodes[key])) for column, key in EPISODE_STATS.items()})
                 if episodes["intrinsic_return"]:
                     row["intrinsic_return"] = float(np.mean(episodes["intrinsic_return"]))
             if progress.iteration % args.eval_freq == 0 or progress.iteration == num_iterations:

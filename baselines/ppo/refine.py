@@ -72,6 +72,8 @@ class Args:
     0.99, 85 steps of placing halve it, which pays hurrying)."""
     residual_scale: float = 0.1
     """the correction's scale in action units."""
+    residual_l2_coef: float = 0.0
+    """weight of the correction's mean square in the loss (ppo.py's --residual-l2-coef): an anchor at the clone."""
     start_states_share: float = 0.25
     """the share of training episodes that start from the bank."""
     critic_warmup_iterations: int = 3
@@ -93,7 +95,7 @@ class Args:
 
 def ppo_args(args: Args, bank: Path) -> ppo.Args:
     return ppo.Args(
-        residual_of=str(args.clone), residual_scale=args.residual_scale, start_states=str(bank),
+        residual_of=str(args.clone), residual_scale=args.residual_scale, residual_l2_coef=args.residual_l2_coef, start_states=str(bank),
         start_states_share=args.start_states_share, env_id="ConstructionPickPlace-v1", reward_mode="sparse",
         curiosity="none", curriculum=("cp4",), total_timesteps=args.total_timesteps, num_envs=args.num_envs,
         num_steps=args.num_steps, num_minibatches=args.num_minibatches, update_epochs=args.update_epochs,

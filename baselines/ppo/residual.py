@@ -58,6 +58,10 @@ class ResidualAgent(nn.Module):
     def _std(self, mean):
         return self.scale * torch.exp(self.actor_logstd.expand_as(mean))
 
+    def correction(self, x):
+        """The residual's output before scaling (zero at the start): what --residual-l2-coef keeps small."""
+        return self.residual_mean(self._inputs_and_mean(x)[0])
+
     def get_value(self, x):
         return self.critic(self._inputs_and_mean(x)[0])
 

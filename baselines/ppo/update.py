@@ -1,0 +1,115 @@
+"""PPO's update on one rollout: advantages (GAE, with the choice of which episode ends bootstrap) and
+the clipped objective, with Adam fused. ppo.py's training loop calls them once per iteration."""
+
+from __future__ import annotations
+
+from collections import defaultdict
+from typing import TYPE_CHECKING, Optional
+
+import numpy as np
+import torch
+import torch.nn as nn
+import torch.optim as optim
+
+from baselines.ppo.curiosity import ICM
+from baselines.ppo.networks import Agent
+
+if TYPE_CHECKING:
+    from baselines.ppo import ppo
+
+
+def bootstrap_mask(terminated: torch.Tensor, truncated: torch.Tensor, bootstrap_at_done: str) -> torch.Tensor:
+    """1 where an episode ended ([steps, envs]) and bootstraps with the value of its last observation."""
+    ends = {"always": terminated + truncated, "truncated": truncated, "never": torch.zeros_like(truncated)}
+    return ends[bootstrap_at_done].clamp(max=1)
+
+
+def gae(rewards: torch.Tensor, values: torch.Tensor, next_value: torch.Tensor, final_values: torch.Tensor,
+        dones: torch.Tensor, gamma: float, gae_lambda: float) -> torch.Tensor:
+    """Generalized advantage estimates of a rollout ([steps, envs]): `values` V(s_t), `next_value`
+    V(s) after the last step, `final_values` the value an episode that ended at step t bootstraps with
+    (V of its last observation where it does, see `bootstrap_mask`, else 0), `dones` where episodes ended."""
+    advantages = torch.zeros_like(rewards)
+    lastgaelam = torch.zeros_like(next_value)
+    for t in reversed(range(len(rewards))):
+        boot = next_value if t == len(rewards) - 1 else values[t + 1]
+        v = torch.where(dones[t].bool(), final_values[t], boot)
+        delta = rewards[t] + gamma * v - values[t]
+        lastgaelam = delta + gamma * gae_lambda * (1 - dones[t]) * lastgaelam
+        advantages[t] = lastgaelam
+    return advantages
+
+
+def ppo_update(agent: Agent, optimizer: optim.Optimizer, batch: dict, args: "ppo.Args", icm: Optional[ICM] = None,
+               icm_optimizer: Optional[optim.Optimizer] = None, demos: Optional[tuple] = None,
+               value_only: bool = False) -> dict[str, float]:
+    """PPO's clipped update on one rollout: `batch` holds obs, next_obs, actions, logprobs and advantages,
+    flat over steps and envs, and returns and values [batch, value heads] (the value loss is the mean of
+    the heads'). `args.update_epochs` epochs of `args.num_minibatches`
+    shuffled minibatches (numpy's RNG), stopping after an epoch whose last minibatch's approximate KL
+    exceeds `args.target_kl`; ICM learns on the same minibatches. `demos` (obs, actions) add a
+    behaviour-cloning term, `args.residual_l2_coef` a pull of a residual agent's correction towards zero;
+    `value_only` trains the critic alone (the warm-up). The mean of each loss."""
+    batch_size = len(batch["obs"])
+    minibatch_size = batch_size // args.num_minibatches
+    b_inds = np.arange(batch_size)
+    advantages = batch["advantages"]
+    if args.norm_adv == "batch":
+        advantages = (advantages - advantages.mean()) / (advantages.std() + 1e-8)
+    losses = defaultdict(list)  # tensors, read once at the end: a .item() per loss per minibatch costs more
+    for _epoch in range(args.update_epochs):
+        np.random.shuffle(b_inds)
+        for start in range(0, batch_size, minibatch_size):
+            mb = torch.from_numpy(b_inds[start:start + minibatch_size]).to(batch["obs"].device)
+            obs, actions = batch["obs"][mb], batch["actions"][mb]
+            _, newlogprob, entropy, newvalue = agent.get_action_and_value(obs, actions)
+            logratio = newlogprob - batch["logprobs"][mb]
+            ratio = logratio.exp()
+            with torch.no_grad():
+                approx_kl = ((ratio - 1) - logratio).mean()
+            mb_adv = advantages[mb]
+            if args.norm_adv == "minibatch":
+                mb_adv = (mb_adv - mb_adv.mean()) / (mb_adv.std() + 1e-8)
+            pg_loss = torch.max(-mb_adv * ratio, -mb_adv * torch.clamp(ratio, 1 - args.clip_coef, 1 + args.clip_coef)).mean()
+            mb_ret = batch["returns"][mb]
+            if args.clip_vloss:
+                mb_val = batch["values"][mb]
+                v_clipped = mb_val + torch.clamp(newvalue - mb_val, -args.clip_coef, args.clip_coef)
+                v_loss = 0.5 * torch.max((newvalue - mb_ret) ** 2, (v_clipped - mb_ret) ** 2).mean()
+            else:
+                v_loss = 0.5 * ((newvalue - mb_ret) ** 2).mean()
+            entropy_loss = entropy.mean()
+            loss = pg_loss - args.ent_coef * entropy_loss + v_loss * args.vf_coef
+            if demos is not None and args.bc_coef > 0:
+                d = torch.randint(len(demos[0]), (len(mb),), device=mb.device)
+                bc_loss = ((agent.actor_mean(agent.normalize(demos[0][d])) - demos[1][d]) ** 2).mean()
+                loss = loss + args.bc_coef * bc_loss
+                losses["bc_loss"].append(bc_loss.detach())
+            if args.residual_l2_coef > 0:
+                l2 = agent.correction(obs).pow(2).sum(-1).mean()
+                loss = loss + args.residual_l2_coef * l2
+                losses["residual_l2"].append(l2.detach())
+            if value_only:
+                loss = v_loss * args.vf_coef
+            optimizer.zero_grad()
+            loss.backward()
+            if args.max_grad_norm is not None:
+                nn.utils.clip_grad_norm_(agent.parameters(), args.max_grad_norm)
+            optimizer.step()
+            if icm is not None:
+                icm_losses = icm.update(icm_optimizer, obs, batch["next_obs"][mb], actions)
+                losses["icm_forward_loss"].append(icm_losses["forward"])
+                losses["icm_inverse_loss"].append(icm_losses["inverse"])
+            losses["value_loss"].append(v_loss.detach())
+            losses["policy_loss"].append(pg_loss.detach())
+            losses["entropy"].append(entropy_loss.detach())
+            losses["approx_kl"].append(approx_kl)
+        if args.target_kl is not None and approx_kl > args.target_kl:
+            break
+    return {k: torch.stack(v).double().mean().item() for k, v in losses.items()}
+
+
+def adam(params, lr: float, eps: float = 1e-8) -> optim.Optimizer:
+    """Adam as the policy and ICM learn with it, fused (one kernel for all tensors per step): at minibatches
+    of a few dozen samples the default's loop over tensors costs about a fifth of the update."""
+    return optim.Adam(params, lr=lr, eps=eps, fused=True)
