@@ -65,6 +65,19 @@ def test_training_and_scripts_evaluate_py_run_the_same_episode_loop(tmp_path):
     assert summary["eval_episodes"] == 1 and summary["eval_place_success"] == float(by_script[1]["placed"])
 
 
+def test_the_recorded_episode_is_one_video_named_by_task_and_seed(tmp_path):
+    """`--video-dir`: the first episode of the task as one video, every frame of it and no more."""
+    import imageio.v2 as iio
+
+    out = tmp_path / "eval.json"
+    evaluation.main(evaluation.Args(env_id="Flooring-v1", episodes=1, seed=1_000_000, json=out, workers=1,
+                                    video_dir=tmp_path / "videos"))
+    [video] = (tmp_path / "videos").glob("*.mp4")
+    assert video.name == "Flooring-v1_seed1000000.mp4"
+    length = json.loads(out.read_text())["episode_results"][0]["length"]
+    assert iio.get_reader(video).count_frames() == length + 1  # the reset's frame and one per step
+
+
 def test_a_checkpoint_of_the_wrong_shape_is_a_clear_error(tmp_path):
     path = tmp_path / "wrong.pt"
     agent = Agent(40, 6, 32)

@@ -180,7 +180,7 @@ def _episode(job: tuple) -> dict:
     torch.manual_seed(seed)
     [episode] = run_episodes(agent, env, find_max_episode_steps_value(env._env), seed, deterministic=not sample)
     if video_dir:
-        env.call("flush_video", name=f"{env_id}_seed{seed}")
+        env.call("flush_video", f"{env_id}_seed{seed}")  # (call's own first parameter is `name`)
     return episode
 
 
