@@ -126,6 +126,11 @@ def test_promotion_in_a_run_moves_train_and_eval_envs_to_the_next_stage(tmp_path
     assert [r["stage"] for r in rows] == ["cp1", "cp1", "cp2"]
     ckpt = torch.load(tmp_path / args.exp_name / "checkpoint.pt", weights_only=False)
     assert ckpt["progress"]["stage_index"] == 1
+    # the policy as cp1 ended is kept beside the run's checkpoint, which goes on
+    [ended] = (tmp_path / args.exp_name).glob("checkpoint_stage*.pt")
+    stage_end = torch.load(ended, weights_only=False)
+    assert ended.name == "checkpoint_stage1_cp1.pt" and stage_end["progress"]["global_step"] == 160
+    assert ckpt["progress"]["global_step"] == 240
 
 
 def test_interrupted_run_resumes_with_the_uninterrupted_run_s_state(tmp_path, monkeypatch):

@@ -29,6 +29,7 @@ import functools
 import math
 import os
 import random
+import shutil
 import signal
 import sys
 import time
@@ -611,6 +612,9 @@ def train(run: Run) -> Progress:
             bar.set_postfix(sps=f"{sps:.0f}", place=row.get("place_success", float("nan")), pick=row.get("pick_success", float("nan")))
             if promotion or progress.iteration % args.checkpoint_freq == 0 or progress.iteration == num_iterations:
                 run.save()
+            if promotion and args.save_model:  # the policy at the end of each stage, kept to be evaluated (at cp4)
+                ended = f"checkpoint_stage{progress.stage_index}_{args.curriculum[progress.stage_index - 1]}.pt"
+                shutil.copyfile(checkpoint_path(args), checkpoint_path(args).with_name(ended))
     except KeyboardInterrupt:
         interrupted = True
     finally:
