@@ -4,7 +4,7 @@ the clipped objective, with Adam fused. ppo.py's training loop calls them once p
 from __future__ import annotations
 
 from collections import defaultdict
-from typing import TYPE_CHECKING, Optional
+from typing import Optional
 
 import numpy as np
 import torch
@@ -13,9 +13,6 @@ import torch.optim as optim
 
 from baselines.ppo.curiosity import ICM
 from baselines.ppo.networks import Agent
-
-if TYPE_CHECKING:
-    from baselines.ppo import ppo
 
 
 def bootstrap_mask(terminated: torch.Tensor, truncated: torch.Tensor, bootstrap_at_done: str) -> torch.Tensor:
@@ -40,13 +37,13 @@ def gae(rewards: torch.Tensor, values: torch.Tensor, next_value: torch.Tensor, f
     return advantages
 
 
-def ppo_update(agent: Agent, optimizer: optim.Optimizer, batch: dict, args: "ppo.Args", icm: Optional[ICM] = None,
+def ppo_update(agent: Agent, optimizer: optim.Optimizer, batch: dict, args, icm: Optional[ICM] = None,
                icm_optimizer: Optional[optim.Optimizer] = None, demos: Optional[tuple] = None,
                value_only: bool = False) -> dict[str, float]:
-    """PPO's clipped update on one rollout: `batch` holds obs, next_obs, actions, logprobs and advantages,
-    flat over steps and envs, and returns and values [batch, value heads] (the value loss is the mean of
-    the heads'). `args.update_epochs` epochs of `args.num_minibatches`
-    shuffled minibatches (numpy's RNG), stopping after an epoch whose last minibatch's approximate KL
+    """PPO's clipped update on one rollout, with the settings of `args` (ppo.py's Args): `batch` holds obs,
+    next_obs, actions, logprobs and advantages, flat over steps and envs, and returns and values [batch,
+    value heads] (the value loss is the mean of the heads'). `args.update_epochs` epochs of
+    `args.num_minibatches` shuffled minibatches (numpy's RNG), stopping after an epoch whose last minibatch's approximate KL
     exceeds `args.target_kl`; ICM learns on the same minibatches. `demos` (obs, actions) add a
     behaviour-cloning term, `args.residual_l2_coef` a pull of a residual agent's correction towards zero;
     `value_only` trains the critic alone (the warm-up). The mean of each loss."""
