@@ -9,9 +9,7 @@ such a summary, so the docs regenerate from docs/data alone once the runs are go
 
     python scripts/refine_report.py --runs docs/data/refine/refine.json docs/data/refine/refine2.json --write-results
 
-Failure kinds at cp4 (Table I: 0.10 m, 20 degrees): dropped (the element not on the plate at the end),
-short (its centre further than 0.10 m from the goal), turned (near enough, more than 20 degrees off).
-Collisions are not recorded apart: an element stopped by the structure ends as short or turned.
+Failure kinds at cp4: baselines/ppo/evaluation.py's `failures`.
 """
 
 from __future__ import annotations
@@ -28,8 +26,8 @@ import matplotlib.pyplot as plt  # noqa: E402
 import torch  # noqa: E402
 import tyro  # noqa: E402
 
+from baselines.ppo.evaluation import failures, kinds  # noqa: E402
 from baselines.ppo.refine import beats, best_snapshot  # noqa: E402
-from ms_construction.curriculum import stage_tolerances  # noqa: E402
 from ms_construction.reporting import update_section  # noqa: E402
 
 SETTINGS = ("learning_rate", "gamma", "start_states_share", "residual_scale", "residual_l2_coef", "num_envs", "num_steps",
@@ -50,23 +48,11 @@ class Args:
     results: Path = Path("docs/RESULTS.md")
 
 
-def failure_kind(episode: dict, tol: dict) -> str:
-    if not episode["held_at_end"]:
-        return "dropped"
-    return "short" if episode["final_place_dist"] > tol["place"] else "turned"
-
-
 def validation_summary(path: Path) -> dict:
     data = json.loads(path.read_text())
-    tol = stage_tolerances("cp4")
-    out = {}
-    for env_id, r in data["tasks"].items():
-        failed = [e for e in r["episode_results"] if not e["placed"]]
-        out[env_id] = dict(episodes=r["episodes"], place_success=r["place_success"], ci95=r["place_success_ci95"],
-                           pick_success=r["pick_success"],
-                           failures=[dict(seed=e["seed"], kind=failure_kind(e, tol), dist=round(e["final_place_dist"], 3),
-                                          angle_deg=round(e["final_place_angle_deg"], 1)) for e in failed])
-    return out
+    return {env_id: dict(episodes=r["episodes"], place_success=r["place_success"], ci95=r["place_success_ci95"],
+                         pick_success=r["pick_success"], failures=failures(r["episode_results"]))
+            for env_id, r in data["tasks"].items()}
 
 
 def summarize(run: Path) -> dict:
@@ -107,17 +93,6 @@ def load(path: Path, data_dir: Path) -> dict:
 
 def pct(v: float) -> str:
     return f"{100 * v:.1f}"
-
-
-def kinds(failures: list) -> str:
-    """'8 short (0.18-1.93 m), 1 turned (25-25 deg)': per kind, the count and the range of its error."""
-    parts = []
-    for kind in ("short", "turned", "dropped"):
-        of = [f for f in failures if f["kind"] == kind]
-        if of:
-            key, unit = ("angle_deg", "deg") if kind == "turned" else ("dist", "m")
-            parts.append(f"{len(of)} {kind} ({min(f[key] for f in of):g}-{max(f[key] for f in of):g} {unit})")
-    return ", ".join(parts) or "none"
 
 
 def report(runs: list[dict]) -> str:

@@ -10,7 +10,7 @@ from pathlib import Path
 import pytest
 import torch
 
-from baselines.ppo import refine
+from baselines.ppo import evaluation, refine
 
 ROOT = Path(__file__).resolve().parents[1]
 spec = importlib.util.spec_from_file_location("refine_report", ROOT / "scripts" / "refine_report.py")
@@ -115,11 +115,17 @@ def test_the_report_tables_a_confirmation_beside_the_clone_where_a_run_has_one(t
     assert "| probe | 100,000 | 95.5 -> 96.0 | 95.0 -> 93.5 | 98.0 -> 97.0 | no |" in body
 
 
-def test_failure_kinds_follow_the_cp4_tolerances():
-    tol = dict(place=0.10, angle_deg=20.0)
-    assert refine_report.failure_kind(dict(held_at_end=False, final_place_dist=0.05), tol) == "dropped"
-    assert refine_report.failure_kind(dict(held_at_end=True, final_place_dist=0.3), tol) == "short"
-    assert refine_report.failure_kind(dict(held_at_end=True, final_place_dist=0.05), tol) == "turned"
+def test_failure_kinds_follow_the_stage_tolerances():
+    def episode(seed, placed, held, dist, angle):
+        return dict(seed=seed, placed=placed, held_at_end=held, final_place_dist=dist, final_place_angle_deg=angle)
+
+    episodes = [episode(0, False, False, 0.05, 3.0), episode(1, False, True, 0.3, 3.0), episode(2, False, True, 0.05, 45.0),
+                episode(3, True, True, 0.05, 3.0), episode(4, False, True, 0.2, 30.0)]
+    failed = evaluation.failures(episodes)  # cp4: 0.10 m, 20 degrees
+    assert [(f["seed"], f["kind"]) for f in failed] == [(0, "dropped"), (1, "short"), (2, "turned"), (4, "short")]
+    assert [f["kind"] for f in evaluation.failures(episodes, "cp2")] == ["dropped", "short", "turned", "turned"]  # 0.25 m
+    assert evaluation.kinds(failed) == "2 short (0.2-0.3 m), 1 turned (45-45 deg), 1 dropped (0.05-0.05 m)"
+    assert evaluation.kinds([]) == "none"
 
 
 def test_a_folder_that_is_not_a_refine_run_is_refused(tmp_path):

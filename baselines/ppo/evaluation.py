@@ -21,6 +21,7 @@ from __future__ import annotations
 import json
 import math
 import multiprocessing as mp
+import os
 import shlex
 import sys
 import time
@@ -33,7 +34,7 @@ import torch
 from tqdm import tqdm
 
 from baselines.ppo.checkpoints import load_checkpoint, load_policy
-from ms_construction.curriculum import STAGE_NAMES
+from ms_construction.curriculum import STAGE_NAMES, stage_tolerances
 from ms_construction.envs import ENV_IDS, TASK_ENV_IDS
 from ms_construction.reporting import update_section
 
@@ -226,6 +227,33 @@ def evaluate(args: Args, env_id: str, pool) -> dict:
     return dict(env_id=env_id, **summarize(episodes), episode_results=episodes)
 
 
+def failures(episodes: list[dict], stage: str = "cp4") -> list[dict]:
+    """The failed episodes, each with its kind at the stage's tolerances (Table I; cp4: 0.10 m, 20 degrees):
+    dropped (the element not on the plate at the end), short (its centre further from the goal than the
+    tolerance) or turned (near enough, turned further than it); and its distance and angle at the end.
+    Collisions are not told apart: an element stopped by the structure ends as short or turned."""
+    tol = stage_tolerances(stage)
+
+    def kind(e: dict) -> str:
+        if not e["held_at_end"]:
+            return "dropped"
+        return "short" if e["final_place_dist"] > tol["place"] else "turned"
+
+    return [dict(seed=e["seed"], kind=kind(e), dist=round(e["final_place_dist"], 3),
+                 angle_deg=round(e["final_place_angle_deg"], 1)) for e in episodes if not e["placed"]]
+
+
+def kinds(failed: list[dict]) -> str:
+    """'8 short (0.18-1.93 m), 1 turned (25-25 deg)': per kind of `failures`, the count and the range of its error."""
+    parts = []
+    for kind in ("short", "turned", "dropped"):
+        of = [f for f in failed if f["kind"] == kind]
+        if of:
+            key, unit = ("angle_deg", "deg") if kind == "turned" else ("dist", "m")
+            parts.append(f"{len(of)} {kind} ({min(f[key] for f in of):g}-{max(f[key] for f in of):g} {unit})")
+    return ", ".join(parts) or "none"
+
+
 def pct(p: float, ci: tuple[float, float]) -> str:
     return f"{100 * p:.1f} [{100 * ci[0]:.1f}, {100 * ci[1]:.1f}]"
 
@@ -325,10 +353,18 @@ def write_results(args: Args, results: dict[str, dict], beside: Optional[dict[st
     policy_ms = 1000 * np.mean([r["policy_time_per_episode_s"] for r in results.values()])
     lines += [f"Compute per episode: the policy's forward passes take {policy_ms:.0f} ms per episode on one CPU "
               "thread (mean over the three tasks), against the planning expert's planning time per episode in "
-              "the table above; both also spend the same simulation time.", ""]
+              "the table above; both also spend the same simulation time. Load average when the evaluation ended: "
+              f"{os.getloadavg()[0]:.1f} on {os.cpu_count()} cores (other work on the machine slows both).", ""]
     if beside:
         lines += ["Beside it, earlier agents on the same protocol (" + "; ".join(
             f"{label}: `{b['command']}`, {b['path']}" for label, b in beside.items()) + "):", "", beside_table(beside), ""]
+    rows = {"this agent": results, **{label: b["tasks"] for label, b in (beside or {}).items()}}
+    lines += [f"Failures by kind ({args.curriculum_stage} tolerances: short of the goal, turned, dropped; `failures` in "
+              "baselines/ppo/evaluation.py), with the range of the distance or angle at the end:", "",
+              "| agent | " + " | ".join(results) + " |", "|---|" + "---|" * len(results)]
+    lines += [f"| {label} | " + " | ".join(kinds(failures(tasks[e]["episode_results"], args.curriculum_stage)) if e in tasks
+                                            else "-" for e in results) + " |" for label, tasks in rows.items()]
+    lines.append("")
     if campaign:
         lines += ["Training (`" + campaign["command"] + "`):", ""]
         lines += [f"- {k}: {v}" for k, v in campaign["record"].items()]
