@@ -9,8 +9,10 @@ CPU (physx_cpu, state observations, pd_joint_delta_pos, uniform random actions):
 - one env in this process: each task against ManiSkill's PickCube-v1 (dense reward), with and
   without the element held by the plate (the grasp's per-substep tracking; most of every real
   pick-carry-place episode);
-- env processes: ms_construction.vector_env.CPUVectorEnv (AsyncVectorEnv workers, one env each) with
-  1, 2 and 4 workers: PickCube-v1, the general task, the general task with the element held, and
+- env processes: ms_construction.vector_env.CPUVectorEnv (one env per process, the first in the
+  learner's) with 1, 2 and 4 envs: PickCube-v1, the general task (also with every env in a worker
+  process, the layout before env 0 moved into the learner's, as a reference in the same round), the
+  general task with the element held, and
   baselines/ppo/ppo.py training on the same number of processes (its env steps/s with the PPO update
   included; the learner's defaults but for the number of envs), free-running and held, ICM off and
   on, against those processes simulating alone: the share of the simulator's speed the learner keeps;
@@ -250,10 +252,10 @@ def ppo_steps_per_second(iterations: int, backend: str, num_envs: Optional[int] 
 def worker_peak_rss_mib(envs: CPUVectorEnv) -> float:
     """The largest peak resident set (VmHWM) of the vector env's worker processes, MiB (Linux)."""
     peaks = []
-    for p in envs.env.processes:
+    for p in envs.worker_processes:
         with open(f"/proc/{p.pid}/status") as f:
             peaks += [int(line.split()[1]) / 1024 for line in f if line.startswith("VmHWM:")]
-    return max(peaks)
+    return max(peaks, default=0.0)
 
 
 def cpu_sections(args: Args) -> str:
@@ -280,10 +282,12 @@ def cpu_sections(args: Args) -> str:
         "",
         "### Env processes",
         "",
-        "ms_construction.vector_env.CPUVectorEnv: one env per worker process, same-step resets, sparse reward (the "
-        f"learner's default), uniform random actions, {args.vector_steps} vector steps per measurement; env steps/s = "
-        f"envs x vector steps per second; medians of {args.rounds} rounds. \"Held\": the element held by the plate "
-        "from every reset on (as in most steps of a trained agent).",
+        "ms_construction.vector_env.CPUVectorEnv: one env per process, env 0 in the learner's (this one) and the "
+        "others in worker processes, same-step resets, sparse reward (the learner's default), uniform random actions, "
+        f"{args.vector_steps} vector steps per measurement; env steps/s = envs x vector steps per second; medians of "
+        f"{args.rounds} rounds. \"Held\": the element held by the plate from every reset on (as in most steps of a "
+        "trained agent). \"Every env in a worker\": the same envs with `first_env_in_process=False`, the layout "
+        "before env 0 moved into the learner's process; \"gain\": env 0 in the learner's process over it, per round.",
         "",
         processes,
         "",
@@ -298,8 +302,9 @@ def cpu_sections(args: Args) -> str:
         "",
         training,
         "",
-        f"Peak host memory (resident set): the benchmark's process (learner and one-env runs) {learner_rss:,.0f} MiB; "
-        f"one env worker process {worker_rss:,.0f} MiB at most.",
+        f"Peak host memory (resident set): the benchmark's process (learner, its env 0 and the one-env runs) "
+        f"{learner_rss:,.0f} MiB; "
+        + (f"one env worker process {worker_rss:,.0f} MiB at most." if worker_rss else "no worker process (one env)."),
     ]) + "\n"
 
 
@@ -330,18 +335,21 @@ def one_env_table(args: Args) -> str:
 def process_table(args: Args) -> tuple[str, str, float]:
     """The env processes' steps/s simulating alone, and PPO's training steps/s on the same number of
     processes, free-running and held, ICM off and on, with its share of the simulation alone."""
-    sim_rows = [f"| env processes | {REFERENCE} | {GENERAL} | {GENERAL}, held |", "|---|---|---|---|"]
+    sim_rows = [f"| env processes | {REFERENCE} | {GENERAL} | {GENERAL}, held | {GENERAL}, every env in a worker | "
+                "gain: env 0 in the learner's process |", "|---|---|---|---|---|---|"]
     ppo_rows = ["| env processes | env steps | curiosity | PPO training, env steps/s | simulating alone, env steps/s | "
                 "share: training / simulating alone |", "|---|---|---|---|---|---|"]
     worker_rss = 0.0
     for n in args.workers:
         ref = CPUVectorEnv(REFERENCE, n, dict(CPU_KWARGS, reward_mode="sparse"))
         ours = CPUVectorEnv(GENERAL, n, dict(CPU_KWARGS, reward_mode="sparse"), wrappers=[HoldElement])
-        vector_steps_per_second(ref, 20, seed=0)  # warm-up
-        vector_steps_per_second(ours, 20, seed=0)
-        m = {k: [] for k in ("ref", "free", "held", *TRAINING)}
+        apart = CPUVectorEnv(GENERAL, n, dict(CPU_KWARGS, reward_mode="sparse"), first_env_in_process=False)
+        for envs in (ref, ours, apart):  # warm-up
+            vector_steps_per_second(envs, 20, seed=0)
+        m = {k: [] for k in ("ref", "free", "held", "apart", *TRAINING)}
         for r in tqdm(range(args.rounds), desc=f"{n} env processes", unit="round"):
             m["ref"].append(vector_steps_per_second(ref, args.vector_steps, seed=r))
+            m["apart"].append(vector_steps_per_second(apart, args.vector_steps, seed=r))
             ours.call("set_hold", False)
             m["free"].append(vector_steps_per_second(ours, args.vector_steps, seed=r))
             ours.call("set_hold", True)
@@ -350,10 +358,11 @@ def process_table(args: Args) -> tuple[str, str, float]:
                 m[steps, curiosity].append(ppo_steps_per_second(args.train_iterations, "physx_cpu", n, held=steps == "held",
                                                                 curiosity=curiosity)["sps"])
         worker_rss = max(worker_rss, worker_peak_rss_mib(ours))
-        ref.close()
-        ours.close()
+        for envs in (ref, ours, apart):
+            envs.close()
         med = {k: statistics.median(v) for k, v in m.items()}
-        sim_rows.append(f"| {n} | {med['ref']:.0f} | {med['free']:.0f} | {med['held']:.0f} |")
+        gain = statistics.median(f / a for f, a in zip(m["free"], m["apart"]))
+        sim_rows.append(f"| {n} | {med['ref']:.0f} | {med['free']:.0f} | {med['held']:.0f} | {med['apart']:.0f} | {gain:.2f} |")
         for steps, curiosity in TRAINING:
             # each round's training over the same round's simulation alone
             share = [t / a for t, a in zip(m[steps, curiosity], m[steps])]

@@ -5,28 +5,38 @@ as PNGs drawn by scripts/plot_training.py.
     python scripts/paper_report.py                  # print the tables
     python scripts/paper_report.py --write-results  # and write them, with the figures, into docs/
 
-The figures are training figures (the episodes PPO sampled, stochastic actions); Table II's rows, the
-paper's 50,000-step protocol on the test seeds, come from scripts/evaluate.py on each finished run's
-checkpoint.
+The figures are training figures (the episodes PPO sampled, stochastic actions). Table II's rows, the
+paper's 50,000-step protocol on the test seeds, come from scripts/evaluate.py on each shipped
+checkpoint and each stage-end policy of the general agent, run with the command its row names (a
+JSON in docs/data/paper/); a row whose JSON is not there yet says so.
 """
 
 from __future__ import annotations
 
 import csv
+import json
 import math
 import subprocess
 import sys
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Optional
 
 import tyro
 
 from baselines.ppo import paper_setting
-from baselines.ppo.paper_setting import CAMPAIGN_DIR, STAGE_STEPS, control_group_runs, general_runs
+from baselines.ppo.evaluation import EXPERT_RESULTS, PAPER_CONTROL_GROUPS, PAPER_TABLE_II, pct, wilson
+from baselines.ppo.paper_setting import CAMPAIGN_DIR, STAGE_STEPS, Run, control_group_runs, general_runs
+from ms_construction.envs import TASK_ENV_IDS
 from ms_construction.reporting import update_section
 
 LAST = 200_000
 """the window, in env steps, of the 'lately' columns."""
+EVAL_DIR = Path("docs/data/paper")
+"""the Table II rows' evaluations (scripts/evaluate.py --json), one JSON per agent."""
+SHIPPED_AGENT_EVAL = Path("docs/data/general_agent_eval_50k.json")
+"""the shipped general agent's evaluation on the same protocol (its own section of docs/RESULTS.md)."""
+PROTOCOL = "--steps 50000"
 
 
 @dataclass
@@ -105,6 +115,95 @@ def report(campaign_dir: Path) -> tuple[str, dict[str, Path]]:
     return "\n".join(lines), csvs
 
 
+@dataclass
+class TableRow:
+    """One agent of Table II: who, how trained and for how long, and where its figures come from (an
+    evaluation JSON and the command that writes it, or the paper's numbers)."""
+
+    agent: str
+    method: str
+    json: Optional[Path] = None
+    command: str = ""
+    pending: str = ""
+    """why the JSON is not there yet."""
+    paper: Optional[dict] = None
+
+
+def _evaluation_row(label: str, method: str, checkpoint: Path, name: str, env_ids: tuple[str, ...], pending: str) -> TableRow:
+    """A row from `scripts/evaluate.py` on `checkpoint` (at cp4, the test seeds, 50,000 steps per task)."""
+    task = "--all" if len(env_ids) == 3 else f"--env-id {env_ids[0]}"
+    json_path = EVAL_DIR / f"{name}_eval_50k.json"
+    return TableRow(label, method, json_path, f"python scripts/evaluate.py --checkpoint {checkpoint} {task} {PROTOCOL} "
+                    f"--json {json_path}", pending)
+
+
+def table_ii_rows(campaign_dir: Path) -> list[TableRow]:
+    """Table II's agents in order: the paper's, our paper-setting general agent (and each of its stages'
+    end policies at cp4), our control groups at 2M and 8M steps, the shipped general agent, the expert."""
+    general = general_runs()[0]
+    done = lambda run: (f"its run is at step {last_step(campaign_dir / run.name / 'progress.csv'):,} of "  # noqa: E731
+                        f"{run.args.total_timesteps:,} ({run.command})")
+    rows = [TableRow("paper: general agent", "PPO + ICM (ML-Agents), curriculum cp1 -> cp4, 2M steps each", paper=PAPER_TABLE_II),
+            TableRow("paper: control groups 4.1 / 4.2 / 4.3", "PPO + ICM, cp4 from the first step, one agent per task",
+                     paper=PAPER_CONTROL_GROUPS),
+            _evaluation_row("ours: paper setting, general agent", f"{general.what}; 8M env steps", general.shipped,
+                            general.name, tuple(TASK_ENV_IDS.values()), done(general))]
+    for k, stage in enumerate(general.args.curriculum[:-1], start=1):
+        snapshot = campaign_dir / general.name / f"checkpoint_stage{k}_{stage}.pt"
+        reached = (f"the end of {stage} comes at step {k * STAGE_STEPS:,}" if not k * STAGE_STEPS <= last_step(
+            campaign_dir / general.name / "progress.csv") else "that stage's final policy was not kept (ppo.py keeps them since 3.42M)")
+        rows.append(_evaluation_row(f"ours: paper setting, end of {stage}", f"the general agent after {k * STAGE_STEPS:,} env "
+                                    f"steps, judged at cp4", snapshot, f"{general.name}_stage{k}_{stage}",
+                                    tuple(TASK_ENV_IDS.values()), reached if not snapshot.is_file() else "not evaluated yet"))
+    for total in (STAGE_STEPS, 4 * STAGE_STEPS):
+        runs = control_group_runs(total)
+        for run in runs:
+            rows.append(_evaluation_row(f"ours: {run.what.split(':')[0]}, {total // 1_000_000}M", f"{run.what}; {total // 1_000_000}M env steps",
+                                        run.shipped, run.shipped.stem, (run.args.env_id,), done(run)))
+    rows.append(TableRow("ours: shipped general agent", "behaviour clone of the planning expert, then PPO on a residual "
+                         "(docs/RESULTS.md, the general agent's section)", SHIPPED_AGENT_EVAL))
+    rows.append(TableRow("ours: planning expert", "mplib RRTConnect; 100 episodes per task (its own section)", EXPERT_RESULTS))
+    return rows
+
+
+def last_step(progress_csv: Path) -> int:
+    return int(read_rows(progress_csv)[-1]["global_step"]) if progress_csv.is_file() else 0
+
+
+def _cells(row: TableRow) -> Optional[dict[str, str]]:
+    """Per task 'pick / place' (95% intervals for ours); None where the row's evaluation is missing."""
+    if row.paper is not None:
+        return {env_id: f"{pick:.2f} / {place:.2f}" for env_id, (pick, place) in row.paper.items()}
+    if row.json is None or not row.json.is_file():
+        return None
+    data = json.loads(row.json.read_text())
+    if "summary" in data:  # scripts/run_expert.py's JSON: rates of `episodes` episodes
+        tasks = {e: s for e, s in data["summary"].items() if e in PAPER_TABLE_II}
+        return {e: " / ".join(pct(s[k], wilson(round(s[k] * s["episodes"]), s["episodes"])) for k in ("pick_success", "place_success"))
+                for e, s in tasks.items()}
+    tasks = data.get("tasks", {data.get("env_id"): data})
+    return {e: f"{pct(r['pick_success'], r['pick_success_ci95'])} / {pct(r['place_success'], r['place_success_ci95'])}"
+            for e, r in tasks.items()}
+
+
+def table_ii(campaign_dir: Path) -> str:
+    """Table II: pick / place success % per task and agent (ours with 95% intervals, the paper's as printed)."""
+    env_ids = list(TASK_ENV_IDS.values())
+    lines = ["| agent | method; env steps | " + " | ".join(f"{e}: pick / place % [95% CI]" for e in env_ids) + " |",
+             "|---|---|" + "---|" * len(env_ids)]
+    notes = []
+    for row in table_ii_rows(campaign_dir):
+        cells = _cells(row)
+        if cells is None:
+            lines.append(f"| {row.agent} | {row.method} | " + " | ".join("not yet" for _ in env_ids) + " |")
+            notes.append(f"- {row.agent}: not yet ({row.pending}); then `{row.command}`")
+        else:
+            lines.append(f"| {row.agent} | {row.method} | " + " | ".join(cells.get(e, "") for e in env_ids) + " |")
+            if row.json is not None:
+                notes.append(f"- {row.agent}: `{json.loads(row.json.read_text())['command']}` ({row.json})")
+    return "\n".join(lines + ["", "Where each row comes from:", ""] + notes)
+
+
 def settings_table() -> str:
     """The settings table of baselines/ppo/paper_setting.py's docstring (the one place it is written)."""
     return "\n".join(line for line in paper_setting.__doc__.splitlines() if line.startswith("|"))
@@ -140,6 +239,10 @@ def main(args: Args) -> str:
             f"'lately' is the last {LAST:,} env steps; 'end' is where the element was when the episode ended "
             "(its distance and angle to the goal, whether the plate held it), the mean over the episodes.", "",
             body, "", *pictures, "",
+            "### Table II", "",
+            "The paper's protocol: 50,000 env steps per task at cp4, deterministic actions (the policy's mean), seeds "
+            "1,000,000 on (never used in training); the paper's rows as it printed them.", "",
+            table_ii(args.campaign_dir), "",
             "The settings, from baselines/ppo/paper_setting.py (where the paper is silent: ML-Agents' documented "
             "defaults where they carry over, ppo.py's otherwise):", "", settings_table()]), "Results")
     return body

@@ -3,6 +3,7 @@ a campaign run from its checkpoint."""
 
 import csv
 import dataclasses
+import json
 import os
 import subprocess
 import sys
@@ -11,6 +12,7 @@ from pathlib import Path
 import pytest
 import torch
 
+from baselines.ppo import evaluation
 from baselines.ppo import paper_setting as ps
 from baselines.ppo import ppo
 
@@ -29,6 +31,7 @@ def test_the_general_agent_runs_the_four_table_i_stages_of_exactly_2m_steps_prom
     assert ppo.should_promote(a, ppo.Progress(global_step=2_000_000, smoothed_success=0.0)) == "steps"
     b = no_curiosity.args
     assert b.curiosity == "none" and b.curriculum == ("cp1",) and b.total_timesteps == 2_000_000 and b.seed == a.seed
+    assert general.shipped == ps.SHIPPED_DIR / "paper_general_agent.pt" and no_curiosity.shipped is None
     assert dataclasses.replace(b, curiosity="icm", curriculum=a.curriculum, total_timesteps=a.total_timesteps,
                                exp_name=a.exp_name) == a, "the ablation differs from run 1 in curiosity and length only"
 
@@ -43,6 +46,9 @@ def test_control_groups_are_single_task_cp4_runs_in_2m_step_stages(total, stages
         assert r.args.curriculum == ("cp4",) * stages and r.args.total_timesteps == total
         same = {f.name for f in dataclasses.fields(ppo.Args)} - {"env_id", "curriculum", "total_timesteps", "exp_name"}
         assert all(getattr(r.args, k) == getattr(general, k) for k in same), "otherwise the paper setting"
+    # the 2M point and the 8M point are published both, each in its own file
+    suffix = "" if total == 2_000_000 else "_8m"
+    assert [r.shipped.name for r in runs] == [f"control_{k}{suffix}.pt" for k in ("ceiling", "window", "flooring")]
     with pytest.raises(SystemExit, match="multiple of 2000000"):
         ps.control_group_runs(3_000_000)
 
@@ -63,28 +69,42 @@ def test_dry_runs_print_the_plans():
         assert "2,000,000 steps each" in res.stdout
 
 
-def test_a_campaign_run_resumes_from_its_checkpoint_with_its_step_count_and_stage(tmp_path):
+def test_a_campaign_run_resumes_from_its_checkpoint_with_its_step_count_and_stage_and_ships_at_its_end(tmp_path):
     """A tiny paper-setting run (two stages of 80 steps) stopped after its first stage, as a session's
-    end leaves it, continues from the checkpoint to the end of its plan: same stage, same step count."""
+    end leaves it, continues from the checkpoint to the end of its plan: same stage, same step count.
+    Only then is its policy shipped, with its campaign record, and scripts/evaluate.py runs it."""
     small = dict(num_envs=2, num_steps=20, num_minibatches=2, num_eval_envs=1, eval_freq=100, checkpoint_freq=1,
                  env_id="Flooring-v1", log_dir=str(tmp_path), exp_name="tiny", stage_timesteps=80,
                  curriculum=("cp1", "cp2"), total_timesteps=80)
-    run = ps.Run("tiny", ps.paper_args(**small), "test")
+    run = ps.Run("tiny", ps.paper_args(**small), "test", "python tiny.py")
     ps.run_or_resume(run)
     ckpt = ps.checkpoint_of(run)
     first = torch.load(ckpt, weights_only=False)
     assert first["progress"]["global_step"] == 80
-    planned = ps.Run("tiny", dataclasses.replace(run.args, total_timesteps=160), "test")
-    assert "resumes at step 80" in ps.describe(planned)
+    shipped = tmp_path / "assets" / "tiny.pt"
+    planned = ps.Run("tiny", dataclasses.replace(run.args, total_timesteps=160), "test", "python tiny.py", shipped)
+    assert "resumes at step 80" in ps.describe(planned) and str(shipped) in ps.describe(planned)
+    with pytest.raises(SystemExit, match="at step 80 of 160"):
+        ps.ship(planned)
     ps.run_or_resume(planned)
     last = torch.load(ckpt, weights_only=False)
     assert last["progress"]["global_step"] == 160
     assert last["progress"]["stage_changes"] == [[0, "cp1"], [80, "cp2"]] or last["progress"]["stage_changes"] == [(0, "cp1"), (80, "cp2")]
     assert last["args"]["icm_strength"] == 0.02 and last["args"]["stage_schedules"]
 
+    policy = torch.load(shipped, weights_only=False)
+    assert "optimizer" not in policy and "rng" not in policy and torch.equal(policy["agent"]["actor_logstd"], last["agent"]["actor_logstd"])
+    record = policy["campaign"]["record"]
+    assert policy["campaign"]["command"] == "python tiny.py" and record["env steps"] == "160"
+    assert record["stages"] == "cp1 from step 0, cp2 from step 80" and " h of training iterations" in record["wall time"]
+    out = tmp_path / "eval.json"
+    evaluation.main(evaluation.Args(checkpoint=shipped, env_id="Flooring-v1", episodes=1, workers=1, json=out))
+    assert json.loads(out.read_text())["episodes"] == 1
 
-def test_the_campaign_report_summarizes_each_run_and_stage_and_draws_figure_3(tmp_path):
-    """scripts/paper_report.py on a small progress.csv: the run's row, its stages, and Figure 3."""
+
+def test_the_campaign_report_summarizes_each_run_and_stage_and_draws_figure_3_and_table_ii(tmp_path):
+    """scripts/paper_report.py on a small progress.csv: the run's row, its stages, Figure 3, and Table II
+    with the paper's rows, ours where evaluated (95% intervals) and, where not yet, why and the command."""
     from baselines.ppo.checkpoints import CSV_FIELDS
 
     run_dir = tmp_path / "campaign" / "paper_general_agent"
@@ -108,3 +128,14 @@ def test_the_campaign_report_summarizes_each_run_and_stage_and_draws_figure_3(tm
     assert "| paper_general_agent | cp2 | 2,000,000-4,000,000 | 8,000 | 50.0 | 25.0 |" in text
     assert "| control_ceiling | controlGroup4.1" in text and "not started" in text
     assert (tmp_path / "images" / "paper_fig3.png").stat().st_size > 0
+    table = text.split("### Table II")[1]
+    assert "| paper: general agent |" in table and "| 84.55 / 68.04 | 95.32 / 84.82 | 88.43 / 85.17 |" in table
+    assert "| 63.00 / 0.21 | 62.89 / 0.30 | 64.72 / 4.45 |" in table
+    assert "| ours: paper setting, general agent |" in table and "| not yet | not yet | not yet |" in table
+    assert ("ours: paper setting, general agent: not yet (its run is at step 4,000,000 of 8,000,000 "
+            "(python scripts/train_paper_agent.py)); then `python scripts/evaluate.py --checkpoint "
+            "assets/checkpoints/paper_general_agent.pt --all --steps 50000") in table
+    assert "ours: paper setting, end of cp3: not yet (the end of cp3 comes at step 6,000,000)" in table
+    assert "--checkpoint assets/checkpoints/control_window_8m.pt --env-id WindowInstallation-v1 --steps 50000" in table
+    expert = next(line for line in table.splitlines() if line.startswith("| ours: planning expert"))
+    assert expert.count("100.0 [96.3, 100.0] / 100.0 [96.3, 100.0]") == 3, "100 of 100 with its Wilson interval"

@@ -34,3 +34,36 @@ def test_an_ended_episode_is_reset_in_the_same_step_and_reported_in_final_info()
         assert [int(t) for t in envs.call("elapsed_steps")] == [0, 0]
     finally:
         envs.close()
+
+
+def _rollout(first_env_in_process: bool, steps: int = 12):
+    """Observations, rewards and ends of a fixed action sequence over two short episodes per env, and
+    the learner's next torch random number."""
+    torch.manual_seed(0)
+    envs = CPUVectorEnv("Flooring-v1", 2, dict(obs_mode="state", control_mode="pd_joint_delta_pos", reward_mode="dense",
+                                               max_episode_steps=5), first_env_in_process=first_env_in_process)
+    try:
+        actions = torch.rand(steps, 2, *envs.single_action_space.shape, generator=torch.Generator().manual_seed(1)) * 2 - 1
+        obs, _ = envs.reset(seed=3)
+        record = [obs]
+        for a in actions:
+            obs, reward, terminated, truncated, info = envs.step(a)
+            record += [obs, reward, terminated | truncated]
+            if info:
+                record.append(info["final_observation"])
+        return record, torch.rand(1), envs.call("elapsed_steps")
+    finally:
+        envs.close()
+
+
+def test_the_first_env_in_the_learners_process_gives_the_same_samples_and_leaves_its_random_numbers_alone():
+    """Env 0 in this process (the default) or in a worker: the same observations, rewards, ends and
+    same-step resets (episode starts drawn from each env's own seeded generators), and the caller's
+    torch random stream is not moved by the env it hosts."""
+    here, rand_here, elapsed_here = _rollout(True)
+    apart, rand_apart, elapsed_apart = _rollout(False)
+    assert len(here) == len(apart) > 12 * 3 + 2  # the episodes of 5 steps ended twice in 12 steps
+    for x, y in zip(here, apart):
+        assert torch.equal(x, y)
+    assert torch.equal(rand_here, rand_apart) and torch.equal(rand_here, torch.manual_seed(0) and torch.rand(1))
+    assert [int(t) for t in elapsed_here] == [int(t) for t in elapsed_apart] == [2, 2]

@@ -47,6 +47,11 @@ PAPER_TABLE_II = {  # the paper's general agent at cp4: pick %, place %
     "WindowInstallation-v1": (95.32, 84.82),
     "Flooring-v1": (88.43, 85.17),
 }
+PAPER_CONTROL_GROUPS = {  # the paper's control groups 4.1 / 4.2 / 4.3 (cp4 from the first step): pick %, place %
+    "CeilingInstallation-v1": (63.00, 0.21),
+    "WindowInstallation-v1": (62.89, 0.30),
+    "Flooring-v1": (64.72, 4.45),
+}
 
 
 @dataclass

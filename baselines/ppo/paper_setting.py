@@ -35,11 +35,15 @@ general agent's stages do.
 
 from __future__ import annotations
 
+import csv
 import dataclasses
 import os
+import platform
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Optional
+
+import torch
 
 from baselines.ppo import ppo
 from baselines.ppo.checkpoints import load_checkpoint
@@ -52,6 +56,8 @@ UPDATE_SAMPLES = 10_000
 CAMPAIGN_DIR = Path("campaign")
 """where the campaign's runs live; their latest checkpoint and progress CSV are committed."""
 CONTROL_GROUPS = {"ceiling": "controlGroup4.1", "window": "controlGroup4.2", "flooring": "controlGroup4.3"}
+SHIPPED_DIR = Path("assets/checkpoints")
+"""where a finished run's final policy is shipped (`ship`)."""
 
 
 def paper_args(num_envs: Optional[int] = None, **overrides) -> ppo.Args:
@@ -79,21 +85,25 @@ def paper_args(num_envs: Optional[int] = None, **overrides) -> ppo.Args:
 
 @dataclass
 class Run:
-    """One run of the campaign: its name and its ppo.Args."""
+    """One run of the campaign: its name, its ppo.Args, what it is, the command that runs it, and where
+    its final policy is shipped when it has run to the end of its plan (None: not shipped)."""
 
     name: str
     args: ppo.Args
     what: str
+    command: str
+    shipped: Optional[Path] = None
 
 
 def general_runs(num_envs: Optional[int] = None, seed: int = 1) -> list[Run]:
     """Run 1 (the paper's general agent) and run 3 (its cp1 stage without curiosity)."""
+    command = "python scripts/train_paper_agent.py"
     return [
         Run("paper_general_agent", paper_args(num_envs, seed=seed, exp_name="paper_general_agent"),
-            "the paper setting: general task, cp1 -> cp4, 2M steps each"),
+            "the paper setting: general task, cp1 -> cp4, 2M steps each", command, SHIPPED_DIR / "paper_general_agent.pt"),
         Run("paper_cp1_no_curiosity", paper_args(num_envs, seed=seed, exp_name="paper_cp1_no_curiosity", curiosity="none",
                                                  curriculum=("cp1",), total_timesteps=STAGE_STEPS),
-            "run 1's cp1 stage without curiosity, same seed"),
+            "run 1's cp1 stage without curiosity, same seed", command),
     ]
 
 
@@ -102,10 +112,13 @@ def control_group_runs(total_timesteps: int = STAGE_STEPS, num_envs: Optional[in
     if total_timesteps % STAGE_STEPS:
         raise SystemExit(f"--total-timesteps {total_timesteps}: use a multiple of {STAGE_STEPS} (one cp4 stage each)")
     stages = ("cp4",) * (total_timesteps // STAGE_STEPS)
+    command = "python scripts/train_control_groups.py" + ("" if total_timesteps == STAGE_STEPS else f" --total-timesteps {total_timesteps}")
+    # the 2M point keeps its own file when the run goes on to 8M: both are published
+    suffix = "" if total_timesteps == STAGE_STEPS else f"_{total_timesteps // 1_000_000}m"
     return [
         Run(f"control_{kind}", paper_args(num_envs, seed=seed, env_id=env_id, exp_name=f"control_{kind}", curriculum=stages,
                                           total_timesteps=total_timesteps),
-            f"{CONTROL_GROUPS[kind]}: {env_id}, cp4 from the first step")
+            f"{CONTROL_GROUPS[kind]}: {env_id}, cp4 from the first step", command, SHIPPED_DIR / f"control_{kind}{suffix}.pt")
         for kind, env_id in TASK_ENV_IDS.items()
     ]
 
@@ -120,14 +133,48 @@ def describe(run: Run) -> str:
     done = load_checkpoint(ckpt)["progress"]["global_step"] if ckpt.is_file() else 0
     return (f"{run.name}: {run.what}; {a.env_id}, stages {' '.join(a.curriculum)} ({a.stage_timesteps:,} steps each), "
             f"{a.total_timesteps:,} steps, curiosity {a.curiosity}, seed {a.seed}, {a.num_envs} envs x {a.num_steps} steps "
-            f"per update; {'resumes at step ' + format(done, ',') if done else 'starts fresh'} ({ckpt})")
+            f"per update; {'resumes at step ' + format(done, ',') if done else 'starts fresh'} ({ckpt})"
+            + (f"; ships to {run.shipped}" if run.shipped else ""))
 
 
 def run_or_resume(run: Run) -> None:
-    """Train `run` to the end of its budget, resuming its checkpoint if it has one. A run that was
-    planned with a larger budget than its checkpoint's (control groups from 2M to 8M) continues to it."""
+    """Train `run` to the end of its budget, resuming its checkpoint if it has one, and ship its final
+    policy (`ship`). A run that was planned with a larger budget than its checkpoint's (control groups
+    from 2M to 8M) continues to it."""
     ckpt = checkpoint_of(run)
-    if not ckpt.is_file():
-        ppo.main(run.args)
-        return
-    ppo.main(dataclasses.replace(run.args, resume=str(ckpt), extend=True))
+    ppo.main(dataclasses.replace(run.args, resume=str(ckpt), extend=True) if ckpt.is_file() else run.args)
+    if run.shipped is not None:
+        ship(run)
+
+
+def training_wall_s(progress_csv: Path, samples_per_iteration: int) -> float:
+    """The wall time of a run's training iterations (rollouts and updates), summed from its progress.csv:
+    evaluations, start-ups and the time between sessions are not in it."""
+    with open(progress_csv, newline="") as f:
+        return sum(samples_per_iteration / float(row["sps"]) for row in csv.DictReader(f) if row["sps"])
+
+
+def ship(run: Run) -> Path:
+    """The final policy of a run that has reached the end of its plan to `run.shipped`, with its Args and
+    its campaign record (method, env steps, stages, wall time, hardware), for scripts/evaluate.py; the
+    optimizers and random states stay in the run's own checkpoint in campaign/, which resumes it."""
+    ckpt = load_checkpoint(checkpoint_of(run))
+    a, progress = ckpt["args"], ckpt["progress"]
+    if progress["global_step"] < run.args.total_timesteps:
+        raise SystemExit(f"{run.name}: at step {progress['global_step']:,} of {run.args.total_timesteps:,}; "
+                         f"ship it when it has run to the end ({run.command})")
+    wall = training_wall_s(checkpoint_of(run).with_name("progress.csv"), a["num_envs"] * a["num_steps"])
+    policy = {k: v for k, v in ckpt.items() if k not in ("optimizer", "icm_optimizer", "rng")}
+    policy["campaign"] = dict(command=run.command, record={
+        "method": f"{run.what} (PPO, sparse reward, curiosity {a['curiosity']}; baselines/ppo/paper_setting.py)",
+        "env steps": f"{progress['global_step']:,}",
+        "stages": ", ".join(f"{stage} from step {step:,}" for step, stage in progress["stage_changes"]),
+        "wall time": f"{wall / 3600:.1f} h of training iterations (rollouts and updates, summed from progress.csv; "
+                     "evaluations, start-ups and pauses not counted), across sessions, with whatever else ran beside it",
+        "hardware": f"{platform.machine()}, {os.cpu_count()} CPU cores; physx_cpu with {a['num_envs']} env processes, "
+                    "the networks on the CPU",
+    })
+    run.shipped.parent.mkdir(parents=True, exist_ok=True)
+    torch.save(policy, run.shipped)
+    print(f"shipped {checkpoint_of(run)} -> {run.shipped}")
+    return run.shipped
