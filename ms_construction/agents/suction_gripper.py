@@ -52,6 +52,18 @@ def grasp_ray(tcp_in_el: torch.Tensor, size: torch.Tensor) -> tuple[torch.Tensor
     return torch.where(ok, dist, torch.full_like(dist, float("inf"))), ok
 
 
+REACH_MARGIN = 0.01
+"""m; `out_of_reach`'s margin over its bound, for float rounding."""
+
+
+def out_of_reach(tcp_from_element: np.ndarray, half_diagonal: float, tau_pick: float) -> bool:
+    """Whether no grasp can happen with the tcp at `tcp_from_element` (world vector from the element's
+    centre): a grasp needs the ray to meet the grasp face within tau_pick, and every point of the face
+    lies within the element's half-diagonal of its centre. A cheap test that spares physx_cpu the ray
+    (a tenth of a step) while the plate is away from the element, with the same result."""
+    return float(np.dot(tcp_from_element, tcp_from_element)) > (tau_pick + half_diagonal + REACH_MARGIN) ** 2
+
+
 def _clip_norm(v: torch.Tensor, max_norm: float) -> torch.Tensor:
     n = torch.linalg.norm(v, dim=-1, keepdim=True)
     return v * torch.clamp(max_norm / n.clamp(min=1e-9), max=1.0)
@@ -91,6 +103,9 @@ class SuctionGripper:
         if not self.gpu and bool(self.held[0]):  # physx_cpu's one env holds already: no ray to cast
             return torch.zeros_like(self.held)
         grasp_in_el, size = grasp_in_el[kind], size[kind]
+        if not self.gpu and out_of_reach(self.tcp._objs[0].entity_pose.p - element._bodies[0].entity.pose.p,
+                                         float(torch.linalg.norm(size[0])) / 2, float(tau_pick[0])):
+            return torch.zeros_like(self.held)  # physx_cpu: no ray to cast either
         tcp_in_el = self.tcp_in_element(element)
         dist, _ = grasp_ray(tcp_in_el, size)
         grasp_now = ~self.held & (dist <= tau_pick)
