@@ -139,3 +139,22 @@ def test_the_campaign_report_summarizes_each_run_and_stage_and_draws_figure_3_an
     assert "--checkpoint assets/checkpoints/control_window_8m.pt --env-id WindowInstallation-v1 --steps 50000" in table
     expert = next(line for line in table.splitlines() if line.startswith("| ours: planning expert"))
     assert expert.count("100.0 [96.3, 100.0] / 100.0 [96.3, 100.0]") == 3, "100 of 100 with its Wilson interval"
+
+
+SHIPPED_RUNS = [r for r in ps.general_runs(num_envs=2) + ps.control_group_runs(num_envs=2)
+                + ps.control_group_runs(8_000_000, num_envs=2) if r.shipped is not None]
+
+
+@pytest.mark.parametrize("run", SHIPPED_RUNS, ids=[r.shipped.name for r in SHIPPED_RUNS])
+def test_each_shipped_campaign_checkpoint_loads_and_evaluates_with_its_record(run, tmp_path):
+    """A shipped paper-setting checkpoint (assets/checkpoints/) carries its campaign record and plays
+    an episode of its task through scripts/evaluate.py; one not shipped yet is skipped, saying so."""
+    path = ROOT / run.shipped
+    if not path.is_file():
+        pytest.skip(f"{run.shipped} not shipped yet ({run.command} ships it at the end of its plan)")
+    record = torch.load(path, map_location="cpu", weights_only=False)["campaign"]["record"]
+    assert record["env steps"] == f"{run.args.total_timesteps:,}" and "wall time" in record and "hardware" in record
+    env_id = "WindowInstallation-v1" if run.args.env_id == "ConstructionPickPlace-v1" else run.args.env_id
+    out = tmp_path / "eval.json"
+    evaluation.main(evaluation.Args(checkpoint=path, env_id=env_id, episodes=1, workers=1, json=out))
+    assert json.loads(out.read_text())["episodes"] == 1
