@@ -47,6 +47,8 @@ class Args:
     """write the section `paper-experiment` of docs/RESULTS.md and the figures into docs/images/."""
     results: Path = Path("docs/RESULTS.md")
     images: Path = Path("docs/images")
+    eval_dir: Path = EVAL_DIR
+    """where Table II's evaluation JSONs are (scripts/evaluate.py --json, as each row's command writes them)."""
 
 
 def read_rows(path: Path) -> list[dict]:
@@ -129,15 +131,16 @@ class TableRow:
     paper: Optional[dict] = None
 
 
-def _evaluation_row(label: str, method: str, checkpoint: Path, name: str, env_ids: tuple[str, ...], pending: str) -> TableRow:
+def _evaluation_row(label: str, method: str, checkpoint: Path, name: str, env_ids: tuple[str, ...], pending: str,
+                    eval_dir: Path) -> TableRow:
     """A row from `scripts/evaluate.py` on `checkpoint` (at cp4, the test seeds, 50,000 steps per task)."""
     task = "--all" if len(env_ids) == 3 else f"--env-id {env_ids[0]}"
-    json_path = EVAL_DIR / f"{name}_eval_50k.json"
+    json_path = eval_dir / f"{name}_eval_50k.json"
     return TableRow(label, method, json_path, f"python scripts/evaluate.py --checkpoint {checkpoint} {task} {PROTOCOL} "
                     f"--json {json_path}", pending)
 
 
-def table_ii_rows(campaign_dir: Path) -> list[TableRow]:
+def table_ii_rows(campaign_dir: Path, eval_dir: Path = EVAL_DIR) -> list[TableRow]:
     """Table II's agents in order: the paper's, our paper-setting general agent (and each of its stages'
     end policies at cp4), our control groups at 2M and 8M steps, the shipped general agent, the expert."""
     general = general_runs()[0]
@@ -147,19 +150,20 @@ def table_ii_rows(campaign_dir: Path) -> list[TableRow]:
             TableRow("paper: control groups 4.1 / 4.2 / 4.3", "PPO + ICM, cp4 from the first step, one agent per task",
                      paper=PAPER_CONTROL_GROUPS),
             _evaluation_row("ours: paper setting, general agent", f"{general.what}; 8M env steps", general.shipped,
-                            general.name, tuple(TASK_ENV_IDS.values()), done(general))]
+                            general.name, tuple(TASK_ENV_IDS.values()), done(general), eval_dir)]
     for k, stage in enumerate(general.args.curriculum[:-1], start=1):
         snapshot = campaign_dir / general.name / f"checkpoint_stage{k}_{stage}.pt"
         reached = (f"the end of {stage} comes at step {k * STAGE_STEPS:,}" if not k * STAGE_STEPS <= last_step(
             campaign_dir / general.name / "progress.csv") else "that stage's final policy was not kept (ppo.py keeps them since 3.42M)")
         rows.append(_evaluation_row(f"ours: paper setting, end of {stage}", f"the general agent after {k * STAGE_STEPS:,} env "
                                     f"steps, judged at cp4", snapshot, f"{general.name}_stage{k}_{stage}",
-                                    tuple(TASK_ENV_IDS.values()), reached if not snapshot.is_file() else "not evaluated yet"))
+                                    tuple(TASK_ENV_IDS.values()), reached if not snapshot.is_file() else "not evaluated yet",
+                                    eval_dir))
     for total in (STAGE_STEPS, 4 * STAGE_STEPS):
         runs = control_group_runs(total)
         for run in runs:
             rows.append(_evaluation_row(f"ours: {run.what.split(':')[0]}, {total // 1_000_000}M", f"{run.what}; {total // 1_000_000}M env steps",
-                                        run.shipped, run.shipped.stem, (run.args.env_id,), done(run)))
+                                        run.shipped, run.shipped.stem, (run.args.env_id,), done(run), eval_dir))
     rows.append(TableRow("ours: shipped general agent", "behaviour clone of the planning expert, then PPO on a residual "
                          "(docs/RESULTS.md, the general agent's section)", SHIPPED_AGENT_EVAL))
     rows.append(TableRow("ours: planning expert", "mplib RRTConnect; 100 episodes per task (its own section)", EXPERT_RESULTS))
@@ -186,13 +190,13 @@ def _cells(row: TableRow) -> Optional[dict[str, str]]:
             for e, r in tasks.items()}
 
 
-def table_ii(campaign_dir: Path) -> str:
+def table_ii(campaign_dir: Path, eval_dir: Path = EVAL_DIR) -> str:
     """Table II: pick / place success % per task and agent (ours with 95% intervals, the paper's as printed)."""
     env_ids = list(TASK_ENV_IDS.values())
     lines = ["| agent | method; env steps | " + " | ".join(f"{e}: pick / place % [95% CI]" for e in env_ids) + " |",
              "|---|---|" + "---|" * len(env_ids)]
     notes = []
-    for row in table_ii_rows(campaign_dir):
+    for row in table_ii_rows(campaign_dir, eval_dir):
         cells = _cells(row)
         if cells is None:
             lines.append(f"| {row.agent} | {row.method} | " + " | ".join("not yet" for _ in env_ids) + " |")
@@ -242,7 +246,7 @@ def main(args: Args) -> str:
             "### Table II", "",
             "The paper's protocol: 50,000 env steps per task at cp4, deterministic actions (the policy's mean), seeds "
             "1,000,000 on (never used in training); the paper's rows as it printed them.", "",
-            table_ii(args.campaign_dir), "",
+            table_ii(args.campaign_dir, args.eval_dir), "",
             "The settings, from baselines/ppo/paper_setting.py (where the paper is silent: ML-Agents' documented "
             "defaults where they carry over, ppo.py's otherwise):", "", settings_table()]), "Results")
     return body

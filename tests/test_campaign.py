@@ -119,7 +119,8 @@ def test_the_campaign_report_summarizes_each_run_and_stage_and_draws_figure_3_an
                             end_place_dist=1.0, end_place_angle_deg=30.0, held_at_end=0.5))
     results = tmp_path / "RESULTS.md"
     res = subprocess.run([sys.executable, str(ROOT / "scripts/paper_report.py"), "--campaign-dir", str(tmp_path / "campaign"),
-                          "--write-results", "--results", str(results), "--images", str(tmp_path / "images")],
+                          "--write-results", "--results", str(results), "--images", str(tmp_path / "images"),
+                          "--eval-dir", str(tmp_path / "evaluations")],
                          capture_output=True, text=True, cwd=ROOT, env={**os.environ, "PYTHONPATH": str(ROOT)})
     assert res.returncode == 0, res.stderr
     text = results.read_text()
