@@ -102,7 +102,8 @@ def report(runs: list[dict]) -> str:
         s = r["settings"]
         setting = (f"lr {s['learning_rate']:g}, gamma {s['gamma']}, bank share {s['start_states_share']}, "
                    f"scale {s['residual_scale']}, {s['num_envs']} envs x {s['num_steps']}"
-                   + (f", L2 anchor {s['residual_l2_coef']:g}" if s.get("residual_l2_coef") else ""))
+                   + (f", L2 anchor {s['residual_l2_coef']:g}" if s.get("residual_l2_coef") else "")
+                   + (f", bootstrap at {s['bootstrap_at_done']}" if s.get("bootstrap_at_done", "truncated") != "truncated" else ""))
         rows = [("the clone", r["clone"])] + [(f"{int(k):,}", v) for k, v in r["validations"].items()]
         for i, (steps, v) in enumerate(rows):
             cells = " | ".join(f"{pct(v[e]['place_success'])} [{pct(v[e]['ci95'][0])}, {pct(v[e]['ci95'][1])}]"
