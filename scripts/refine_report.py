@@ -103,7 +103,7 @@ def report(runs: list[dict]) -> str:
         setting = (f"lr {s['learning_rate']:g}, gamma {s['gamma']}, bank share {s['start_states_share']}, "
                    f"scale {s['residual_scale']}, {s['num_envs']} envs x {s['num_steps']}"
                    + (f", L2 anchor {s['residual_l2_coef']:g}" if s.get("residual_l2_coef") else "")
-                   + (f", bootstrap at {s['bootstrap_at_done']}" if s.get("bootstrap_at_done", "truncated") != "truncated" else ""))
+                   + (f", bootstrap-at-done {s['bootstrap_at_done']}" if s.get("bootstrap_at_done", "truncated") != "truncated" else ""))
         rows = [("the clone", r["clone"])] + [(f"{int(k):,}", v) for k, v in r["validations"].items()]
         for i, (steps, v) in enumerate(rows):
             cells = " | ".join(f"{pct(v[e]['place_success'])} [{pct(v[e]['ci95'][0])}, {pct(v[e]['ci95'][1])}]"
@@ -142,6 +142,7 @@ def plot(runs: list[dict], out: Path) -> None:
         ax.axhline(99, color="k", linestyle=":", linewidth=1)
         ax.set_title(name)
         ax.set_xlabel("PPO env steps (0: the clone)")
+        ax.xaxis.set_major_formatter(matplotlib.ticker.FuncFormatter(lambda x, _: f"{x / 1000:g}k" if x else "0"))
     axes[0].set_ylabel("validation place success %")
     axes[0].legend(fontsize=8)
     fig.tight_layout()

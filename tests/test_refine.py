@@ -39,6 +39,8 @@ def stand_ins(tmp_path, monkeypatch):
         if name.endswith("clone.pt"):
             return CLONE_VAL
         table = val_table if seed == refine.VALIDATION_SEED else confirm_table
+        if Path(checkpoint) == refine.SHIPPED:  # a stand-in for a shipped refinement: its step says which row
+            return table[torch.load(checkpoint)["step"]]
         return table[int(name.split("_")[1].split(".")[0])]
 
     monkeypatch.setattr(refine.ppo, "main", fake_ppo)
@@ -72,6 +74,17 @@ def test_a_validation_winner_that_loses_on_fresh_seeds_is_not_shipped(stand_ins)
     confirm_table[100] = dict(zip(TASKS, (0.99, 0.92, 0.98)))
     refine.main(args)
     assert not shipped.exists()
+
+
+@pytest.mark.parametrize("shipped_confirmation, replaced", [((0.985, 0.975, 0.995), False), ((0.98, 0.965, 0.99), True)])
+def test_a_shipped_refinement_is_replaced_only_by_one_that_beats_it_on_fresh_seeds(stand_ins, shipped_confirmation, replaced):
+    args, runs, val_table, confirm_table, shipped = stand_ins
+    torch.save(dict(step=50), shipped)  # an earlier refinement, shipped
+    confirm_table[50] = dict(zip(TASKS, shipped_confirmation))
+    val_table.update({k: dict(zip(TASKS, (0.99, 0.985, 0.99))) for k in (100, 200, 300)})
+    confirm_table[100] = dict(zip(TASKS, (0.985, 0.97, 0.995)))  # beats the clone on fresh seeds
+    refine.main(args)
+    assert torch.load(shipped)["step"] == (100 if replaced else 50)
 
 
 def test_nothing_is_shipped_when_no_snapshot_beats_the_clone(stand_ins):
