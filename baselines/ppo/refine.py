@@ -24,6 +24,7 @@ same command continues an interrupted refinement.
 from __future__ import annotations
 
 import dataclasses
+import hashlib
 import json
 import os
 import platform
@@ -157,7 +158,8 @@ def main(args: Args) -> Path:
         if better and args.ship and shipped_refinement(args.clone):
             # a refinement shipped before is the bar too: replacing it with anything that beats the clone could
             # ship a worse agent (the same fresh episodes for both; the test seeds stay unseen)
-            now = timed("confirmation", lambda: validate(SHIPPED, args.run_dir / f"confirm{m}_shipped.json", m,
+            tag = hashlib.sha1(SHIPPED.read_bytes()).hexdigest()[:8]  # the file names the agent it judged
+            now = timed("confirmation", lambda: validate(SHIPPED, args.run_dir / f"confirm{m}_shipped_{tag}.json", m,
                                                          CONFIRMATION_SEED))
             better = beats(confirmed[1], now)
             print(f"confirmation against the agent shipped now ({SHIPPED}; shipped -> refined): "
