@@ -84,7 +84,7 @@ class Args:
     bootstrap_at_done: str = "always"
     """with the sparse reward: `always` (ManiSkill's: a success state bootstraps with its value, as if it kept
     paying) or `truncated` (success is an end; runs 1-6 in docs/RESULTS.md). Run 7 against run 5 measured the
-    choice: `always` as good or better at every comparison, within the runs' noise."""
+    choice: behind at 100k env steps, ahead at 200k and 300k, the best snapshots tied on fresh episodes."""
     validation_episodes: int = 200
     """episodes per task of each validation."""
     confirmation_episodes: int = 200
