@@ -31,7 +31,7 @@ from baselines.ppo.refine import beats, best_snapshot  # noqa: E402
 from ms_construction.reporting import update_section  # noqa: E402
 
 SETTINGS = ("learning_rate", "gamma", "start_states_share", "residual_scale", "residual_l2_coef", "num_envs", "num_steps",
-            "critic_warmup_iterations", "bootstrap_at_done", "target_kl")
+            "critic_warmup_iterations", "bootstrap_at_done", "target_kl", "reward_mode", "reward_scale")
 TASKS = {"CeilingInstallation-v1": "ceiling", "WindowInstallation-v1": "window", "Flooring-v1": "flooring"}
 
 
@@ -100,7 +100,8 @@ def report(runs: list[dict]) -> str:
              "|---|---|---|" + "---|" * len(TASKS)]
     for r in runs:
         s = r["settings"]
-        setting = (f"lr {s['learning_rate']:g}, gamma {s['gamma']}, bank share {s['start_states_share']}, "
+        setting = ((f"{s['reward_mode']} reward x {s['reward_scale']:g}, " if s.get("reward_mode", "sparse") != "sparse" else "")
+                   + f"lr {s['learning_rate']:g}, gamma {s['gamma']}, bank share {s['start_states_share']}, "
                    f"scale {s['residual_scale']}, {s['num_envs']} envs x {s['num_steps']}"
                    + (f", L2 anchor {s['residual_l2_coef']:g}" if s.get("residual_l2_coef") else "")
                    + (f", bootstrap-at-done {s['bootstrap_at_done']}" if s.get("bootstrap_at_done", "truncated") != "truncated" else ""))

@@ -128,6 +128,20 @@ def test_the_report_tables_a_confirmation_beside_the_clone_where_a_run_has_one(t
     assert "| probe | 100,000 | 95.5 -> 96.0 | 95.0 -> 93.5 | 98.0 -> 97.0 | no |" in body
 
 
+def test_the_reward_reaches_ppo_and_a_dense_run_is_labelled_so(tmp_path):
+    args = refine.Args(run_dir=tmp_path, reward_mode="normalized_dense", reward_scale=0.02, gamma=0.99)
+    run = refine.ppo_args(args, tmp_path / "failure_states.pt")
+    assert (run.reward_mode, run.reward_scale, run.gamma, run.bootstrap_at_done) == ("normalized_dense", 0.02, 0.99, "always")
+    dense, sparse = (summary(name, {100_000: (0.97, 0.95, 0.99)}) for name in ("dense", "sparse"))
+    dense["settings"].update(reward_mode="normalized_dense", reward_scale=0.02)
+    paths = [tmp_path / "dense.json", tmp_path / "sparse.json"]
+    for path, run in zip(paths, (dense, sparse)):
+        path.write_text(json.dumps(run))
+    body = refine_report.main(refine_report.Args(runs=tuple(paths), out=tmp_path / "refine.png"))
+    assert "| dense | normalized_dense reward x 0.02, lr 3e-05" in body
+    assert "| sparse | lr 3e-05" in body  # runs before the flag, and sparse ones, read as they did
+
+
 def test_failure_kinds_follow_the_stage_tolerances():
     def episode(seed, placed, held, dist, angle):
         return dict(seed=seed, placed=placed, held_at_end=held, final_place_dist=dist, final_place_angle_deg=angle)

@@ -5,7 +5,7 @@
 
 1. bank: the clone's deterministic episodes on training seeds; where it fails, its states before the
    element's closest approach to its goal (baselines/ppo/start_states.py);
-2. PPO (baselines/ppo/ppo.py) on the general task at cp4 with the task's own sparse reward: a
+2. PPO (baselines/ppo/ppo.py) on the general task at cp4 with the task's own reward (sparse by default): a
    residual policy on the frozen clone (--residual-of, ResiP), whose critic first learns the clone's
    returns alone (--critic-warmup-iterations), a share of the training episodes starting from the bank;
 3. validation: every --validate-every env steps the policy as it stands on the validation seeds (500,000
@@ -33,7 +33,7 @@ import shutil
 import sys
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Optional
+from typing import Literal, Optional
 
 import torch
 import tyro
@@ -69,6 +69,12 @@ class Args:
     update_epochs: int = 4
     learning_rate: float = 3e-5
     """of the residual and the critic (at 1e-4 the validations swung more, docs/RESULTS.md)."""
+    reward_mode: Literal["sparse", "dense", "normalized_dense"] = "sparse"
+    """the task's reward: `sparse` (Algorithm 1: the grasp and the placement pay), `dense` or `normalized_dense` (every
+    step pays progress towards the goal; placing pays most, with `--bootstrap-at-done always`: the task card)."""
+    reward_scale: float = 1.0
+    """the reward's scale: keep the returns near the sparse reward's (a few units), which the critic's warm-up
+    iterations can fit at this learning rate (normalized_dense at gamma 0.99 returns up to 100: 0.02)."""
     gamma: float = 0.999
     """discount: near 1, the sparse reward's return says whether the episode placed more than how soon (at
     0.99, 85 steps of placing halve it, which pays hurrying)."""
@@ -101,10 +107,10 @@ class Args:
 def ppo_args(args: Args, bank: Path) -> ppo.Args:
     return ppo.Args(
         residual_of=str(args.clone), residual_scale=args.residual_scale, residual_l2_coef=args.residual_l2_coef, start_states=str(bank),
-        start_states_share=args.start_states_share, env_id="ConstructionPickPlace-v1", reward_mode="sparse",
+        start_states_share=args.start_states_share, env_id="ConstructionPickPlace-v1", reward_mode=args.reward_mode,
         curiosity="none", curriculum=("cp4",), total_timesteps=args.total_timesteps, num_envs=args.num_envs,
         num_steps=args.num_steps, num_minibatches=args.num_minibatches, update_epochs=args.update_epochs,
-        learning_rate=args.learning_rate, gamma=args.gamma,
+        learning_rate=args.learning_rate, gamma=args.gamma, reward_scale=args.reward_scale,
         target_kl=0.05, critic_warmup_iterations=args.critic_warmup_iterations, bootstrap_at_done=args.bootstrap_at_done,
         eval_freq=10**9, checkpoint_freq=5, seed=args.seed, log_dir=str(args.run_dir), exp_name="ppo",
         sim_backend="physx_cpu", cuda=False)
