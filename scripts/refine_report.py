@@ -74,9 +74,13 @@ def summarize(run: Path) -> dict:
                    clone=clone, validations={str(k): v for k, v in sorted(validations.items())})
     # refine.py's confirmation: the best snapshot and the clone again, on fresh seeds (confirm<episodes>_<which>.json)
     confirmed = {path.stem.split("_", 1)[1]: validation_summary(path) for path in sorted(run.glob("confirm*_*.json"))}
-    if "clone" in confirmed and len(confirmed) == 2:
-        step = next(k for k in confirmed if k != "clone")
-        summary["confirmation"] = dict(env_steps=int(step), clone=confirmed["clone"], snapshot=confirmed[step])
+    steps = [k for k in confirmed if k.isdigit()]
+    if "clone" in confirmed and len(steps) == 1:
+        summary["confirmation"] = dict(env_steps=int(steps[0]), clone=confirmed["clone"], snapshot=confirmed[steps[0]])
+        # refine.py's last bar: the agent shipped at the time (confirm<episodes>_shipped_<its hash>.json)
+        shipped = [k for k in confirmed if k.startswith("shipped_")]
+        if shipped:
+            summary["confirmation"]["shipped"] = confirmed[shipped[0]]
     return summary
 
 
@@ -121,15 +125,22 @@ def report(runs: list[dict]) -> str:
     confirmed = [r for r in runs if "confirmation" in r]
     if confirmed:
         lines += ["", "Confirmation (refine.py ships a snapshot only if it wins here too): the best snapshot and the clone "
-                  "again, on fresh episodes (seeds 600000 on), place %:", "",
+                  "again, on fresh episodes (seeds 600000 on), place %; and the agent shipped at the time on the same "
+                  "episodes where refine.py measured it (it does when a snapshot beats the clone, shipping enabled):", "",
                   "| run | snapshot (env steps) | " + " | ".join(f"{t}: clone -> snapshot" for t in TASKS.values())
-                  + " | beats the clone |", "|---|---|" + "---|" * (len(TASKS) + 1)]
+                  + " | beats the clone | the agent shipped then (" + " / ".join(TASKS.values()) + "): beaten |",
+                  "|---|---|" + "---|" * (len(TASKS) + 2)]
         for r in confirmed:
             c = r["confirmation"]
             clone, snap = ({e: c[k][e]["place_success"] for e in TASKS} for k in ("clone", "snapshot"))
             wins = beats(snap, clone)
+            then = "not measured"
+            if "shipped" in c:
+                shipped = {e: c["shipped"][e]["place_success"] for e in TASKS}
+                then = " / ".join(pct(shipped[e]) for e in TASKS) + (": yes" if beats(snap, shipped) else ": no")
             lines.append(f"| {r['run']} | {c['env_steps']:,} | "
-                         + " | ".join(f"{pct(clone[e])} -> {pct(snap[e])}" for e in TASKS) + f" | {'yes' if wins else 'no'} |")
+                         + " | ".join(f"{pct(clone[e])} -> {pct(snap[e])}" for e in TASKS)
+                         + f" | {'yes' if wins else 'no'} | {then} |")
     return "\n".join(lines)
 
 

@@ -125,7 +125,26 @@ def test_the_report_tables_a_confirmation_beside_the_clone_where_a_run_has_one(t
     path = tmp_path / "probe.json"
     path.write_text(json.dumps(run))
     body = refine_report.main(refine_report.Args(runs=(path,), out=tmp_path / "refine.png"))
-    assert "| probe | 100,000 | 95.5 -> 96.0 | 95.0 -> 93.5 | 98.0 -> 97.0 | no |" in body
+    assert "| probe | 100,000 | 95.5 -> 96.0 | 95.0 -> 93.5 | 98.0 -> 97.0 | no | not measured |" in body
+    run["confirmation"]["shipped"] = summary("p", {1: (0.98, 0.97, 0.995)})["validations"]["1"]
+    path.write_text(json.dumps(run))
+    body = refine_report.main(refine_report.Args(runs=(path,), out=tmp_path / "refine.png"))
+    assert "| 98.0 -> 97.0 | no | 98.0 / 97.0 / 99.5: no |" in body
+
+
+def test_a_run_folder_s_confirmation_names_the_snapshot_and_the_agent_shipped_then(tmp_path):
+    run = tmp_path / "refine9"
+    (run / "ppo").mkdir(parents=True)
+    torch.save(dict(args=dict(learning_rate=3e-5), progress=dict(global_step=200_000)), run / "ppo" / "checkpoint.pt")
+    for name, success in [("val200_clone", 0.96), ("val200_200000", 0.97), ("confirm200_clone", 0.95),
+                          ("confirm200_200000", 0.99), ("confirm200_shipped_fe56ed4d", 0.97)]:
+        (run / f"{name}.json").write_text(json.dumps(dict(tasks={t: dict(
+            episodes=200, place_success=success, place_success_ci95=[0.9, 1.0], pick_success=1.0, episode_results=[])
+            for t in TASKS})))
+    summary_ = refine_report.load(run, tmp_path / "data")
+    c = summary_["confirmation"]
+    assert c["env_steps"] == 200_000
+    assert [c[k]["Flooring-v1"]["place_success"] for k in ("clone", "snapshot", "shipped")] == [0.95, 0.99, 0.97]
 
 
 def test_the_reward_reaches_ppo_and_a_dense_run_is_labelled_so(tmp_path):

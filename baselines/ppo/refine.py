@@ -5,7 +5,7 @@
 
 1. bank: the clone's deterministic episodes on training seeds; where it fails, its states before the
    element's closest approach to its goal (baselines/ppo/start_states.py);
-2. PPO (baselines/ppo/ppo.py) on the general task at cp4 with the task's own reward (sparse by default): a
+2. PPO (baselines/ppo/ppo.py) on the general task at cp4 with the task's own reward (its normalized dense one by default): a
    residual policy on the frozen clone (--residual-of, ResiP), whose critic first learns the clone's
    returns alone (--critic-warmup-iterations), a share of the training episodes starting from the bank;
 3. validation: every --validate-every env steps the policy as it stands on the validation seeds (500,000
@@ -69,15 +69,17 @@ class Args:
     update_epochs: int = 4
     learning_rate: float = 3e-5
     """of the residual and the critic (at 1e-4 the validations swung more, docs/RESULTS.md)."""
-    reward_mode: Literal["sparse", "dense", "normalized_dense"] = "sparse"
-    """the task's reward: `sparse` (Algorithm 1: the grasp and the placement pay), `dense` or `normalized_dense` (every
-    step pays progress towards the goal; placing pays most, with `--bootstrap-at-done always`: the task card)."""
-    reward_scale: float = 1.0
-    """the reward's scale: keep the returns near the sparse reward's (a few units), which the critic's warm-up
-    iterations can fit at this learning rate (normalized_dense at gamma 0.99 returns up to 100: 0.02)."""
-    gamma: float = 0.999
-    """discount: near 1, the sparse reward's return says whether the episode placed more than how soon (at
-    0.99, 85 steps of placing halve it, which pays hurrying)."""
+    reward_mode: Literal["sparse", "dense", "normalized_dense"] = "normalized_dense"
+    """the task's reward: `normalized_dense` (every step pays progress towards the goal, placing pays most with
+    `--bootstrap-at-done always`: the task card; run 8, the shipped agent's) or `sparse` (Algorithm 1: the grasp
+    and the placement pay; runs 1-7), or `dense`."""
+    reward_scale: float = 0.02
+    """the reward's scale: keeps the returns near the sparse reward's (a few units), which the critic's warm-up
+    iterations fit at this learning rate (normalized_dense at gamma 0.99 returns up to 100; sparse: use 1)."""
+    gamma: float = 0.99
+    """discount: with the dense reward, 0.99 (a success state is worth 1 / (1 - gamma) steps of its pay, the
+    horizon tests/test_dense_reward.py checks placing against); with the sparse one runs 2-5 and 7 used 0.999 (at
+    0.99, 85 steps of placing halve the return; run 6 measured 0.99, which did not place more)."""
     residual_scale: float = 0.1
     """the correction's scale in action units."""
     residual_l2_coef: float = 0.1
@@ -88,9 +90,10 @@ class Args:
     critic_warmup_iterations: int = 3
     """first iterations that train only the critic, on the clone's own rollouts."""
     bootstrap_at_done: str = "always"
-    """with the sparse reward: `always` (ManiSkill's: a success state bootstraps with its value, as if it kept
-    paying) or `truncated` (success is an end; runs 1-6 in docs/RESULTS.md). Run 7 against run 5 measured the
-    choice: behind at 100k env steps, ahead at 200k and 300k, the best snapshots tied on fresh episodes."""
+    """`always` (ManiSkill's: a success state bootstraps with its value, as if it kept paying; what the dense
+    rewards are made for) or `truncated` (success is an end; runs 1-6 in docs/RESULTS.md). With the sparse reward,
+    run 7 against run 5 measured the choice: behind at 100k env steps, ahead at 200k and 300k, the best snapshots
+    tied on fresh episodes."""
     validation_episodes: int = 200
     """episodes per task of each validation."""
     confirmation_episodes: int = 200
