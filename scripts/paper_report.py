@@ -16,6 +16,7 @@ from __future__ import annotations
 import csv
 import json
 import math
+import shlex
 import subprocess
 import sys
 from dataclasses import dataclass
@@ -214,7 +215,8 @@ def settings_table() -> str:
 
 
 def figures(csvs: dict[str, Path], images: Path) -> list[str]:
-    """Draw Figure 3 (and 4 when a control group has run) with plot_training.py; their commands."""
+    """Draw Figure 3 (and 4 when a control group has run, and curiosity's effect when run 3 has) with
+    plot_training.py; their commands."""
     commands = []
     if "paper_general_agent" in csvs:
         commands.append(["--figure", "fig3", "--csv", str(csvs["paper_general_agent"]), "--out", str(images / "paper_fig3.png"),
@@ -223,10 +225,14 @@ def figures(csvs: dict[str, Path], images: Path) -> list[str]:
         if controls:
             commands.append(["--figure", "fig4", "--csv", str(csvs["paper_general_agent"]), *controls,
                              "--out", str(images / "paper_fig4.png"), "--window", "20"])
+        if "paper_cp1_no_curiosity" in csvs:  # run 3 beside run 1's own cp1 stage, the same seed
+            commands.append(["--csv", str(csvs["paper_general_agent"]), str(csvs["paper_cp1_no_curiosity"]),
+                             "--max-steps", str(STAGE_STEPS), "--out", str(images / "paper_curiosity.png"), "--window", "20",
+                             "--title", "cp1 of the paper setting: with curiosity (run 1) and without (run 3)"])
     script = Path(__file__).with_name("plot_training.py")
     for c in commands:
         subprocess.run([sys.executable, str(script), *c], check=True)
-    return ["python scripts/plot_training.py " + " ".join(c) for c in commands]
+    return ["python scripts/plot_training.py " + shlex.join(c) for c in commands]
 
 
 def main(args: Args) -> str:

@@ -2,6 +2,8 @@
 
     python scripts/plot_training.py --csv runs/<run>/progress.csv --out docs/images/training.png
     python scripts/plot_training.py --csv runs/<a>/progress.csv runs/<b>/progress.csv --title "ICM vs none" --window 20
+    python scripts/plot_training.py --csv campaign/paper_general_agent/progress.csv \
+        campaign/paper_cp1_no_curiosity/progress.csv --max-steps 2000000   # cp1 with and without curiosity
     python scripts/plot_training.py --figure fig3 --csv campaign/paper_general_agent/progress.csv --out docs/images/paper_fig3.png
     python scripts/plot_training.py --figure fig4 --csv campaign/paper_general_agent/progress.csv \
         campaign/control_ceiling/progress.csv campaign/control_window/progress.csv campaign/control_flooring/progress.csv \
@@ -56,11 +58,13 @@ class Args:
     """figure title (default: the run folder name(s))."""
     window: int = 10
     """rows in the trailing moving average."""
+    max_steps: Optional[int] = None
+    """draw only the rows up to this env step (e.g. the paper setting's cp1 stage beside a run of that stage alone)."""
 
 
-def load(path: Path, required: tuple[str, ...] = REQUIRED) -> dict:
+def load(path: Path, required: tuple[str, ...] = REQUIRED, max_steps: Optional[int] = None) -> dict:
     """The `required` columns (and the optional ones it has) as arrays (float, NaN for empty cells;
-    stage as strings), or SystemExit."""
+    stage as strings) of the rows up to `max_steps` env steps (all: None), or SystemExit."""
     if not path.is_file():
         raise SystemExit(f"{path}: no such file")
     with open(path, newline="") as f:
@@ -69,9 +73,9 @@ def load(path: Path, required: tuple[str, ...] = REQUIRED) -> dict:
         missing = [c for c in required if c not in fields]
         if missing:
             raise SystemExit(f"{path}: missing columns: {', '.join(missing)}")
-        rows = list(reader)
+        rows = [r for r in reader if max_steps is None or float(r["global_step"]) <= max_steps]
     if not rows:
-        raise SystemExit(f"{path}: no rows")
+        raise SystemExit(f"{path}: no rows" + (f" up to env step {max_steps:,}" if max_steps is not None else ""))
     numeric = [c for c in required if c != "stage"] + [c for c in OPTIONAL if c in fields]
     data = {c: np.array([float(r[c]) if r[c] not in ("", None) else np.nan for r in rows]) for c in numeric}
     data["stage"] = [r["stage"] for r in rows]
@@ -135,7 +139,7 @@ def figure3(args: Args):
     """The paper's Fig. 3 for one run: returns against env steps, a colour per stage."""
     if len(args.csv) != 1:
         raise SystemExit("--figure fig3: give one progress.csv (the general agent's)")
-    d = load(args.csv[0], FIGURE_REQUIRED)
+    d = load(args.csv[0], FIGURE_REQUIRED, args.max_steps)
     intrinsic = "intrinsic_return" in d and not np.isnan(d["intrinsic_return"]).all()
     fig, axes = plt.subplots(1, 2 if intrinsic else 1, figsize=(13 if intrinsic else 8, 4.5), constrained_layout=True,
                              squeeze=False)
@@ -162,7 +166,7 @@ def figure4(args: Args):
     """The paper's Fig. 4: the first run's last stage against the other runs, from each one's start."""
     if len(args.csv) < 2:
         raise SystemExit("--figure fig4: give the general agent's progress.csv first, then the control groups'")
-    general = load(args.csv[0], FIGURE_REQUIRED)
+    general = load(args.csv[0], FIGURE_REQUIRED, args.max_steps)
     last = stage_segments(general["stage"])[-1]
     fig, ax = plt.subplots(figsize=(9, 4.5), constrained_layout=True)
     s = last[1]
@@ -170,7 +174,7 @@ def figure4(args: Args):
     raw_and_average(ax, general["global_step"][s:] - start, general["extrinsic_return"][s:], args.window, "tab:red",
                     f"{args.csv[0].parent.name} ({last[0]} stage)")
     for k, path in enumerate(args.csv[1:]):
-        d = load(path, FIGURE_REQUIRED)
+        d = load(path, FIGURE_REQUIRED, args.max_steps)
         raw_and_average(ax, d["global_step"], d["extrinsic_return"], args.window, EXTRA_COLORS[k % len(EXTRA_COLORS)],
                         path.parent.name)
     ax.axhline(3.0, color="grey", ls=":", lw=1)
@@ -182,7 +186,7 @@ def figure4(args: Args):
 
 
 def progress_figure(args: Args):
-    runs = [(run_label(p, args.csv), load(p)) for p in args.csv]
+    runs = [(run_label(p, args.csv), load(p, max_steps=args.max_steps)) for p in args.csv]
     colors = dict(STAGE_COLORS)
     used = list(dict.fromkeys(s for _, d in runs for s in d["stage"]))
     # runs that all train in one stage (the refinements at cp4) are told apart by colour, not by line style alone

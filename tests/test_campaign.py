@@ -117,6 +117,15 @@ def test_the_campaign_report_summarizes_each_run_and_stage_and_draws_figure_3_an
             w.writerow(dict(global_step=10_000 * i, iteration=i, stage=stage, episodes=40, pick_success=0.5,
                             place_success=0.0 if stage == "cp1" else 0.25, extrinsic_return=0.5, intrinsic_return=0.1,
                             end_place_dist=1.0, end_place_angle_deg=30.0, held_at_end=0.5))
+    run3 = tmp_path / "campaign" / "paper_cp1_no_curiosity"
+    run3.mkdir()
+    with open(run3 / "progress.csv", "w", newline="") as f:  # run 3, half of its cp1 stage
+        w = csv.DictWriter(f, fieldnames=CSV_FIELDS)
+        w.writeheader()
+        for i in range(1, 101):
+            w.writerow(dict(global_step=10_000 * i, iteration=i, stage="cp1", episodes=40, pick_success=0.25,
+                            place_success=0.0, extrinsic_return=-0.5, end_place_dist=1.5, end_place_angle_deg=40.0,
+                            held_at_end=0.25))
     results = tmp_path / "RESULTS.md"
     res = subprocess.run([sys.executable, str(ROOT / "scripts/paper_report.py"), "--campaign-dir", str(tmp_path / "campaign"),
                           "--write-results", "--results", str(results), "--images", str(tmp_path / "images"),
@@ -129,6 +138,11 @@ def test_the_campaign_report_summarizes_each_run_and_stage_and_draws_figure_3_an
     assert "| paper_general_agent | cp2 | 2,000,000-4,000,000 | 8,000 | 50.0 | 25.0 |" in text
     assert "| control_ceiling | controlGroup4.1" in text and "not started" in text
     assert (tmp_path / "images" / "paper_fig3.png").stat().st_size > 0
+    assert "| paper_cp1_no_curiosity | run 1's cp1 stage without curiosity" in text and "1,000,000 / 2,000,000 | cp1 |" in text
+    assert "| paper_cp1_no_curiosity | cp1 | 0-1,000,000 | 4,000 | 25.0 | 0.0 |" in text
+    # curiosity's effect: run 3 beside run 1's own cp1 stage only
+    assert (tmp_path / "images" / "paper_curiosity.png").stat().st_size > 0
+    assert "--max-steps 2000000 --out" in text and "paper_curiosity.png)" in text
     table = text.split("### Table II")[1]
     assert "| paper: general agent |" in table and "| 84.55 / 68.04 | 95.32 / 84.82 | 88.43 / 85.17 |" in table
     assert "| 63.00 / 0.21 | 62.89 / 0.30 | 64.72 / 4.45 |" in table

@@ -113,3 +113,20 @@ def test_paper_figures_3_and_4_are_drawn_from_small_csvs(tmp_path):
     assert (imread(fig4)[..., :3].min(axis=-1) < 0.95).mean() > 0.02
     res = run("--figure", "fig4", "--csv", str(general), "--out", str(tmp_path / "x.png"))
     assert res.returncode != 0 and "control groups" in res.stderr
+
+
+def test_max_steps_draws_only_the_rows_up_to_it_and_says_when_none_are(tmp_path):
+    import importlib.util
+
+    spec = importlib.util.spec_from_file_location("plot_training", SCRIPT)
+    plot_training = importlib.util.module_from_spec(spec)
+    sys.modules["plot_training"] = plot_training  # dataclasses look their module up
+    spec.loader.exec_module(plot_training)
+    path = write_csv(tmp_path / "a" / "progress.csv", csv_fields(), synthetic_rows(60))  # 800 env steps a row
+    assert len(plot_training.load(path, max_steps=24_000)["global_step"]) == 30
+    assert plot_training.load(path, max_steps=24_000)["stage"] == ["cp1"] * 30
+    out = tmp_path / "cp1.png"
+    res = run("--csv", str(path), str(path), "--max-steps", "24000", "--out", str(out))
+    assert res.returncode == 0 and out.stat().st_size > 0, res.stderr
+    res = run("--csv", str(path), "--max-steps", "100", "--out", str(tmp_path / "x.png"))
+    assert res.returncode != 0 and "no rows up to env step 100" in res.stderr
