@@ -89,7 +89,7 @@ class Args:
     """the share of training episodes that start from the bank."""
     critic_warmup_iterations: int = 3
     """first iterations that train only the critic, on the clone's own rollouts."""
-    bootstrap_at_done: str = "always"
+    bootstrap_at_done: Literal["always", "truncated"] = "always"
     """`always` (ManiSkill's: a success state bootstraps with its value, as if it kept paying; what the dense
     rewards are made for) or `truncated` (success is an end; runs 1-6 in docs/RESULTS.md). With the sparse reward,
     run 7 against run 5 measured the choice: behind at 100k env steps, ahead at 200k and 300k, the best snapshots
