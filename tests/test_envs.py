@@ -107,6 +107,22 @@ def test_tasks_kwarg_is_validated_and_restricts_the_general_task():
     assert seen == {1}
 
 
+def test_task_weights_kwarg_is_validated_and_weighs_the_general_task_s_choice():
+    with pytest.raises(ValueError, match="bricks"):
+        make_env("ConstructionPickPlace-v1", task_weights={"bricks": 1.0})
+    with pytest.raises(ValueError, match="not all 0"):
+        make_env("ConstructionPickPlace-v1", task_weights={"ceiling": 0, "window": 0, "flooring": 0})
+    with pytest.raises(ValueError, match="general task only"):
+        make_env("Flooring-v1", task_weights={"flooring": 1.0})
+    # unnamed types weigh 1; a weight of 0 leaves a type out
+    env = make_env("ConstructionPickPlace-v1", task_weights={"ceiling": 0, "window": 3})
+    seen = [int(env.reset(seed=s)[1]["task_id"][0]) for s in range(40)]
+    again = [int(env.reset(seed=s)[1]["task_id"][0]) for s in range(40)]
+    env.close()
+    assert seen == again  # a seed still fixes the episode
+    assert 0 not in seen and 20 < seen.count(1) < 40 and seen.count(2) > 0
+
+
 def test_general_task_yields_all_three_task_types():
     env = make_env("ConstructionPickPlace-v1")
     seen = set()

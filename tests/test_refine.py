@@ -2,6 +2,7 @@
 shipping only what beats the clone) with PPO and the evaluations stood in for, and its report
 (scripts/refine_report.py) on a small summary."""
 
+import dataclasses
 import importlib.util
 import json
 import sys
@@ -159,6 +160,26 @@ def test_the_reward_reaches_ppo_and_a_dense_run_is_labelled_so(tmp_path):
     body = refine_report.main(refine_report.Args(runs=tuple(paths), out=tmp_path / "refine.png"))
     assert "| dense | normalized_dense reward x 0.02, lr 3e-05" in body
     assert "| sparse | lr 3e-05" in body  # runs before the flag, and sparse ones, read as they did
+
+
+def test_task_weights_reach_the_training_envs_only_and_label_the_run(tmp_path):
+    from baselines.ppo import ppo
+
+    run = refine.ppo_args(refine.Args(run_dir=tmp_path, task_weights=(0.0, 1.0, 0.0)), tmp_path / "bank.pt")
+    run.start_states = None
+    with pytest.raises(SystemExit, match="task-weights"):
+        ppo.validate(dataclasses.replace(run, task_weights=(0.0, 0.0, 0.0)))
+    seen = {}
+    for mode in (False, True):  # training, then evaluation
+        envs = ppo.make_envs(run, 1, torch.device("cpu"), eval_mode=mode)
+        seen[mode] = {int(envs.reset(seed=s)[1]["task_id"][0]) for s in range(12)}
+        envs.close()
+    assert seen[False] == {1} and len(seen[True]) > 1
+    weighted = summary("weighted", {100_000: (0.97, 0.95, 0.99)})
+    weighted["settings"]["task_weights"] = [1.0, 2.0, 1.0]
+    (tmp_path / "weighted.json").write_text(json.dumps(weighted))
+    body = refine_report.main(refine_report.Args(runs=(tmp_path / "weighted.json",), out=tmp_path / "refine.png"))
+    assert "num_steps" not in body and ", task weights 1/2/1 |" in body
 
 
 def test_failure_kinds_follow_the_stage_tolerances():

@@ -56,6 +56,7 @@ from baselines.ppo.update import adam, bootstrap_mask, gae, ppo_update
 from baselines.ppo.start_states import StartFromStates
 from ms_construction.curriculum import STAGE_NAMES
 from ms_construction.envs import ENV_IDS
+from ms_construction.parameters import ELEMENT_KINDS
 from ms_construction.vector_env import CPUVectorEnv
 
 ControlMode = Literal["pd_joint_delta_pos", "pd_joint_pos", "pd_joint_target_delta_pos", "pd_ee_delta_pos",
@@ -193,6 +194,9 @@ class Args:
     training episodes start from; evaluation always resets as usual. physx_cpu only."""
     start_states_share: float = 0.5
     """the share of training episodes that start from the bank."""
+    task_weights: Optional[tuple[float, float, float]] = None
+    """the general task's sampling weights of ceiling, window and flooring in the training envs (None: uniform;
+    `1 2 1`: window installation half the episodes); evaluation always samples uniformly."""
 
     curiosity: Literal["none", "icm", "icm_normalized"] = "icm"
     """intrinsic reward (baselines/ppo/curiosity.py): `icm` as ML-Agents computes it (the forward model's
@@ -234,6 +238,8 @@ def make_envs(args: Args, num_envs: int, device: torch.device, eval_mode: bool =
     physx_cpu (one env each), ManiSkillVectorEnv on physx_cuda. With `video_dir`, evaluation videos."""
     kwargs = dict(obs_mode="state", control_mode=args.control_mode, reward_mode=args.reward_mode,
                   render_mode="rgb_array" if video_dir else None)
+    if args.task_weights is not None and not eval_mode:
+        kwargs["task_weights"] = dict(zip(ELEMENT_KINDS, args.task_weights))
     if args.sim_backend == "physx_cpu":
         wrappers = ()
         if args.start_states and not eval_mode:
@@ -301,6 +307,10 @@ def validate(args: Args) -> None:
         raise SystemExit("--residual-l2-coef weighs a residual's correction: give --residual-of")
     if args.residual_of and args.bc_coef > 0:
         raise SystemExit("--bc-coef works on the policy's own weights; a residual agent (--residual-of) has none to pull")
+    if args.task_weights is not None and (args.env_id != "ConstructionPickPlace-v1" or min(args.task_weights) < 0
+                                          or sum(args.task_weights) <= 0):
+        raise SystemExit(f"--task-weights {args.task_weights}: three weights >= 0, not all 0 (ceiling, window, flooring), "
+                         "of the general task ConstructionPickPlace-v1 only")
     if not 0 <= args.start_states_share <= 1:
         raise SystemExit(f"--start-states-share must lie in [0, 1], got {args.start_states_share}")
     if args.start_states and args.sim_backend == "physx_cuda":

@@ -87,6 +87,9 @@ class Args:
     (run 5, the first refinement to beat the clone on fresh episodes, had it; runs without it did not)."""
     start_states_share: float = 0.25
     """the share of training episodes that start from the bank."""
+    task_weights: Optional[tuple[float, float, float]] = None
+    """sampling weights of ceiling, window and flooring in the training episodes (None: uniform; `1 2 1`: window
+    installation, the task the clone fails most, half of them); validation always samples uniformly."""
     critic_warmup_iterations: int = 3
     """first iterations that train only the critic, on the clone's own rollouts."""
     bootstrap_at_done: Literal["always", "truncated"] = "always"
@@ -110,7 +113,7 @@ class Args:
 def ppo_args(args: Args, bank: Path) -> ppo.Args:
     return ppo.Args(
         residual_of=str(args.clone), residual_scale=args.residual_scale, residual_l2_coef=args.residual_l2_coef, start_states=str(bank),
-        start_states_share=args.start_states_share, env_id="ConstructionPickPlace-v1", reward_mode=args.reward_mode,
+        start_states_share=args.start_states_share, task_weights=args.task_weights, env_id="ConstructionPickPlace-v1", reward_mode=args.reward_mode,
         curiosity="none", curriculum=("cp4",), total_timesteps=args.total_timesteps, num_envs=args.num_envs,
         num_steps=args.num_steps, num_minibatches=args.num_minibatches, update_epochs=args.update_epochs,
         learning_rate=args.learning_rate, gamma=args.gamma, reward_scale=args.reward_scale,

@@ -12,7 +12,7 @@ from __future__ import annotations
 
 import functools
 import os
-from typing import Any, Optional, Sequence
+from typing import Any, Mapping, Optional, Sequence
 
 import numpy as np
 import sapien
@@ -95,6 +95,7 @@ class ConstructionTaskEnv(BaseEnv):
         curriculum_stage: str = "cp4",
         tolerances: Optional[dict] = None,
         tasks: Optional[Sequence[str]] = None,
+        task_weights: Optional[Mapping[str, float]] = None,
         **kwargs,
     ):
         self._tol_init = resolve_tolerances(curriculum_stage, tolerances)
@@ -107,10 +108,24 @@ class ConstructionTaskEnv(BaseEnv):
             if bad or not tasks or len(set(tasks)) != len(tasks):
                 raise ValueError(f"tasks={tasks!r}: give distinct task types from {ELEMENT_KINDS}")
             self.TASKS = tuple(t for t in ELEMENT_KINDS if t in tasks)
+        self._task_weights = self._check_task_weights(task_weights)
         self.robot_init_qpos_noise = robot_init_qpos_noise
         self._step_grasp_frame, self._in_step_readout = None, False
         kwargs.setdefault("render_backend", default_render_backend())
         super().__init__(*args, robot_uids=robot_uids, **kwargs)
+
+    def _check_task_weights(self, weights: Optional[Mapping[str, float]]) -> Optional[torch.Tensor]:
+        """`task_weights` as sampling probabilities in the order of self.TASKS (None: uniform). A task type
+        not named weighs 1, so {"window": 2} samples window installation half the time."""
+        if weights is None:
+            return None
+        if len(self.TASKS) == 1:
+            raise ValueError(f"'task_weights' is a kwarg of the general task only; {type(self).__name__} is {self.TASKS[0]}")
+        bad = [k for k in weights if k not in self.TASKS]
+        w = [float(weights.get(k, 1.0)) for k in self.TASKS]
+        if bad or min(w) < 0 or sum(w) <= 0:
+            raise ValueError(f"task_weights={dict(weights)!r}: give weights >= 0, not all 0, for task types of {self.TASKS}")
+        return torch.tensor(w) / sum(w)
 
     # ------------------------------------------------------------------------------------- #
     # configuration
@@ -201,7 +216,11 @@ class ConstructionTaskEnv(BaseEnv):
             b = len(env_idx)
             self.site.initialize(env_idx)
             if len(self.TASKS) > 1:
-                self.task_id[env_idx] = self._task_choices[torch.randint(len(self._task_choices), (b,))]
+                if self._task_weights is None:
+                    pick = torch.randint(len(self._task_choices), (b,))
+                else:
+                    pick = torch.multinomial(self._task_weights.to(self.device), b, replacement=True)
+                self.task_id[env_idx] = self._task_choices[pick]
                 self._select_active_elements()
             task = self.task_id[env_idx]
             self.goal_slot[env_idx] = torch.randint(self._goal_table.shape[1], (b,))

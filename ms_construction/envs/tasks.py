@@ -104,7 +104,8 @@ class ConstructionPickPlaceEnv(ConstructionTaskEnv):
 
 ConstructionPickPlaceEnv.__doc__ = _card(
     """**Task Description:** the general pick-and-place task. Every episode, each parallel env samples
-a task type (ceiling panel, window or floor panel; `tasks=` restricts the choice) and a goal slot
+a task type (ceiling panel, window or floor panel; `tasks=` restricts the choice, `task_weights=`, e.g.
+`{"window": 2}`, weighs it; unnamed types weigh 1) and a goal slot
 of that type; the episode's element starts on the staging table while the other two wait in the
 storage area outside the barriers. `info["task_id"]`: 0 ceiling, 1 window, 2 flooring.
 """,
