@@ -130,6 +130,8 @@ class TableRow:
     pending: str = ""
     """why the JSON is not there yet."""
     paper: Optional[dict] = None
+    env_ids: tuple[str, ...] = tuple(TASK_ENV_IDS.values())
+    """the tasks the agent is judged on (a control group: its own only)."""
 
 
 def _evaluation_row(label: str, method: str, checkpoint: Path, name: str, env_ids: tuple[str, ...], pending: str,
@@ -138,7 +140,7 @@ def _evaluation_row(label: str, method: str, checkpoint: Path, name: str, env_id
     task = "--all" if len(env_ids) == 3 else f"--env-id {env_ids[0]}"
     json_path = eval_dir / f"{name}_eval_50k.json"
     return TableRow(label, method, json_path, f"python scripts/evaluate.py --checkpoint {checkpoint} {task} {PROTOCOL} "
-                    f"--json {json_path}", pending)
+                    f"--json {json_path}", pending, env_ids=env_ids)
 
 
 def table_ii_rows(campaign_dir: Path, eval_dir: Path = EVAL_DIR) -> list[TableRow]:
@@ -200,13 +202,13 @@ def table_ii(campaign_dir: Path, eval_dir: Path = EVAL_DIR) -> str:
     for row in table_ii_rows(campaign_dir, eval_dir):
         cells = _cells(row)
         if cells is None:
-            lines.append(f"| {row.agent} | {row.method} | " + " | ".join("not yet" for _ in env_ids) + " |")
+            cells = {e: "not yet" for e in row.env_ids}
             notes.append(f"- {row.agent}: not yet ({row.pending}); then `{row.command}`")
-        else:
-            lines.append(f"| {row.agent} | {row.method} | " + " | ".join(cells.get(e, "") for e in env_ids) + " |")
-            if row.json is not None:
-                notes.append(f"- {row.agent}: `{json.loads(row.json.read_text())['command']}` ({row.json})")
-    return "\n".join(lines + ["", "Where each row comes from:", ""] + notes)
+        elif row.json is not None:
+            notes.append(f"- {row.agent}: `{json.loads(row.json.read_text())['command']}` ({row.json})")
+        lines.append(f"| {row.agent} | {row.method} | " + " | ".join(cells.get(e, "-") for e in env_ids) + " |")
+    return "\n".join(lines + ["", "-: not this agent's task (a control group trains on one task and is judged on it "
+                               "alone, as in the paper).", "", "Where each row comes from:", ""] + notes)
 
 
 def settings_table() -> str:

@@ -152,6 +152,9 @@ def test_the_campaign_report_summarizes_each_run_and_stage_and_draws_figure_3_an
             "assets/checkpoints/paper_general_agent.pt --all --steps 50000") in table
     assert "ours: paper setting, end of cp3: not yet (the end of cp3 comes at step 6,000,000)" in table
     assert "--checkpoint assets/checkpoints/control_window_8m.pt --env-id WindowInstallation-v1 --steps 50000" in table
+    # a control group is judged on its own task alone
+    assert "| ours: controlGroup4.2, 2M | controlGroup4.2: WindowInstallation-v1, cp4 from the first step; 2M env steps " \
+           "| - | not yet | - |" in table
     expert = next(line for line in table.splitlines() if line.startswith("| ours: planning expert"))
     assert expert.count("100.0 [96.3, 100.0] / 100.0 [96.3, 100.0]") == 3, "100 of 100 with its Wilson interval"
 
