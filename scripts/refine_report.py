@@ -32,7 +32,7 @@ from ms_construction.reporting import update_section  # noqa: E402
 
 SETTINGS = ("learning_rate", "gamma", "start_states_share", "residual_scale", "residual_l2_coef", "num_envs", "num_steps",
             "critic_warmup_iterations", "bootstrap_at_done", "target_kl", "reward_mode", "reward_scale",
-            "task_weights")
+            "task_weights", "obs_elapsed_time")
 TASKS = {"CeilingInstallation-v1": "ceiling", "WindowInstallation-v1": "window", "Flooring-v1": "flooring"}
 
 
@@ -110,7 +110,8 @@ def report(runs: list[dict]) -> str:
                    f"scale {s['residual_scale']}, {s['num_envs']} envs x {s['num_steps']}"
                    + (f", L2 anchor {s['residual_l2_coef']:g}" if s.get("residual_l2_coef") else "")
                    + (f", bootstrap-at-done {s['bootstrap_at_done']}" if s.get("bootstrap_at_done", "truncated") != "truncated" else "")
-                   + (", task weights " + "/".join(f"{w:g}" for w in s["task_weights"]) if s.get("task_weights") else ""))
+                   + (", task weights " + "/".join(f"{w:g}" for w in s["task_weights"]) if s.get("task_weights") else "")
+                   + (", elapsed time observed" if s.get("obs_elapsed_time") else ""))
         rows = [("the clone", r["clone"])] + [(f"{int(k):,}", v) for k, v in r["validations"].items()]
         for i, (steps, v) in enumerate(rows):
             cells = " | ".join(f"{pct(v[e]['place_success'])} [{pct(v[e]['ci95'][0])}, {pct(v[e]['ci95'][1])}]"

@@ -67,8 +67,8 @@ def test_behaviour_cloning_fits_the_demonstrations_and_writes_a_ppo_checkpoint(t
                           val_fraction=0.1, env_id="Flooring-v1"))
     ckpt = torch.load(out, weights_only=False)
     assert ckpt["bc"]["val_action_mse"] < 0.5 * float(np.var(np.concatenate([d.actions for d in flooring_demos])))
-    agent, control_mode = checkpoints.load_policy(out, "Flooring-v1")
-    assert control_mode == "pd_joint_delta_pos"
+    agent, env_kwargs = checkpoints.load_policy(out, "Flooring-v1")
+    assert env_kwargs == {"control_mode": "pd_joint_delta_pos"}
     obs = torch.as_tensor(flooring_demos[0].obs)
     features = agent.features(torch.as_tensor(np.concatenate([d.obs for d in flooring_demos])))
     np.testing.assert_allclose(agent.obs_rms.mean.numpy(), features.mean(0).numpy(), atol=0.2)  # train split only

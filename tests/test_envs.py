@@ -123,6 +123,20 @@ def test_task_weights_kwarg_is_validated_and_weighs_the_general_task_s_choice():
     assert 0 not in seen and 20 < seen.count(1) < 40 and seen.count(2) > 0
 
 
+def test_obs_elapsed_time_appends_the_step_fraction_last_and_changes_nothing_else():
+    plain, timed = make_env("WindowInstallation-v1"), make_env("WindowInstallation-v1", obs_elapsed_time=True)
+    obs, obs_t = plain.reset(seed=5)[0], timed.reset(seed=5)[0]
+    assert obs_t.shape[-1] == obs.shape[-1] + 1 and float(obs_t[0, -1]) == 0.0
+    assert torch.equal(obs_t[..., :-1], obs)
+    action = torch.zeros(plain.action_space.shape)
+    for step in (1, 2, 3):
+        obs, obs_t = plain.step(action)[0], timed.step(action)[0]
+        assert torch.equal(obs_t[..., :-1], obs) and float(obs_t[0, -1]) == pytest.approx(step / 250)
+    assert float(timed.reset(seed=6)[0][0, -1]) == 0.0, "a reset starts the clock again"
+    plain.close()
+    timed.close()
+
+
 def test_general_task_yields_all_three_task_types():
     env = make_env("ConstructionPickPlace-v1")
     seen = set()

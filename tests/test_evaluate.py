@@ -47,9 +47,9 @@ def test_training_and_scripts_evaluate_py_run_the_same_episode_loop(tmp_path):
     out = tmp_path / "eval.json"
     evaluation.main(evaluation.Args(env_id="Flooring-v1", episodes=2, seed=1_000_000, json=out, workers=1))
     by_script = json.loads(out.read_text())["episode_results"]
-    agent, control_mode = load_policy(evaluation.DEFAULT_CHECKPOINT, "Flooring-v1")
+    agent, env_kwargs = load_policy(evaluation.DEFAULT_CHECKPOINT, "Flooring-v1")
     # one env, as scripts/evaluate.py's workers: the policy's batch size changes its last float bits
-    envs = CPUVectorEnv("Flooring-v1", 1, dict(obs_mode="state", control_mode=control_mode, reward_mode="sparse",
+    envs = CPUVectorEnv("Flooring-v1", 1, dict(obs_mode="state", **env_kwargs, reward_mode="sparse",
                                                curriculum_stage="cp4"))
     try:
         in_training = [e for seed in (1_000_000, 1_000_001) for e in evaluation.run_episodes(agent, envs, 250, seed=seed)]
@@ -114,6 +114,24 @@ def test_sampled_actions_are_seeded_by_the_episode_and_stay_out_of_the_published
     assert lengths[0] != lengths[2], "sampled actions are not the policy's mean"
     with pytest.raises(SystemExit, match="diagnostic"):
         evaluation.main(evaluation.Args(env_id="Flooring-v1", episodes=1, sample_actions=True, write_results=True))
+
+
+def test_a_longer_step_limit_tells_late_arrivals_and_stays_out_of_the_published_table(tmp_path):
+    """--max-episode-steps (a diagnostic): episodes run to the limit given; what placed within the task's own
+    250 steps is counted beside."""
+    short = evaluation.main(evaluation.Args(env_id="Flooring-v1", episodes=1, seed=1_000_000, workers=1,
+                                            max_episode_steps=20))["Flooring-v1"]
+    assert short["episode_results"][0]["length"] == 20 and short["place_success"] == 0
+    assert short["place_success_within_limit"] == 0 and short["task_step_limit"] == 250
+    longer = evaluation.main(evaluation.Args(env_id="Flooring-v1", episodes=1, seed=1_000_000, workers=1,
+                                             max_episode_steps=300))["Flooring-v1"]
+    ordinary = evaluation.main(evaluation.Args(env_id="Flooring-v1", episodes=1, seed=1_000_000, workers=1))["Flooring-v1"]
+    assert longer["episode_results"][0]["length"] == ordinary["episode_results"][0]["length"] <= 250
+    assert longer["place_success_within_limit"] == ordinary["place_success"] == 1.0
+    assert "place_success_within_limit" not in ordinary
+    for bad in (dict(write_results=True), dict(steps=1000), dict(max_episode_steps=0)):
+        with pytest.raises(SystemExit, match="max-episode-steps"):
+            evaluation.main(evaluation.Args(env_id="Flooring-v1", episodes=1, **{"max_episode_steps": 300, **bad}))
 
 
 def test_earlier_agents_rows_come_from_their_json_and_a_bad_spec_is_refused(tmp_path):

@@ -359,8 +359,8 @@ def test_a_checkpoint_written_before_the_split_loads_through_the_checkpoint_api(
     assert ckpt["args"]["curiosity"] == "icm_normalized", "before ML-Agents' curiosity, icm meant the normalized variant"
     args = ppo.Args(**{**ckpt["args"], "curriculum": tuple(ckpt["args"]["curriculum"])})  # what --resume builds
     assert args.bootstrap_at_done == "truncated"
-    agent, control_mode = checkpoints.load_policy(path, "Flooring-v1")
-    assert control_mode == "pd_joint_delta_pos"
+    agent, env_kwargs = checkpoints.load_policy(path, "Flooring-v1")
+    assert env_kwargs == {"control_mode": "pd_joint_delta_pos"}
     for k, v in agent.state_dict().items():
         assert torch.equal(v, ckpt["agent"][k]), k
     with pytest.raises(SystemExit, match="control mode pd_joint_delta_pos, not pd_joint_pos"):

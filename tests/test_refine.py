@@ -182,6 +182,17 @@ def test_task_weights_reach_the_training_envs_only_and_label_the_run(tmp_path):
     assert ", task weights 1/2/1 |" in body
 
 
+def test_the_elapsed_time_reaches_ppo_and_labels_the_run(tmp_path):
+    run = refine.ppo_args(refine.Args(run_dir=tmp_path, obs_elapsed_time=True, bootstrap_at_done="terminated"),
+                          tmp_path / "bank.pt")
+    assert run.obs_elapsed_time and run.bootstrap_at_done == "terminated"
+    timed = summary("timed", {100_000: (0.97, 0.95, 0.99)})
+    timed["settings"].update(obs_elapsed_time=True, bootstrap_at_done="terminated")
+    (tmp_path / "timed.json").write_text(json.dumps(timed))
+    body = refine_report.main(refine_report.Args(runs=(tmp_path / "timed.json",), out=tmp_path / "refine.png"))
+    assert ", bootstrap-at-done terminated, elapsed time observed |" in body
+
+
 def test_failure_kinds_follow_the_stage_tolerances():
     def episode(seed, placed, held, dist, angle):
         return dict(seed=seed, placed=placed, held_at_end=held, final_place_dist=dist, final_place_angle_deg=angle)

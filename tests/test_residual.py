@@ -40,6 +40,31 @@ def test_the_residual_starts_as_the_clone_and_trains_only_its_own_weights():
     assert all(p.requires_grad for n, p in agent.named_parameters() if not n.startswith("base."))
 
 
+def test_a_residual_that_sees_the_time_starts_as_the_clone_which_does_not():
+    """--obs-elapsed-time: the observation's last entry is the time; the base reads the rest, the residual and
+    the critic read it too."""
+    base = load_checkpoint(CLONE)
+    torch.manual_seed(0)
+    agent = make_agent(dict(base["args"], residual_of=str(CLONE), residual_scale=0.1, curiosity="none",
+                            obs_elapsed_time=True), 44, 6, base_args=base["args"])
+    agent.base.load_state_dict(base["agent"])
+    clone, _ = load_policy(CLONE, "Flooring-v1")
+    obs = torch.randn(64, 44)
+    with torch.no_grad():
+        assert torch.equal(agent.get_action(obs, deterministic=True), clone.get_action(obs[:, :-1], deterministic=True))
+        late = obs.clone()
+        late[:, -1] = 0.9
+        assert not torch.equal(agent.get_value(obs), agent.get_value(late)), "the critic sees the time"
+    assert agent.residual_mean[0].in_features == agent.critic[0].in_features == 43 + 2 * 3 + 6 + 1
+
+
+def test_bootstrapping_at_terminated_ends_keeps_success_and_drops_the_time_limit():
+    terminated, truncated = torch.tensor([[1.0, 0.0, 0.0]]), torch.tensor([[0.0, 1.0, 0.0]])
+    masks = {mode: update.bootstrap_mask(terminated, truncated, mode).tolist()
+             for mode in ("always", "truncated", "terminated", "never")}
+    assert masks == {"always": [[1, 1, 0]], "truncated": [[0, 1, 0]], "terminated": [[1, 0, 0]], "never": [[0, 0, 0]]}
+
+
 def test_the_l2_anchor_pulls_the_correction_back_to_the_clone():
     """With advantages of zero the policy loss has no gradient, so an update with --residual-l2-coef moves
     only the correction, and towards zero (the clone's own action)."""
@@ -62,8 +87,10 @@ def test_the_l2_anchor_pulls_the_correction_back_to_the_clone():
     assert 0 < losses["residual_l2"] <= before and after < 0.9 * before
 
 
-def test_a_short_residual_run_changes_the_policy_resumes_and_evaluates(tmp_path):
-    ppo.main(residual_args(tmp_path))
+@pytest.mark.parametrize("timed", [False, True], ids=["clone's observation", "elapsed time observed"])
+def test_a_short_residual_run_changes_the_policy_resumes_and_evaluates(tmp_path, timed):
+    kw = dict(obs_elapsed_time=True, bootstrap_at_done="terminated") if timed else {}
+    ppo.main(residual_args(tmp_path, **kw))
     ckpt_path = tmp_path / "residual" / "checkpoint.pt"
     ckpt = load_checkpoint(ckpt_path)
     assert ckpt["base_args"] is not None and ckpt["progress"]["global_step"] == 80
@@ -71,9 +98,12 @@ def test_a_short_residual_run_changes_the_policy_resumes_and_evaluates(tmp_path)
     for k, v in base["agent"].items():
         assert torch.equal(ckpt["agent"][f"base.{k}"], v), f"the base stays as it was: {k}"
     assert ckpt["agent"]["residual_mean.6.weight"].abs().sum() > 0, "the correction has learnt"
-    progress = ppo.main(dataclasses.replace(residual_args(tmp_path, total_timesteps=160), resume=str(ckpt_path), extend=True))
+    assert ckpt["obs_dim"] == 43 + timed
+    progress = ppo.main(dataclasses.replace(residual_args(tmp_path, total_timesteps=160, **kw), resume=str(ckpt_path),
+                                            extend=True))
     assert progress.global_step == 160
-    agent, _ = load_policy(ckpt_path, "Flooring-v1")  # what scripts/evaluate.py loads
+    _, env_kwargs = load_policy(ckpt_path, "Flooring-v1")  # what scripts/evaluate.py loads
+    assert env_kwargs.get("obs_elapsed_time", False) == timed
     result = evaluation.main(evaluation.Args(checkpoint=ckpt_path, env_id="Flooring-v1", episodes=2, workers=1))
     assert result["Flooring-v1"]["episodes"] == 2
 

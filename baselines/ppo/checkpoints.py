@@ -121,14 +121,21 @@ def check_fit(ckpt: dict, path, env_id: str, obs_dim: int, act_dim: int, control
                          f"not {control_mode}: use --control-mode {ckpt['args']['control_mode']}")
 
 
-def load_policy(path, env_id: str) -> tuple[Agent, str]:
-    """The checkpoint's Agent (in eval mode) and its control mode, after checking that it fits
-    `env_id`'s state observations in that control mode."""
+def policy_env_kwargs(args: dict) -> dict:
+    """The env kwargs that a checkpoint's policy (its saved `args`) acts in, beside obs_mode="state": its control
+    mode, and the elapsed-time entry of the observation if it was trained with one."""
+    return dict(control_mode=args["control_mode"], **({"obs_elapsed_time": True} if args.get("obs_elapsed_time") else {}))
+
+
+def load_policy(path, env_id: str) -> tuple[Agent, dict]:
+    """The checkpoint's Agent (in eval mode) and the env kwargs it acts in (`policy_env_kwargs`: pass them to
+    gym.make with obs_mode="state"), after checking that it fits `env_id`'s observations there."""
     import gymnasium as gym
 
     ckpt = load_checkpoint(path)
-    control_mode = ckpt["args"]["control_mode"]
-    env = gym.make(env_id, obs_mode="state", control_mode=control_mode, num_envs=1, sim_backend="physx_cpu")
+    env_kwargs = policy_env_kwargs(ckpt["args"])
+    control_mode = env_kwargs["control_mode"]
+    env = gym.make(env_id, obs_mode="state", num_envs=1, sim_backend="physx_cpu", **env_kwargs)
     obs_dim, act_dim = env.observation_space.shape[-1], env.action_space.shape[-1]
     env.close()
     check_fit(ckpt, path, env_id, obs_dim, act_dim, control_mode)
@@ -137,7 +144,7 @@ def load_policy(path, env_id: str) -> tuple[Agent, str]:
         agent.load_state_dict(ckpt["agent"])
     except RuntimeError as e:
         raise SystemExit(f"checkpoint {path}: its weights do not fit the policy network ({e})") from None
-    return agent.eval(), control_mode
+    return agent.eval(), env_kwargs
 
 
 def average_checkpoints(paths: list, out: Path) -> dict:

@@ -36,6 +36,7 @@ from tqdm import tqdm
 from baselines.ppo.checkpoints import load_checkpoint, load_policy
 from ms_construction.curriculum import STAGE_NAMES, stage_tolerances
 from ms_construction.envs import ENV_IDS, TASK_ENV_IDS
+from ms_construction.envs.construction_env import ConstructionTaskEnv
 from ms_construction.reporting import update_section
 
 DEFAULT_CHECKPOINT = Path("assets/checkpoints/general_agent.pt")
@@ -84,6 +85,10 @@ class Args:
     sample_actions: bool = False
     """sample each action from the policy's Gaussian (seeded by the episode's seed) instead of taking its
     mean: a diagnostic of how the policy behaves as it was trained; the published protocol is the mean."""
+    max_episode_steps: Optional[int] = None
+    """a diagnostic: let episodes run up to this many steps instead of the task's limit (250), to tell late
+    arrivals from lost episodes; each task's results then also say what placed within the task's own limit
+    (`place_success_within_limit`). The published protocol keeps the limit."""
     write_results: bool = False
     """write the table (with how the agent was trained, from its checkpoint) into docs/RESULTS.md."""
 
@@ -166,16 +171,17 @@ def _episode(job: tuple) -> dict:
     from mani_skill.utils.gym_utils import find_max_episode_steps_value
     from mani_skill.vector.wrappers.gymnasium import ManiSkillVectorEnv
 
-    checkpoint, env_id, stage, seed, video_dir, sample = job
+    checkpoint, env_id, stage, seed, video_dir, sample, max_steps = job
     torch.set_num_threads(1)
-    key = (checkpoint, env_id, video_dir is not None)
+    key = (checkpoint, env_id, video_dir is not None, max_steps)
     if key not in _worker:
         for _, old in _worker.values():
             old.close()
         _worker.clear()
-        agent, control_mode = load_policy(Path(checkpoint), env_id)
-        env = gym.make(env_id, obs_mode="state", control_mode=control_mode, reward_mode="sparse", num_envs=1,
-                       sim_backend="physx_cpu", curriculum_stage=stage, render_mode="rgb_array" if video_dir else None)
+        agent, env_kwargs = load_policy(Path(checkpoint), env_id)
+        env = gym.make(env_id, obs_mode="state", reward_mode="sparse", num_envs=1, sim_backend="physx_cpu",
+                       curriculum_stage=stage, render_mode="rgb_array" if video_dir else None, **env_kwargs,
+                       **({"max_episode_steps": max_steps} if max_steps else {}))
         if video_dir:
             from mani_skill.utils.wrappers import RecordEpisode
 
@@ -213,7 +219,7 @@ def evaluate(args: Args, env_id: str, pool) -> dict:
 
     def job(i: int, video: bool) -> tuple:
         return (str(args.checkpoint), env_id, args.curriculum_stage, args.seed + i, str(args.video_dir) if video else None,
-                args.sample_actions)
+                args.sample_actions, args.max_episode_steps)
 
     for i in range(min(args.videos, target) if args.video_dir else 0):  # the recorded episodes come first
         episodes.append(pool.apply(_episode, (job(i, True),)))
@@ -229,7 +235,12 @@ def evaluate(args: Args, env_id: str, pool) -> dict:
             bar.update(min(target, progress()) - bar.n)
             bar.set_postfix(placed=f"{sum(x['placed'] for x in episodes)}/{len(episodes)}")
     bar.close()
-    return dict(env_id=env_id, **summarize(episodes), episode_results=episodes)
+    within = {}
+    if args.max_episode_steps:
+        limit = ConstructionTaskEnv.MAX_EPISODE_STEPS
+        within = dict(task_step_limit=limit, max_episode_steps=args.max_episode_steps, place_success_within_limit=sum(
+            e["placed"] and e["length"] <= limit for e in episodes) / len(episodes))
+    return dict(env_id=env_id, **summarize(episodes), **within, episode_results=episodes)
 
 
 def failures(episodes: list[dict], stage: str = "cp4") -> list[dict]:
@@ -298,6 +309,9 @@ def main(args: Args) -> dict[str, dict]:
         raise SystemExit("--episodes, --steps and --workers must be positive")
     if args.sample_actions and args.write_results:
         raise SystemExit("--sample-actions is a diagnostic: the published table (--write-results) takes the policy's mean")
+    if args.max_episode_steps is not None and (args.max_episode_steps < 1 or args.write_results or args.steps is not None):
+        raise SystemExit(f"--max-episode-steps {args.max_episode_steps}: a positive diagnostic with --episodes; the published "
+                         "table (--write-results) and the paper's protocol (--steps) keep the task's limit")
     beside = read_beside(args.beside)
     for env_id in env_ids:  # a checkpoint that does not fit fails here, before any worker starts
         load_policy(args.checkpoint, env_id)
@@ -306,6 +320,10 @@ def main(args: Args) -> dict[str, dict]:
         for env_id in env_ids:
             results[env_id] = evaluate(args, env_id, pool)
     print(table(results))
+    for env_id, r in results.items():
+        if "place_success_within_limit" in r:
+            print(f"{env_id}: placed {r['place_success_within_limit']:.1%} within the task's {r['task_step_limit']} steps, "
+                  f"{r['place_success']:.1%} within {r['max_episode_steps']}")
     if args.json:
         args.json.parent.mkdir(parents=True, exist_ok=True)
         command = "python scripts/evaluate.py " + " ".join(shlex.quote(a) for a in sys.argv[1:])

@@ -135,7 +135,8 @@ def make_agent(args, obs_dim: int, act_dim: int, base_args: Optional[dict] = Non
 
         if base_args is None:
             raise ValueError("a residual agent needs its base's args (the checkpoint's base_args)")
-        return ResidualAgent(make_agent(base_args, obs_dim, act_dim), get("hidden_size"), get("residual_scale"),
-                             value_heads=value_heads(args))
+        time_input = bool(get("obs_elapsed_time", False))  # the base was trained without the time entry
+        return ResidualAgent(make_agent(base_args, obs_dim - int(time_input), act_dim), get("hidden_size"),
+                             get("residual_scale"), value_heads=value_heads(args), time_input=time_input)
     starts = STATE_QUATERNION_STARTS if get("rotation_features", False) else ()
     return Agent(obs_dim, act_dim, get("hidden_size"), starts, value_heads(args), get("num_layers", 3))

@@ -143,12 +143,14 @@ class Args:
     """scale of the extrinsic reward."""
     eval_freq: int = 10
     """evaluate every this many iterations (and at stage ends)."""
-    bootstrap_at_done: Optional[Literal["always", "truncated", "never"]] = None
+    bootstrap_at_done: Optional[Literal["always", "truncated", "terminated", "never"]] = None
     """which episode ends bootstrap with the value of their last observation. `truncated`: episodes cut
     by the time limit (they did not end there); success is an end with nothing after it. `always`
     (ManiSkill's PPO default, its name): every end, success included, so that a success state counts
     as one that keeps paying what it paid; the dense rewards are made for it (see the task card).
-    `never`: no end. Default: `always` with the dense rewards, `truncated` with sparse (ML-Agents',
+    `terminated`: success only; the time limit is an end like any other, which only a policy that sees
+    the time (--obs-elapsed-time) can value right: an episode cut short of its goal loses what placing
+    would have paid. `never`: no end. Default: `always` with the dense rewards, `truncated` with sparse (ML-Agents',
     which bootstraps interrupted episodes only)."""
     hidden_size: int = 256
     """width of the policy and value networks."""
@@ -194,6 +196,10 @@ class Args:
     training episodes start from; evaluation always resets as usual. physx_cpu only."""
     start_states_share: float = 0.5
     """the share of training episodes that start from the bank."""
+    obs_elapsed_time: bool = False
+    """append the episode's elapsed steps / 250 to the observation (the tasks' `obs_elapsed_time`), in training
+    and evaluation: a policy that knows how much of the step limit is left can hurry. A residual's base (trained
+    without it) does not see it."""
     task_weights: Optional[tuple[float, float, float]] = None
     """the general task's sampling weights of ceiling, window and flooring in the training envs (None: uniform;
     `1 2 1`: window installation half the episodes); evaluation always samples uniformly."""
@@ -238,6 +244,8 @@ def make_envs(args: Args, num_envs: int, device: torch.device, eval_mode: bool =
     physx_cpu (one env each), ManiSkillVectorEnv on physx_cuda. With `video_dir`, evaluation videos."""
     kwargs = dict(obs_mode="state", control_mode=args.control_mode, reward_mode=args.reward_mode,
                   render_mode="rgb_array" if video_dir else None)
+    if args.obs_elapsed_time:
+        kwargs["obs_elapsed_time"] = True
     if args.task_weights is not None and not eval_mode:
         kwargs["task_weights"] = dict(zip(ELEMENT_KINDS, args.task_weights))
     if args.sim_backend == "physx_cpu":
@@ -419,7 +427,8 @@ def setup(args: Args) -> Run:
     if resume is not None or init is not None:
         base_args = (resume or init).get("base_args")
     elif args.residual_of:
-        base = load_checkpoint(args.residual_of, "--residual-of", args.env_id, obs_dim, act_dim, args.control_mode)
+        base = load_checkpoint(args.residual_of, "--residual-of", args.env_id, obs_dim - int(args.obs_elapsed_time), act_dim,
+                               args.control_mode)
         base_args = base["args"]
     else:
         base_args = None

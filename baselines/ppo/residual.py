@@ -6,6 +6,11 @@ normalizes it (its rotation features and frozen statistics), and its standard de
 `scale * exp(log_std)`. The residual's output layer starts at zero, so before any update the policy's
 deterministic action is exactly the clone's; the critic sees the same inputs. To PPO it is an Agent
 like any other (same methods), so rollouts, updates, checkpoints and evaluation do not change.
+
+With `time_input` the observation ends with the episode's elapsed time (the tasks' `obs_elapsed_time`):
+the residual and the critic see it, the base (trained without it) sees the observation without it. A
+correction that knows how much of the step limit is left can hurry a late episode, and a critic that
+knows it can value an episode the limit will cut (ppo.py's `--bootstrap-at-done terminated`).
 """
 
 from __future__ import annotations
@@ -27,14 +32,16 @@ class ResidualAgent(nn.Module):
             outputs and noise live on the scale of the other networks'.
         init_log_std: the correction's log standard deviation before scaling, at the start.
         value_heads: the critic's outputs (one per reward signal).
+        time_input: the observation's last entry is the elapsed time, for the residual and the critic only.
     """
 
-    def __init__(self, base: Agent, hidden: int, scale: float = 0.1, init_log_std: float = -0.5, value_heads: int = 1):
+    def __init__(self, base: Agent, hidden: int, scale: float = 0.1, init_log_std: float = -0.5, value_heads: int = 1,
+                 time_input: bool = False):
         super().__init__()
         self.base = base.requires_grad_(False)
         act_dim = base.actor_logstd.shape[-1]
-        in_dim = base.obs_rms.mean.shape[0] + act_dim
-        self.scale = scale
+        in_dim = base.obs_rms.mean.shape[0] + act_dim + int(time_input)
+        self.scale, self.time_input = scale, time_input
         self.residual_mean = mlp(in_dim, act_dim, hidden)
         nn.init.zeros_(self.residual_mean[-1].weight)
         nn.init.zeros_(self.residual_mean[-1].bias)
@@ -46,13 +53,13 @@ class ResidualAgent(nn.Module):
         return self.base.obs_rms
 
     def features(self, x):
-        return self.base.features(x)
+        return self.base.features(x[..., :-1] if self.time_input else x)
 
     def _inputs_and_mean(self, x):
         with torch.no_grad():
-            z = self.base.normalize(x)
+            z = self.base.normalize(x[..., :-1] if self.time_input else x)
             base_action = self.base.actor_mean(z)
-        inputs = torch.cat([z, base_action], -1)
+        inputs = torch.cat([z, base_action, x[..., -1:]] if self.time_input else [z, base_action], -1)
         return inputs, base_action + self.scale * self.residual_mean(inputs)
 
     def _std(self, mean):

@@ -46,9 +46,9 @@ def _failure_states(job: tuple) -> dict:
     checkpoint, env_id, seed, offsets = job
     torch.set_num_threads(1)
     if "env" not in _worker:
-        agent, control_mode = load_policy(Path(checkpoint), env_id)
-        _worker.update(agent=agent, env=gym.make(env_id, obs_mode="state", control_mode=control_mode,
-                                                   reward_mode="sparse", num_envs=1, sim_backend="physx_cpu"))
+        agent, env_kwargs = load_policy(Path(checkpoint), env_id)
+        _worker.update(agent=agent, env=gym.make(env_id, obs_mode="state", reward_mode="sparse", num_envs=1,
+                                                   sim_backend="physx_cpu", **env_kwargs))
     agent, env = _worker["agent"], _worker["env"]
     obs, _ = env.reset(seed=seed)
     actions, dists = [], []

@@ -17,7 +17,8 @@ from baselines.ppo.networks import Agent
 
 def bootstrap_mask(terminated: torch.Tensor, truncated: torch.Tensor, bootstrap_at_done: str) -> torch.Tensor:
     """1 where an episode ended ([steps, envs]) and bootstraps with the value of its last observation."""
-    ends = {"always": terminated + truncated, "truncated": truncated, "never": torch.zeros_like(truncated)}
+    ends = {"always": terminated + truncated, "truncated": truncated, "terminated": terminated,
+            "never": torch.zeros_like(truncated)}
     return ends[bootstrap_at_done].clamp(max=1)
 
 

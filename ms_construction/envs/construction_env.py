@@ -96,6 +96,7 @@ class ConstructionTaskEnv(BaseEnv):
         tolerances: Optional[dict] = None,
         tasks: Optional[Sequence[str]] = None,
         task_weights: Optional[Mapping[str, float]] = None,
+        obs_elapsed_time: bool = False,
         **kwargs,
     ):
         self._tol_init = resolve_tolerances(curriculum_stage, tolerances)
@@ -109,6 +110,7 @@ class ConstructionTaskEnv(BaseEnv):
                 raise ValueError(f"tasks={tasks!r}: give distinct task types from {ELEMENT_KINDS}")
             self.TASKS = tuple(t for t in ELEMENT_KINDS if t in tasks)
         self._task_weights = self._check_task_weights(task_weights)
+        self.obs_elapsed_time = bool(obs_elapsed_time)
         self.robot_init_qpos_noise = robot_init_qpos_noise
         self._step_grasp_frame, self._in_step_readout = None, False
         kwargs.setdefault("render_backend", default_render_backend())
@@ -409,6 +411,8 @@ class ConstructionTaskEnv(BaseEnv):
                 tcp_to_grasp_pos=self._grasp_frame()[:, :3] - tcp[:, :3],
                 obj_to_goal_pos=goal[:, :3] - el[:, :3],
             )
+        if self.obs_elapsed_time:  # last, so that a policy without it reads the rest unchanged
+            obs["elapsed"] = (self.elapsed_steps.float() / self.MAX_EPISODE_STEPS)[:, None]
         return obs
 
     def compute_sparse_reward(self, obs: Any, action: torch.Tensor, info: dict):

@@ -49,6 +49,10 @@ the dense rewards are for a learner that bootstraps at every episode end, succes
 (ManiSkill's PPO `bootstrap_at_done="always"`, ppo.py's default for them), so that a placed element
 counts as a state that keeps paying the most; a learner that values success as an end with nothing
 after it finds holding the element near its goal worth more than placing it.
+
+**Observation:** `obs_elapsed_time=True` appends the episode's elapsed steps / {_STEPS} (the step limit) as
+the last entry (`extra/elapsed`): the limit is part of the task (success counts within it), and a policy
+that knows how much of it is left can hurry (Pardo et al. 2018, time limits in RL). Off by default.
 """
 
 

@@ -159,7 +159,7 @@ class DemoCollector:
 
 
 PolicyLoader = Callable[[Path, str], tuple]
-"""(checkpoint path, env id) -> (policy with get_action(obs, deterministic), its control mode)."""
+"""(checkpoint path, env id) -> (policy with get_action(obs, deterministic), the env kwargs it acts in)."""
 _collector, _policy = None, None
 
 
@@ -176,7 +176,10 @@ def _collect(job: tuple[str, str, int, float, Optional[str], Optional[PolicyLoad
         demos, policy_steps = [_collector.collect(seed, noise)], 0
     else:
         if _policy is None:
-            _policy, _ = load_policy(Path(policy_path), env_id)
+            _policy, env_kwargs = load_policy(Path(policy_path), env_id)
+            if env_kwargs.get("obs_elapsed_time"):
+                raise ValueError(f"{policy_path}: takeovers record the expert's observations, which have no elapsed-time "
+                                 "entry; give a policy trained without --obs-elapsed-time (a behaviour clone)")
         demos, policy_steps = _collector.takeovers(seed, noise, _policy)
     return [dict(obs=d.obs, actions=d.actions, rewards=d.rewards, placed=d.placed, task=d.task, seed=d.seed,
                  noise=d.noise) for d in demos if d.placed], policy_steps
