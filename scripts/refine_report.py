@@ -32,7 +32,7 @@ from ms_construction.reporting import update_section  # noqa: E402
 
 SETTINGS = ("learning_rate", "gamma", "start_states_share", "residual_scale", "residual_l2_coef", "num_envs", "num_steps",
             "critic_warmup_iterations", "bootstrap_at_done", "target_kl", "reward_mode", "reward_scale",
-            "task_weights", "obs_elapsed_time")
+            "task_weights", "obs_elapsed_time", "start_states_keep_clock")
 TASKS = {"CeilingInstallation-v1": "ceiling", "WindowInstallation-v1": "window", "Flooring-v1": "flooring"}
 
 
@@ -71,7 +71,10 @@ def summarize(run: Path) -> dict:
             validations[int(which)] = validation_summary(path)
     if clone is None:
         raise SystemExit(f"{run}: no validation of the clone (val<episodes>_clone.json); run refine.py there first")
-    summary = dict(run=run.name, settings={k: saved.get(k) for k in SETTINGS}, ppo_steps=int(ckpt["progress"]["global_step"]),
+    settings = {k: saved.get(k) for k in SETTINGS}
+    if (run / "failure_states.pt").exists():
+        settings["bank_offsets"] = list(torch.load(run / "failure_states.pt", map_location="cpu", weights_only=False)["offsets"])
+    summary = dict(run=run.name, settings=settings, ppo_steps=int(ckpt["progress"]["global_step"]),
                    clone=clone, validations={str(k): v for k, v in sorted(validations.items())})
     # refine.py's confirmation: the best snapshot and the clone again, on fresh seeds (confirm<episodes>_<which>.json)
     confirmed = {path.stem.split("_", 1)[1]: validation_summary(path) for path in sorted(run.glob("confirm*_*.json"))}
@@ -111,7 +114,9 @@ def report(runs: list[dict]) -> str:
                    + (f", L2 anchor {s['residual_l2_coef']:g}" if s.get("residual_l2_coef") else "")
                    + (f", bootstrap-at-done {s['bootstrap_at_done']}" if s.get("bootstrap_at_done", "truncated") != "truncated" else "")
                    + (", task weights " + "/".join(f"{w:g}" for w in s["task_weights"]) if s.get("task_weights") else "")
-                   + (", elapsed time observed" if s.get("obs_elapsed_time") else ""))
+                   + (", elapsed time observed" if s.get("obs_elapsed_time") else "")
+                   + (", bank at " + "/".join(map(str, s["bank_offsets"])) + " steps" if s.get("bank_offsets", [-30, -10]) != [-30, -10] else "")
+                   + (", bank keeps its clock" if s.get("start_states_keep_clock") else ""))
         rows = [("the clone", r["clone"])] + [(f"{int(k):,}", v) for k, v in r["validations"].items()]
         for i, (steps, v) in enumerate(rows):
             cells = " | ".join(f"{pct(v[e]['place_success'])} [{pct(v[e]['ci95'][0])}, {pct(v[e]['ci95'][1])}]"

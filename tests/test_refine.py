@@ -51,7 +51,7 @@ def stand_ins(tmp_path, monkeypatch):
     monkeypatch.setattr(refine, "ship", lambda args, ckpt, *a: shipped.write_bytes(Path(ckpt).read_bytes()))
     run_dir = tmp_path / "run"
     run_dir.mkdir()
-    torch.save(dict(states=[{}]), run_dir / "failure_states.pt")  # the bank exists: not collected again
+    torch.save(dict(states=[{}], offsets=[-30, -10]), run_dir / "failure_states.pt")  # the bank exists: not collected again
     args = refine.Args(clone=tmp_path / "clone.pt", run_dir=run_dir, total_timesteps=300, validate_every=100)
     return args, runs, val_table, confirm_table, shipped
 
@@ -191,6 +191,22 @@ def test_the_elapsed_time_reaches_ppo_and_labels_the_run(tmp_path):
     (tmp_path / "timed.json").write_text(json.dumps(timed))
     body = refine_report.main(refine_report.Args(runs=(tmp_path / "timed.json",), out=tmp_path / "refine.png"))
     assert ", bootstrap-at-done terminated, elapsed time observed |" in body
+
+
+def test_a_bank_that_keeps_its_clock_reaches_ppo_and_one_of_other_offsets_is_refused(stand_ins):
+    args, runs, *_ = stand_ins
+    run = refine.ppo_args(dataclasses.replace(args, bank_keeps_clock=True), args.run_dir / "failure_states.pt")
+    assert run.start_states_keep_clock
+    with pytest.raises(SystemExit, match="other offsets"):
+        refine.main(dataclasses.replace(args, bank_offsets=(-90, -50, -20)))
+    with pytest.raises(SystemExit, match="without elapsed steps"):  # the stand-in bank predates them
+        refine.main(dataclasses.replace(args, bank_keeps_clock=True))
+    assert runs == [], "nothing trained on a bank the run did not ask for"
+    clocked = summary("clocked", {100_000: (0.97, 0.95, 0.99)})
+    clocked["settings"].update(start_states_keep_clock=True, bank_offsets=[-90, -50, -20])
+    (args.run_dir / "clocked.json").write_text(json.dumps(clocked))
+    body = refine_report.main(refine_report.Args(runs=(args.run_dir / "clocked.json",), out=args.run_dir / "refine.png"))
+    assert ", bank at -90/-50/-20 steps, bank keeps its clock |" in body
 
 
 def test_failure_kinds_follow_the_stage_tolerances():

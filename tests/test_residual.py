@@ -11,6 +11,7 @@ import torch
 from baselines.ppo import evaluation, ppo, update
 from baselines.ppo.checkpoints import load_checkpoint, load_policy
 from baselines.ppo.networks import make_agent
+from baselines.ppo import start_states
 from baselines.ppo.start_states import StartFromStates
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -124,6 +125,55 @@ def test_a_share_of_resets_start_from_the_bank(tmp_path):
     never = StartFromStates(env, str(bank), share=0.0)
     never.reset(seed=3)
     assert not torch.allclose(env.unwrapped.obj.pose.p, marker, atol=1e-3), "an ordinary reset"
+    env.close()
+
+
+def test_a_bank_episode_keeps_the_clock_of_its_state_when_asked(tmp_path):
+    """Most failed windows run out of time: restarted with the whole step limit they would not (start_states.py)."""
+    env = gym.make("Flooring-v1", obs_mode="state", num_envs=1, sim_backend="physx_cpu", obs_elapsed_time=True)
+    env.reset(seed=3)
+    state = env.unwrapped.get_state_dict()
+    bank = tmp_path / "bank.pt"
+    torch.save(dict(states=[state], elapsed=[248]), bank)
+    obs, _ = StartFromStates(env, str(bank), share=1.0, keep_clock=True).reset(seed=0)
+    assert int(env.unwrapped.elapsed_steps[0]) == 248 and obs[0, -1].item() == pytest.approx(248 / 250)
+    truncated = [bool(env.step(torch.zeros(1, 6))[3][0]) for _ in range(2)]
+    assert truncated == [False, True], "the step limit counts on from the state's own step"
+    StartFromStates(env, str(bank), share=1.0).reset(seed=0)
+    assert int(env.unwrapped.elapsed_steps[0]) == 0, "by default a bank episode has the whole limit"
+    torch.save(dict(states=[state]), bank)
+    with pytest.raises(ValueError, match="no elapsed steps"):
+        StartFromStates(env, str(bank), share=1.0, keep_clock=True)
+    env.close()
+
+
+class _TurnBase:
+    """A policy that only turns the arm's base joint, so never places, and whose every step leaves another arm state."""
+
+    def get_action(self, obs, deterministic=True):
+        return torch.tensor([[0.5, 0, 0, 0, 0, 0]]).expand(obs.shape[0], 6)
+
+
+def test_a_failed_episode_s_states_are_banked_with_the_steps_they_were_taken_at(monkeypatch):
+    env = gym.make("Flooring-v1", obs_mode="state", reward_mode="sparse", num_envs=1, sim_backend="physx_cpu")
+    # the distances after actions 0..4 were closest after action 3, in the state at step 4
+    assert start_states.steps_before_closest([5, 4, 3, 1, 2], (-2, 0)) == [2, 4]
+    assert start_states.steps_before_closest([5, 4, 3, 1, 2], (-30, -10)) == [0]
+    monkeypatch.setattr(start_states, "_worker", dict(agent=_TurnBase(), env=env))
+    # the element never moves here, so its closest approach is noise: ask for two steps apart instead
+    monkeypatch.setattr(start_states, "steps_before_closest", lambda dists, offsets: [37, 120])
+    result = start_states._failure_states(("unused.pt", "Flooring-v1", 11, (-30, -10)))
+    assert not result["placed"] and result["elapsed"] == [37, 120] and len(result["states"]) == 2
+    obs, _ = env.reset(seed=11)  # the same episode again: the arm after t actions is the banked state at t
+    arms = [env.unwrapped.get_state_dict()["articulations"]]
+    for _ in range(max(result["elapsed"])):
+        env.step(_TurnBase().get_action(obs))
+        arms.append(env.unwrapped.get_state_dict()["articulations"])
+    for state, t in zip(result["states"], result["elapsed"]):
+        for name, arm in state["articulations"].items():
+            assert torch.allclose(arm, arms[t][name], atol=1e-5), f"the state banked as step {t} is the arm after {t} actions"
+    with pytest.raises(ValueError, match="offsets"):
+        start_states.collect_failure_states(Path("unused.pt"), 1, offsets=(10,))
     env.close()
 
 

@@ -196,6 +196,10 @@ class Args:
     training episodes start from; evaluation always resets as usual. physx_cpu only."""
     start_states_share: float = 0.5
     """the share of training episodes that start from the bank."""
+    start_states_keep_clock: bool = False
+    """an episode started from the bank goes on from the elapsed steps its state was taken at (a failure that ran
+    out of time stays one) instead of getting the whole step limit again; the bank must hold them (a bank of
+    start_states.py collected since it keeps them)."""
     obs_elapsed_time: bool = False
     """append the episode's elapsed steps / 250 to the observation (the tasks' `obs_elapsed_time`), in training
     and evaluation: a policy that knows how much of the step limit is left can hurry. A residual's base (trained
@@ -251,7 +255,8 @@ def make_envs(args: Args, num_envs: int, device: torch.device, eval_mode: bool =
     if args.sim_backend == "physx_cpu":
         wrappers = ()
         if args.start_states and not eval_mode:
-            wrappers = (functools.partial(StartFromStates, bank=args.start_states, share=args.start_states_share),)
+            wrappers = (functools.partial(StartFromStates, bank=args.start_states, share=args.start_states_share,
+                                          keep_clock=args.start_states_keep_clock),)
         return CPUVectorEnv(args.env_id, num_envs, kwargs, device=device, video_dir=video_dir, wrappers=wrappers)
     env = gym.make(args.env_id, num_envs=num_envs, sim_backend=args.sim_backend, **kwargs)
     if video_dir is not None:
@@ -321,6 +326,8 @@ def validate(args: Args) -> None:
                          "of the general task ConstructionPickPlace-v1 only")
     if not 0 <= args.start_states_share <= 1:
         raise SystemExit(f"--start-states-share must lie in [0, 1], got {args.start_states_share}")
+    if args.start_states_keep_clock and not args.start_states:
+        raise SystemExit("--start-states-keep-clock: give the bank (--start-states)")
     if args.start_states and args.sim_backend == "physx_cuda":
         raise SystemExit("--start-states: physx_cpu only (the bank is restored in the env worker processes)")
     missing = [p for p in args.demos if not Path(p).is_file()]

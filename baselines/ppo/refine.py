@@ -58,6 +58,12 @@ class Args:
     """where the steps write."""
     bank_episodes: int = 1500
     """the clone's episodes on training seeds whose failures fill the bank."""
+    bank_offsets: tuple[int, ...] = (-30, -10)
+    """steps before the element's closest approach to its goal at which a failed episode's states go into the bank."""
+    bank_keeps_clock: bool = False
+    """an episode started from the bank goes on from its state's elapsed steps (ppo.py's --start-states-keep-clock)
+    instead of getting the whole step limit again: most of the clone's failed windows run out of time, and with the
+    whole limit a bank episode never does (earlier --bank-offsets leave it the time to hurry)."""
     total_timesteps: int = 300_000
     """env steps of PPO (the issue's budget for the RL stage: 2M)."""
     num_envs: int = 4
@@ -118,7 +124,7 @@ class Args:
 def ppo_args(args: Args, bank: Path) -> ppo.Args:
     return ppo.Args(
         residual_of=str(args.clone), residual_scale=args.residual_scale, residual_l2_coef=args.residual_l2_coef, start_states=str(bank),
-        start_states_share=args.start_states_share, task_weights=args.task_weights, env_id="ConstructionPickPlace-v1", reward_mode=args.reward_mode,
+        start_states_share=args.start_states_share, start_states_keep_clock=args.bank_keeps_clock, task_weights=args.task_weights, env_id="ConstructionPickPlace-v1", reward_mode=args.reward_mode,
         curiosity="none", curriculum=("cp4",), total_timesteps=args.total_timesteps, num_envs=args.num_envs,
         num_steps=args.num_steps, num_minibatches=args.num_minibatches, update_epochs=args.update_epochs,
         learning_rate=args.learning_rate, gamma=args.gamma, reward_scale=args.reward_scale,
@@ -141,8 +147,13 @@ def main(args: Args) -> Path:
 
     bank = args.run_dir / "failure_states.pt"
     if not bank.exists():
-        result = timed("bank", lambda: collect_failure_states(args.clone, args.bank_episodes))
+        result = timed("bank", lambda: collect_failure_states(args.clone, args.bank_episodes, offsets=args.bank_offsets))
         torch.save(result, bank)
+    saved = torch.load(bank, map_location="cpu", weights_only=False)
+    if tuple(saved["offsets"]) != tuple(args.bank_offsets) or (args.bank_keeps_clock and "elapsed" not in saved):
+        raise SystemExit(f"{bank}: a bank of other offsets {tuple(saved['offsets'])}"
+                         + (" or without elapsed steps" if args.bank_keeps_clock else "")
+                         + f" than this run asks for ({tuple(args.bank_offsets)}): use another --run-dir, or delete it")
     ckpt = args.run_dir / "ppo" / "checkpoint.pt"
     run = ppo_args(args, bank)
     n = args.validation_episodes

@@ -6,8 +6,10 @@ the same way. `collect_failure_states` runs the policy deterministically on trai
 an episode does not place, keeps the env states a few steps before the element came closest to its
 goal (where the policy went wrong, as the expert takeovers of ms_construction/planning/demos.py
 choose them). `StartFromStates` (a worker-side wrapper, see CPUVectorEnv's `wrappers`) resets a share
-of episodes into a state drawn from that bank; the episode then has its whole time limit. Evaluation
-never uses it.
+of episodes into a state drawn from that bank. An env state does not hold the episode's clock (ManiSkill's
+elapsed steps), so by default the episode then has its whole time limit again; with `keep_clock` it goes
+on from the step the state was taken at, so that a failure that was a late arrival stays one (most failed
+windows are: docs/RESULTS.md). Evaluation never uses it.
 
     python -m baselines.ppo.start_states --checkpoint assets/checkpoints/general_agent_clone.pt --episodes 1500 \\
         --out runs/failure_states.pt
@@ -60,24 +62,33 @@ def _failure_states(job: tuple) -> dict:
         if bool(terminated[0]) or bool(truncated[0]):
             break
     placed, task_id = bool(info["success"][0]), int(info["task_id"][0])
-    kept = []
+    kept, elapsed = [], []
     if not placed:
-        closest = int(np.argmin(dists))
-        wanted = sorted({max(0, closest + k) for k in offsets})
+        wanted = steps_before_closest(dists, offsets)
         env.reset(seed=seed)
         for t in range(wanted[-1] + 1):  # the state at step t is the one after t actions
             if t in wanted:
                 kept.append(_to_cpu(env.unwrapped.get_state_dict()))
+                elapsed.append(t)
             if t < wanted[-1]:
                 env.step(actions[t])
-    return dict(seed=seed, task_id=task_id, placed=placed, states=kept)
+    return dict(seed=seed, task_id=task_id, placed=placed, states=kept, elapsed=elapsed)
+
+
+def steps_before_closest(dists: list[float], offsets: tuple[int, ...]) -> list[int]:
+    """The steps (actions taken) `offsets` before the one after which the element was closest to its goal."""
+    closest = int(np.argmin(dists)) + 1  # dists[i] is measured after action i, in the state at step i + 1
+    return sorted({max(0, closest + k) for k in offsets})
 
 
 def collect_failure_states(checkpoint: Path, episodes: int, env_id: str = "ConstructionPickPlace-v1",
                            seed: int = FIRST_SEED, offsets: tuple[int, ...] = (-30, -10), workers: int = 2) -> dict:
-    """The bank: states of the failed episodes among `episodes` (see `_failure_states`), with counts."""
+    """The bank: states of the failed episodes among `episodes` (see `_failure_states`), each with the
+    episode's elapsed steps when it was taken, and counts."""
+    if not offsets or max(offsets) > 0:
+        raise ValueError(f"offsets {offsets}: steps at or before (<= 0) the closest approach, at least one")
     jobs = [(str(checkpoint), env_id, seed + i, offsets) for i in range(episodes)]
-    bank, failed, per_task = [], 0, np.zeros((3, 2), dtype=int)  # per task: episodes, failures
+    bank, elapsed, failed, per_task = [], [], 0, np.zeros((3, 2), dtype=int)  # per task: episodes, failures
     with mp.get_context("spawn").Pool(workers) as pool:
         bar = tqdm(pool.imap(_failure_states, jobs), total=episodes, desc="failure states", unit="ep")
         for r in bar:
@@ -86,24 +97,30 @@ def collect_failure_states(checkpoint: Path, episodes: int, env_id: str = "Const
                 failed += 1
                 per_task[r["task_id"], 1] += 1
                 bank += r["states"]
+                elapsed += r["elapsed"]
             bar.set_postfix(failed=failed)
-    return dict(states=bank, env_id=env_id, checkpoint=str(checkpoint), episodes=episodes, failed=failed,
+    return dict(states=bank, elapsed=elapsed, env_id=env_id, checkpoint=str(checkpoint), episodes=episodes, failed=failed,
                 per_task=per_task.tolist(), offsets=list(offsets), first_seed=seed)
 
 
 class StartFromStates(gym.Wrapper):
-    """Resets a share of episodes into a state drawn from a bank (`collect_failure_states`'s file).
+    """Resets a share of episodes into a state drawn from a bank (`collect_failure_states`'s file);
+    with `keep_clock` the episode's elapsed steps are those of the state's own episode, not 0.
     Wraps a ManiSkill env of one env (physx_cpu); picklable as `functools.partial(StartFromStates,
     bank=..., share=...)` for CPUVectorEnv's workers."""
 
-    def __init__(self, env: gym.Env, bank: str, share: float):
+    def __init__(self, env: gym.Env, bank: str, share: float, keep_clock: bool = False):
         super().__init__(env)
         if not 0 <= share <= 1:
             raise ValueError(f"share of episodes started from the bank must lie in [0, 1], got {share}")
-        self.states = torch.load(bank, map_location="cpu", weights_only=False)["states"]
+        saved = torch.load(bank, map_location="cpu", weights_only=False)
+        self.states, self.elapsed = saved["states"], saved.get("elapsed")
         if not self.states:
             raise ValueError(f"{bank}: the bank holds no states")
-        self.share, self.rng = share, np.random.default_rng()
+        if keep_clock and (self.elapsed is None or len(self.elapsed) != len(self.states)):
+            raise ValueError(f"{bank}: the bank holds no elapsed steps for its states (collected before banks kept "
+                             "them): collect it again to keep the clock")
+        self.share, self.keep_clock, self.rng = share, keep_clock, np.random.default_rng()
 
     def reset(self, **kwargs):
         if kwargs.get("seed") is not None:  # a seeded reset (each worker its own seed) seeds the draws too
@@ -111,8 +128,10 @@ class StartFromStates(gym.Wrapper):
         obs, info = self.env.reset(**kwargs)
         if self.rng.random() >= self.share:
             return obs, info
-        u = self.env.unwrapped
-        u.set_state_dict(self.states[self.rng.integers(len(self.states))])
+        u, i = self.env.unwrapped, self.rng.integers(len(self.states))
+        u.set_state_dict(self.states[i])
+        if self.keep_clock:  # the tensor ManiSkill's step limit and the tasks' obs_elapsed_time read
+            u.elapsed_steps.fill_(int(self.elapsed[i]))
         return u.get_obs(), u.get_info()
 
 
@@ -124,6 +143,8 @@ class Args:
     """where the bank goes (torch file)."""
     episodes: int = 1500
     """deterministic episodes of the policy on training seeds."""
+    offsets: tuple[int, ...] = (-30, -10)
+    """steps before (negative) the element's closest approach to its goal at which a failed episode's states are kept."""
     env_id: str = "ConstructionPickPlace-v1"
     seed: int = FIRST_SEED
     workers: int = 2
@@ -131,7 +152,7 @@ class Args:
 
 if __name__ == "__main__":
     a = tyro.cli(Args)
-    result = collect_failure_states(a.checkpoint, a.episodes, a.env_id, a.seed, workers=a.workers)
+    result = collect_failure_states(a.checkpoint, a.episodes, a.env_id, a.seed, a.offsets, a.workers)
     a.out.parent.mkdir(parents=True, exist_ok=True)
     torch.save(result, a.out)
     print(f"{result['failed']} of {a.episodes} episodes failed (per task [episodes, failures]: {result['per_task']}); "
