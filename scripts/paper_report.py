@@ -87,6 +87,7 @@ HEADER = ("training episodes | picked % | placed % | extrinsic return | intrinsi
 def report(campaign_dir: Path) -> tuple[str, dict[str, Path]]:
     """The tables (markdown) and the progress.csv of each run that has one."""
     plans = {r.name: r for r in general_runs() + control_group_runs()}
+    continued = {r.name: r for r in control_group_runs(4 * STAGE_STEPS)}  # a control group past 2M is on its way to 8M
     csvs = {name: campaign_dir / name / "progress.csv" for name in plans if (campaign_dir / name / "progress.csv").is_file()}
     lines = [f"| run | what | env steps done / planned | stage now | lately: env steps | {HEADER} |",
              "|---|---|---|---|---|" + "---|" * 8]
@@ -96,6 +97,8 @@ def report(campaign_dir: Path) -> tuple[str, dict[str, Path]]:
             continue
         rows = read_rows(csvs[name])
         done = int(rows[-1]["global_step"])
+        if done > run.args.total_timesteps and name in continued:
+            run = continued[name]
         late = [r for r in rows if int(r["global_step"]) > done - LAST]
         before = [r for r in rows if int(r["global_step"]) <= done - LAST]
         window = done - (int(before[-1]["global_step"]) if before else 0)

@@ -126,6 +126,15 @@ def test_the_campaign_report_summarizes_each_run_and_stage_and_draws_figure_3_an
             w.writerow(dict(global_step=10_000 * i, iteration=i, stage="cp1", episodes=40, pick_success=0.25,
                             place_success=0.0, extrinsic_return=-0.5, end_place_dist=1.5, end_place_angle_deg=40.0,
                             held_at_end=0.25))
+    flooring = tmp_path / "campaign" / "control_flooring"
+    flooring.mkdir()
+    with open(flooring / "progress.csv", "w", newline="") as f:  # a control group past its 2M point, on to 8M
+        w = csv.DictWriter(f, fieldnames=CSV_FIELDS)
+        w.writeheader()
+        for i in range(1, 211):
+            w.writerow(dict(global_step=10_000 * i, iteration=i, stage="cp4", episodes=40, pick_success=1.0,
+                            place_success=0.0, extrinsic_return=0.0, end_place_dist=2.0, end_place_angle_deg=60.0,
+                            held_at_end=1.0))
     results = tmp_path / "RESULTS.md"
     res = subprocess.run([sys.executable, str(ROOT / "scripts/paper_report.py"), "--campaign-dir", str(tmp_path / "campaign"),
                           "--write-results", "--results", str(results), "--images", str(tmp_path / "images"),
@@ -137,6 +146,9 @@ def test_the_campaign_report_summarizes_each_run_and_stage_and_draws_figure_3_an
     assert "| paper_general_agent | cp1 | 0-2,000,000 | 8,000 | 50.0 | 0.0 |" in text
     assert "| paper_general_agent | cp2 | 2,000,000-4,000,000 | 8,000 | 50.0 | 25.0 |" in text
     assert "| control_ceiling | controlGroup4.1" in text and "not started" in text
+    assert "| control_flooring | controlGroup4.3: Flooring-v1, cp4 from the first step | 2,100,000 / 8,000,000 | cp4 |" in text
+    assert "| control_flooring | cp4 | 2,000,000-2,100,000 | 400 | 100.0 | 0.0 |" in text
+    assert (tmp_path / "images" / "paper_fig4.png").stat().st_size > 0
     assert (tmp_path / "images" / "paper_fig3.png").stat().st_size > 0
     assert "| paper_cp1_no_curiosity | run 1's cp1 stage without curiosity" in text and "1,000,000 / 2,000,000 | cp1 |" in text
     assert "| paper_cp1_no_curiosity | cp1 | 0-1,000,000 | 4,000 | 25.0 | 0.0 |" in text
