@@ -32,7 +32,8 @@ from ms_construction.reporting import update_section  # noqa: E402
 
 SETTINGS = ("learning_rate", "gamma", "start_states_share", "residual_scale", "residual_l2_coef", "num_envs", "num_steps",
             "critic_warmup_iterations", "bootstrap_at_done", "target_kl", "reward_mode", "reward_scale",
-            "task_weights", "obs_elapsed_time", "start_states_keep_clock")
+            "task_weights", "obs_elapsed_time", "start_states_keep_clock", "residual_of")
+CLONE_NAME = "general_agent_clone.pt"
 TASKS = {"CeilingInstallation-v1": "ceiling", "WindowInstallation-v1": "window", "Flooring-v1": "flooring"}
 
 
@@ -108,7 +109,9 @@ def report(runs: list[dict]) -> str:
              "|---|---|---|" + "---|" * len(TASKS)]
     for r in runs:
         s = r["settings"]
-        setting = ((f"{s['reward_mode']} reward x {s['reward_scale']:g}, " if s.get("reward_mode", "sparse") != "sparse" else "")
+        base = Path(s.get("residual_of") or CLONE_NAME).name  # a second round refines a refined agent, not the clone
+        setting = ((f"on {base}, " if base != CLONE_NAME else "")
+                   + (f"{s['reward_mode']} reward x {s['reward_scale']:g}, " if s.get("reward_mode", "sparse") != "sparse" else "")
                    + f"lr {s['learning_rate']:g}, gamma {s['gamma']}, bank share {s['start_states_share']}, "
                    f"scale {s['residual_scale']}, {s['num_envs']} envs x {s['num_steps']}"
                    + (f", L2 anchor {s['residual_l2_coef']:g}" if s.get("residual_l2_coef") else "")
@@ -117,7 +120,7 @@ def report(runs: list[dict]) -> str:
                    + (", elapsed time observed" if s.get("obs_elapsed_time") else "")
                    + (", bank at " + "/".join(map(str, s["bank_offsets"])) + " steps" if s.get("bank_offsets", [-30, -10]) != [-30, -10] else "")
                    + (", bank keeps its clock" if s.get("start_states_keep_clock") else ""))
-        rows = [("the clone", r["clone"])] + [(f"{int(k):,}", v) for k, v in r["validations"].items()]
+        rows = [("the clone" if base == CLONE_NAME else "the base", r["clone"])] + [(f"{int(k):,}", v) for k, v in r["validations"].items()]
         for i, (steps, v) in enumerate(rows):
             cells = " | ".join(f"{pct(v[e]['place_success'])} [{pct(v[e]['ci95'][0])}, {pct(v[e]['ci95'][1])}]"
                                for e in TASKS)

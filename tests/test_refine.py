@@ -216,9 +216,10 @@ def test_failure_kinds_follow_the_stage_tolerances():
     episodes = [episode(0, False, False, 0.05, 3.0), episode(1, False, True, 0.3, 3.0), episode(2, False, True, 0.05, 45.0),
                 episode(3, True, True, 0.05, 3.0), episode(4, False, True, 0.2, 30.0)]
     failed = evaluation.failures(episodes)  # cp4: 0.10 m, 20 degrees
-    assert [(f["seed"], f["kind"]) for f in failed] == [(0, "dropped"), (1, "short"), (2, "turned"), (4, "short")]
-    assert [f["kind"] for f in evaluation.failures(episodes, "cp2")] == ["dropped", "short", "turned", "turned"]  # 0.25 m
-    assert evaluation.kinds(failed) == "2 short (0.2-0.3 m), 1 turned (45-45 deg), 1 dropped (0.05-0.05 m)"
+    assert [(f["seed"], f["kind"]) for f in failed] == [(0, "dropped"), (1, "short"), (2, "turned"), (4, "short and turned")]
+    assert [f["kind"] for f in evaluation.failures(episodes, "cp2")] == ["dropped", "short", "turned", "turned"]  # 0.25 m, 60 deg
+    assert evaluation.kinds(failed) == ("1 short (0.3-0.3 m), 1 short and turned (0.2-0.2 m, 30-30 deg), "
+                                        "1 turned (45-45 deg), 1 dropped (0.05-0.05 m)")
     assert evaluation.kinds([]) == "none"
 
 

@@ -16,6 +16,7 @@ from baselines.ppo.start_states import StartFromStates
 
 ROOT = Path(__file__).resolve().parents[1]
 CLONE = ROOT / "assets/checkpoints/general_agent_clone.pt"
+REFINED = ROOT / "assets/checkpoints/general_agent.pt"
 
 
 def residual_args(tmp_path, **kw) -> ppo.Args:
@@ -86,6 +87,41 @@ def test_the_l2_anchor_pulls_the_correction_back_to_the_clone():
     losses = update.ppo_update(agent, update.adam([p for p in agent.parameters() if p.requires_grad], lr=1e-3), batch, args)
     after = agent.correction(obs).pow(2).sum(-1).mean().item()
     assert 0 < losses["residual_l2"] <= before and after < 0.9 * before
+
+
+def test_a_second_round_residual_starts_as_the_refined_agent_and_keeps_it_frozen(tmp_path):
+    """--residual-of a refined agent (itself a residual on the clone): the corrections add up, the new one starts
+    at zero, and the checkpoint carries both bases' args so that scripts/evaluate.py loads it."""
+    refined = load_checkpoint(REFINED)
+    assert refined["base_args"] is not None, "the shipped agent is a residual on the clone"
+    torch.manual_seed(0)
+    agent = make_agent(dict(refined["args"], residual_of=str(REFINED), obs_elapsed_time=False), 43, 6,
+                       base_args={**refined["args"], "base_args": refined["base_args"]})
+    agent.base.load_state_dict(refined["agent"])
+    shipped, _ = load_policy(REFINED, "Flooring-v1")
+    obs = torch.randn(64, 43)
+    with torch.no_grad():
+        assert torch.equal(agent.get_action(obs, deterministic=True), shipped.get_action(obs, deterministic=True))
+    assert not any(p.requires_grad for p in agent.base.parameters())
+
+    ppo.main(residual_args(tmp_path, residual_of=str(REFINED)))
+    ckpt_path = tmp_path / "residual" / "checkpoint.pt"
+    ckpt = load_checkpoint(ckpt_path)
+    for k, v in refined["agent"].items():
+        assert torch.equal(ckpt["agent"][f"base.{k}"], v), f"the refined base stays as it was: {k}"
+    assert ckpt["base_args"]["base_args"].get("residual_of") is None, "the clone is the innermost base"
+    assert ckpt["agent"]["residual_mean.6.weight"].abs().sum() > 0, "the new correction has learnt"
+    result = evaluation.main(evaluation.Args(checkpoint=ckpt_path, env_id="Flooring-v1", episodes=2, workers=1))
+    assert result["Flooring-v1"]["episodes"] == 2
+
+
+def test_a_residual_that_sees_the_time_is_refused_as_a_base(tmp_path):
+    timed = load_checkpoint(REFINED)
+    timed["args"] = dict(timed["args"], obs_elapsed_time=True)
+    timed["obs_dim"] = 44
+    torch.save(timed, tmp_path / "timed.pt")
+    with pytest.raises(SystemExit, match="elapsed time cannot be another residual's base"):
+        ppo.main(residual_args(tmp_path, residual_of=str(tmp_path / "timed.pt")))
 
 
 @pytest.mark.parametrize("timed", [False, True], ids=["clone's observation", "elapsed time observed"])

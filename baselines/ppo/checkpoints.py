@@ -39,6 +39,8 @@ def upgrade_args(saved: dict) -> dict:
         args["norm_adv"] = "minibatch" if args["norm_adv"] else "none"
     if args.get("curiosity") == "icm" and "icm_gamma" not in args:
         args["curiosity"] = "icm_normalized"
+    if args.get("base_args") is not None:  # a refined agent's base that is itself a residual (ppo.py --residual-of)
+        args["base_args"] = upgrade_args(args["base_args"])
     return args
 
 

@@ -244,29 +244,36 @@ def evaluate(args: Args, env_id: str, pool) -> dict:
 
 
 def failures(episodes: list[dict], stage: str = "cp4") -> list[dict]:
-    """The failed episodes, each with its kind at the stage's tolerances (Table I; cp4: 0.10 m, 20 degrees):
-    dropped (the element not on the plate at the end), short (its centre further from the goal than the
-    tolerance) or turned (near enough, turned further than it); and its distance and angle at the end.
-    Collisions are not told apart: an element stopped by the structure ends as short or turned."""
+    """The failed episodes, each with its kind at the stage's tolerances (Table I; cp4: 0.10 m, 20 degrees)
+    and its distance and angle at the end. Kinds: dropped (the element not on the plate at the end); short
+    (further from the goal than the tolerance, turned within it: on course, late or stopped); short and turned
+    (off by both: lost on the way); turned (near enough, turned further than the tolerance).
+    Collisions are not told apart: an element stopped by the structure ends as one of the others."""
     tol = stage_tolerances(stage)
 
     def kind(e: dict) -> str:
         if not e["held_at_end"]:
             return "dropped"
-        return "short" if e["final_place_dist"] > tol["place"] else "turned"
+        short, turned = e["final_place_dist"] > tol["place"], e["final_place_angle_deg"] > tol["angle_deg"]
+        return "short and turned" if short and turned else "short" if short else "turned"
 
     return [dict(seed=e["seed"], kind=kind(e), dist=round(e["final_place_dist"], 3),
                  angle_deg=round(e["final_place_angle_deg"], 1)) for e in episodes if not e["placed"]]
 
 
 def kinds(failed: list[dict]) -> str:
-    """'8 short (0.18-1.93 m), 1 turned (25-25 deg)': per kind of `failures`, the count and the range of its error."""
+    """'8 short (0.18-1.93 m), 2 short and turned (1-2.1 m, 72-156 deg), 1 turned (25-25 deg)': per kind of
+    `failures`, the count and the range of its error."""
+    def span(of: list[dict], key: str, unit: str) -> str:
+        return f"{min(f[key] for f in of):g}-{max(f[key] for f in of):g} {unit}"
+
     parts = []
-    for kind in ("short", "turned", "dropped"):
+    for kind in ("short", "short and turned", "turned", "dropped"):
         of = [f for f in failed if f["kind"] == kind]
         if of:
-            key, unit = ("angle_deg", "deg") if kind == "turned" else ("dist", "m")
-            parts.append(f"{len(of)} {kind} ({min(f[key] for f in of):g}-{max(f[key] for f in of):g} {unit})")
+            errors = ([span(of, "dist", "m")] if kind != "turned" else []) + \
+                     ([span(of, "angle_deg", "deg")] if "turned" in kind else [])
+            parts.append(f"{len(of)} {kind} ({', '.join(errors)})")
     return ", ".join(parts) or "none"
 
 
@@ -382,8 +389,8 @@ def write_results(args: Args, results: dict[str, dict], beside: Optional[dict[st
         lines += ["Beside it, earlier agents on the same protocol (" + "; ".join(
             f"{label}: `{b['command']}`, {b['path']}" for label, b in beside.items()) + "):", "", beside_table(beside), ""]
     rows = {"this agent": results, **{label: b["tasks"] for label, b in (beside or {}).items()}}
-    lines += [f"Failures by kind ({args.curriculum_stage} tolerances: short of the goal, turned, dropped; `failures` in "
-              "baselines/ppo/evaluation.py), with the range of the distance or angle at the end:", "",
+    lines += [f"Failures by kind ({args.curriculum_stage} tolerances: short of the goal, short and turned, turned, dropped; "
+              "`failures` in baselines/ppo/evaluation.py), with the range of the distance or angle at the end:", "",
               "| agent | " + " | ".join(results) + " |", "|---|" + "---|" * len(results)]
     lines += [f"| {label} | " + " | ".join(kinds(failures(tasks[e]["episode_results"], args.curriculum_stage)) if e in tasks
                                             else "-" for e in results) + " |" for label, tasks in rows.items()]

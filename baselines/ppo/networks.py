@@ -128,7 +128,8 @@ def value_heads(args) -> int:
 
 def make_agent(args, obs_dim: int, act_dim: int, base_args: Optional[dict] = None) -> nn.Module:
     """The Agent that `args` (ppo.py's Args or a checkpoint's saved dict of them) describes; with
-    `residual_of`, a ResidualAgent on a base that `base_args` (the base checkpoint's args) describes."""
+    `residual_of`, a ResidualAgent on a base that `base_args` (the base checkpoint's args) describes; a base that is
+    itself a residual carries its own base's args under `base_args["base_args"]`."""
     get = args.get if isinstance(args, dict) else lambda k, d=None: getattr(args, k, d)
     if get("residual_of"):
         from baselines.ppo.residual import ResidualAgent
@@ -136,7 +137,8 @@ def make_agent(args, obs_dim: int, act_dim: int, base_args: Optional[dict] = Non
         if base_args is None:
             raise ValueError("a residual agent needs its base's args (the checkpoint's base_args)")
         time_input = bool(get("obs_elapsed_time", False))  # the base was trained without the time entry
-        return ResidualAgent(make_agent(base_args, obs_dim - int(time_input), act_dim), get("hidden_size"),
+        base = make_agent(base_args, obs_dim - int(time_input), act_dim, base_args.get("base_args"))
+        return ResidualAgent(base, get("hidden_size"),
                              get("residual_scale"), value_heads=value_heads(args), time_input=time_input)
     starts = STATE_QUATERNION_STARTS if get("rotation_features", False) else ()
     return Agent(obs_dim, act_dim, get("hidden_size"), starts, value_heads(args), get("num_layers", 3))

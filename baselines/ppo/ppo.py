@@ -184,8 +184,9 @@ class Args:
     coefficient to 0.1 and the entropy coefficient to 1e-5."""
 
     residual_of: Optional[str] = None
-    """a checkpoint (a behaviour clone) that stays frozen as the base policy; PPO learns a correction
-    added to its actions (baselines/ppo/residual.py, ResiP). Its observation statistics stay too."""
+    """a checkpoint (a behaviour clone, or a refined agent: a residual on a residual) that stays frozen as the base
+    policy; PPO learns a correction added to its actions (baselines/ppo/residual.py, ResiP). Its observation
+    statistics stay too."""
     residual_scale: float = 0.1
     """the correction's scale in action units."""
     residual_l2_coef: float = 0.0
@@ -434,9 +435,14 @@ def setup(args: Args) -> Run:
     if resume is not None or init is not None:
         base_args = (resume or init).get("base_args")
     elif args.residual_of:
-        base = load_checkpoint(args.residual_of, "--residual-of", args.env_id, obs_dim - int(args.obs_elapsed_time), act_dim,
-                               args.control_mode)
+        base = load_checkpoint(args.residual_of, "--residual-of")
         base_args = base["args"]
+        if base.get("base_args") is not None:  # a refined agent as the base: its own base's args go with it
+            if base_args.get("obs_elapsed_time"):
+                raise SystemExit(f"--residual-of {args.residual_of}: a residual that sees the elapsed time cannot be "
+                                 "another residual's base; give one trained without --obs-elapsed-time")
+            base_args = {**base_args, "base_args": base["base_args"]}
+        check_fit(base, args.residual_of, args.env_id, obs_dim - int(args.obs_elapsed_time), act_dim, args.control_mode)
     else:
         base_args = None
     agent = make_agent(args, obs_dim, act_dim, base_args).to(device)

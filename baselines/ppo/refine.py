@@ -17,6 +17,8 @@
    episodes also more than the agent shipped now where that is an earlier refinement, it becomes
    assets/checkpoints/general_agent.pt, with its campaign record (env steps, wall time, hardware);
    the clone stays beside it as general_agent_clone.pt.
+A second round refines a refined agent the same way (--clone assets/checkpoints/general_agent_refine8.pt: a residual
+on its residual, judged against it wherever the first round is judged against the clone).
 Each step is skipped when its output is in --run-dir, and PPO resumes from its checkpoint, so the
 same command continues an interrupted refinement.
 """
@@ -53,7 +55,9 @@ validation episodes favours a lucky one (docs/RESULTS.md: one won on validation 
 @dataclass
 class Args:
     clone: Path = CLONE
-    """the behaviour clone to refine (it stays frozen)."""
+    """the policy to refine (it stays frozen): the behaviour clone, or a refined agent for a second round (a residual
+    on its residual; one trained without --obs-elapsed-time). Validation, confirmation and shipping judge the result
+    against it as they judge a refinement against the clone."""
     run_dir: Path = Path("runs/refine")
     """where the steps write."""
     bank_episodes: int = 1500
@@ -224,12 +228,16 @@ def ship(args: Args, ckpt_path: Path, bank: Path, record: dict, validated: tuple
     bank_info = torch.load(bank, map_location="cpu", weights_only=False)
     ppo_steps = ckpt["progress"]["global_step"]
     wall = record["wall_s"]
+    base_record = clone.get("campaign", {}).get("record", {})
+    second_round = clone.get("base_args") is not None  # the base is itself a refinement of the clone
     ckpt["campaign"] = dict(command="python -m baselines.ppo.refine " + " ".join(shlex.quote(a) for a in sys.argv[1:]), record={
-        "the clone": f"{args.clone} (env steps in all: "
-                     + clone.get("campaign", {}).get("record", {}).get("env steps in all", "?") + ")",
+        **({"the refined agent refined again": f"{args.clone} (its PPO: "
+            + base_record.get("PPO (residual on the frozen clone)", "?") + "; its clone: " + base_record.get("the clone", "?") + ")"}
+           if second_round else
+           {"the clone": f"{args.clone} (env steps in all: " + base_record.get("env steps in all", "?") + ")"}),
         "failure bank": f"{len(bank_info['states'])} states from {bank_info['failed']} failed of {bank_info['episodes']} "
-                        "episodes of the clone on training seeds",
-        "PPO (residual on the frozen clone)": f"{ppo_steps} env steps",
+                        f"episodes of {'that agent' if second_round else 'the clone'} on training seeds",
+        f"PPO (residual on the frozen {'refined agent' if second_round else 'clone'})": f"{ppo_steps} env steps",
         **{f"{what} place success, clone -> refined": ", ".join(f"{k} {c[k]:.3f} -> {r[k]:.3f}" for k in c)
            for what, (c, r) in (("validation", validated), ("confirmation", confirmed or (None, None))) if c},
         "wall time": ", ".join(f"{k} {v / 60:.0f} min" for k, v in wall.items()) + f"; {sum(wall.values()) / 3600:.2f} h",

@@ -11,6 +11,10 @@ With `time_input` the observation ends with the episode's elapsed time (the task
 the residual and the critic see it, the base (trained without it) sees the observation without it. A
 correction that knows how much of the step limit is left can hurry a late episode, and a critic that
 knows it can value an episode the limit will cut (ppo.py's `--bootstrap-at-done terminated`).
+
+A ResidualAgent can itself be the base of another (a second round of refinement on a refined agent):
+as a base it offers what an Agent offers a residual, `normalize` and `actor_mean` of the normalized
+observation, so the corrections add up; a base that sees the time cannot (its `actor_mean` would need it).
 """
 
 from __future__ import annotations
@@ -55,9 +59,21 @@ class ResidualAgent(nn.Module):
     def features(self, x):
         return self.base.features(x[..., :-1] if self.time_input else x)
 
+    def normalize(self, x):
+        """The observation as the innermost base normalizes it (without the time entry)."""
+        return self.base.normalize(x[..., :-1] if self.time_input else x)
+
+    def actor_mean(self, z):
+        """The policy's mean from a normalized observation: what a residual on this agent adds its correction to."""
+        if self.time_input:
+            raise ValueError("a residual that sees the elapsed time cannot be another residual's base")
+        with torch.no_grad():
+            base_action = self.base.actor_mean(z)
+        return base_action + self.scale * self.residual_mean(torch.cat([z, base_action], -1))
+
     def _inputs_and_mean(self, x):
         with torch.no_grad():
-            z = self.base.normalize(x[..., :-1] if self.time_input else x)
+            z = self.normalize(x)
             base_action = self.base.actor_mean(z)
         inputs = torch.cat([z, base_action, x[..., -1:]] if self.time_input else [z, base_action], -1)
         return inputs, base_action + self.scale * self.residual_mean(inputs)
