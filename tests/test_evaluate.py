@@ -134,6 +134,18 @@ def test_a_longer_step_limit_tells_late_arrivals_and_stays_out_of_the_published_
             evaluation.main(evaluation.Args(env_id="Flooring-v1", episodes=1, **{"max_episode_steps": 300, **bad}))
 
 
+def test_an_action_gain_speeds_the_policy_up_and_stays_out_of_the_published_table(tmp_path):
+    """--action-gain (a diagnostic): the policy's actions times the gain; a faster arm places the same panel sooner."""
+    run = lambda **kw: evaluation.main(evaluation.Args(env_id="Flooring-v1", episodes=1, seed=1_000_000, workers=1,  # noqa: E731
+                                                       json=tmp_path / "gain.json", **kw))["Flooring-v1"]["episode_results"][0]
+    ordinary, faster = run(), run(action_gain=1.5)
+    assert json.loads((tmp_path / "gain.json").read_text())["action_gain"] == 1.5
+    assert faster["placed"] and faster["length"] < ordinary["length"]
+    for bad in (dict(action_gain=0.0), dict(action_gain=1.5, write_results=True)):
+        with pytest.raises(SystemExit, match="action-gain"):
+            evaluation.main(evaluation.Args(env_id="Flooring-v1", episodes=1, **bad))
+
+
 def test_earlier_agents_rows_come_from_their_json_and_a_bad_spec_is_refused(tmp_path):
     r = dict(episodes=330, pick_success=1.0, pick_success_ci95=[0.988, 1.0], place_success=0.979,
              place_success_ci95=[0.957, 0.99])

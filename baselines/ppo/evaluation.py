@@ -89,6 +89,10 @@ class Args:
     """a diagnostic: let episodes run up to this many steps instead of the task's limit (250), to tell late
     arrivals from lost episodes; each task's results then also say what placed within the task's own limit
     (`place_success_within_limit`). The published protocol keeps the limit."""
+    action_gain: float = 1.0
+    """a diagnostic: multiply the policy's actions by this (then clip to [-1, 1]), to tell whether a faster policy
+    would place more (the shipped agent's placed windows take 25% longer than the expert's). The published
+    protocol is the policy's own actions."""
     write_results: bool = False
     """write the table (with how the agent was trained, from its checkpoint) into docs/RESULTS.md."""
 
@@ -165,13 +169,23 @@ def evaluate_envs(agent, envs, num_steps: int, seed: int) -> dict:
 _worker: dict = {}
 
 
+class Gain:
+    """A policy whose actions are `gain` times another's (--action-gain)."""
+
+    def __init__(self, agent, gain: float):
+        self.agent, self.gain = agent, gain
+
+    def get_action(self, x, deterministic=False):
+        return self.gain * self.agent.get_action(x, deterministic=deterministic)
+
+
 def _episode(job: tuple) -> dict:
     """One seeded episode in a worker process (env and policy kept for the next job)."""
     import gymnasium as gym
     from mani_skill.utils.gym_utils import find_max_episode_steps_value
     from mani_skill.vector.wrappers.gymnasium import ManiSkillVectorEnv
 
-    checkpoint, env_id, stage, seed, video_dir, sample, max_steps = job
+    checkpoint, env_id, stage, seed, video_dir, sample, max_steps, gain = job
     torch.set_num_threads(1)
     key = (checkpoint, env_id, video_dir is not None, max_steps)
     if key not in _worker:
@@ -190,7 +204,7 @@ def _episode(job: tuple) -> dict:
         _worker[key] = (agent, ManiSkillVectorEnv(env, 1, auto_reset=False, record_metrics=True))
     agent, env = _worker[key]
     torch.manual_seed(seed)
-    [episode] = run_episodes(agent, env, find_max_episode_steps_value(env._env), seed, deterministic=not sample)
+    [episode] = run_episodes(agent if gain == 1 else Gain(agent, gain), env, find_max_episode_steps_value(env._env), seed, deterministic=not sample)
     if video_dir:
         env.call("flush_video", f"{env_id}_seed{seed}")  # (call's own first parameter is `name`)
     return episode
@@ -219,7 +233,7 @@ def evaluate(args: Args, env_id: str, pool) -> dict:
 
     def job(i: int, video: bool) -> tuple:
         return (str(args.checkpoint), env_id, args.curriculum_stage, args.seed + i, str(args.video_dir) if video else None,
-                args.sample_actions, args.max_episode_steps)
+                args.sample_actions, args.max_episode_steps, args.action_gain)
 
     for i in range(min(args.videos, target) if args.video_dir else 0):  # the recorded episodes come first
         episodes.append(pool.apply(_episode, (job(i, True),)))
@@ -314,6 +328,9 @@ def main(args: Args) -> dict[str, dict]:
         raise SystemExit(f"--curriculum-stage {args.curriculum_stage}: use one of {', '.join(STAGE_NAMES)}")
     if args.episodes < 1 or (args.steps is not None and args.steps < 1) or args.workers < 1:
         raise SystemExit("--episodes, --steps and --workers must be positive")
+    if args.action_gain <= 0 or (args.action_gain != 1 and args.write_results):
+        raise SystemExit(f"--action-gain {args.action_gain}: a positive diagnostic; the published table (--write-results) "
+                         "takes the policy's own actions")
     if args.sample_actions and args.write_results:
         raise SystemExit("--sample-actions is a diagnostic: the published table (--write-results) takes the policy's mean")
     if args.max_episode_steps is not None and (args.max_episode_steps < 1 or args.write_results or args.steps is not None):
@@ -337,7 +354,7 @@ def main(args: Args) -> dict[str, dict]:
         out = results[env_ids[0]] if len(env_ids) == 1 else {"tasks": results}
         args.json.write_text(json.dumps({"command": command, "checkpoint": str(args.checkpoint),
                                          "curriculum_stage": args.curriculum_stage,
-                                         "sample_actions": args.sample_actions, **out}, indent=1) + "\n")
+                                         "sample_actions": args.sample_actions, "action_gain": args.action_gain, **out}, indent=1) + "\n")
         print(f"wrote {args.json}")
     if args.video_dir:
         print(f"videos: {args.video_dir.resolve()}")
