@@ -149,7 +149,9 @@ def report(runs: list[dict]) -> str:
             if "shipped" in c:
                 shipped = {e: c["shipped"][e]["place_success"] for e in TASKS}
                 then = " / ".join(pct(shipped[e]) for e in TASKS) + (": yes" if beats(snap, shipped) else ": no")
-            lines.append(f"| {r['run']} | {c['env_steps']:,} | "
+            base = Path(r["settings"].get("residual_of") or CLONE_NAME).name
+            run = r["run"] + (f" (its base, {base}, in the clone's place)" if base != CLONE_NAME else "")
+            lines.append(f"| {run} | {c['env_steps']:,} | "
                          + " | ".join(f"{pct(clone[e])} -> {pct(snap[e])}" for e in TASKS)
                          + f" | {'yes' if wins else 'no'} | {then} |")
     return "\n".join(lines)

@@ -209,6 +209,19 @@ def test_a_bank_that_keeps_its_clock_reaches_ppo_and_one_of_other_offsets_is_ref
     assert ", bank at -90/-50/-20 steps, bank keeps its clock |" in body
 
 
+def test_a_second_round_is_reported_against_its_base_not_the_clone(tmp_path):
+    run = summary("round2", {100_000: (0.985, 0.98, 0.98)})
+    run["settings"]["residual_of"] = "assets/checkpoints/general_agent_refine8.pt"
+    run["confirmation"] = dict(env_steps=100_000, clone=summary("c", {1: (0.995, 0.995, 0.98)})["validations"]["1"],
+                               snapshot=summary("s", {1: (0.99, 0.955, 1.0)})["validations"]["1"])
+    path = tmp_path / "round2.json"
+    path.write_text(json.dumps(run))
+    body = refine_report.main(refine_report.Args(runs=(path,), out=tmp_path / "refine.png"))
+    assert "| round2 | on general_agent_refine8.pt, lr 3e-05," in body and "| the base | 96.0" in body
+    assert "| round2 (its base, general_agent_refine8.pt, in the clone's place) | 100,000 | 99.5 -> 99.0 |" in body
+    assert "the clone" not in body.split("| round2 |")[1].split("\n")[0]
+
+
 def test_failure_kinds_follow_the_stage_tolerances():
     def episode(seed, placed, held, dist, angle):
         return dict(seed=seed, placed=placed, held_at_end=held, final_place_dist=dist, final_place_angle_deg=angle)

@@ -17,8 +17,9 @@
    episodes also more than the agent shipped now where that is an earlier refinement, it becomes
    assets/checkpoints/general_agent.pt, with its campaign record (env steps, wall time, hardware);
    the clone stays beside it as general_agent_clone.pt.
-A second round refines a refined agent the same way (--clone assets/checkpoints/general_agent_refine8.pt: a residual
-on its residual, judged against it wherever the first round is judged against the clone).
+A second round refines a refined agent the same way (--clone assets/checkpoints/general_agent.pt, or a copy of it: a
+residual on its residual, judged against it wherever the first round is judged against the clone; run 14 in
+docs/RESULTS.md).
 Each step is skipped when its output is in --run-dir, and PPO resumes from its checkpoint, so the
 same command continues an interrupted refinement.
 """
