@@ -18,7 +18,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Optional
+from typing import Literal, Optional
 
 import tyro
 
@@ -52,10 +52,15 @@ class Args:
     policy fails, from the states it led to (DAgger-style; ms_construction/planning/demos.py)."""
 
 
+    branch_preference: Literal["nearest", "fixed"] = "nearest"
+    """the expert's choice among several ways to reach a configuration (ExpertConfig.branch_preference): `nearest`
+    to the arm (the shipped clone's demonstrations) or `fixed`, the same way for the same goal slot every time."""
+
+
 def main(args: Args) -> None:
     record_demos(args.out, args.episodes, env_id=args.env_id, seed=args.seed, noise=args.noise,
                  curriculum_stage=args.curriculum_stage, workers=args.workers, save_every=args.save_every,
-                 resume=args.resume, policy=args.policy, load_policy=load_policy)
+                 resume=args.resume, policy=args.policy, load_policy=load_policy, branch_preference=args.branch_preference)
 
 
 if __name__ == "__main__":

@@ -110,12 +110,13 @@ def report(env_id: str, result: dict, failed: dict[str, dict], tol: float) -> st
     lines = [f"{env_id}: per goal slot, the arm configurations the expert's placed episodes end in (joints in rad; "
              f"the same configuration within {tol} rad), the side its base joint turned to on the way, and the "
              "failed episodes of each agent (failed / episodes):", "",
-             "| goal slot | expert episodes | expert's final arm configurations | base turned + / - | "
-             + " | ".join(failed) + " |", "|---|---|---|---|" + "---|" * len(failed)]
+             "| " + " | ".join(["goal slot", "expert episodes", "expert's final arm configurations", "base turned + / -",
+                                *failed]) + " |", "|---" * (4 + len(failed)) + "|"]
     for slot, s in result.items():
         configs = "<br>".join(f"{b['count']} x {b['q']}" for b in s["final_branches"])
-        lines.append(f"| {slot} | {s['episodes']} | {configs} | {s['base_turn']['+']} / {s['base_turn']['-']} | "
-                     + " | ".join("{1} / {0}".format(*f.get(slot, [0, 0])) for f in failed.values()) + " |")
+        cells = [slot, str(s["episodes"]), configs, f"{s['base_turn']['+']} / {s['base_turn']['-']}",
+                 *("{1} / {0}".format(*f.get(slot, [0, 0])) for f in failed.values())]
+        lines.append("| " + " | ".join(cells) + " |")
     return "\n".join(lines)
 
 

@@ -40,6 +40,7 @@ import shutil
 import sys
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Literal
 
 import torch
 import tyro
@@ -95,6 +96,10 @@ class Args:
     """first PPO iterations that train only the value function."""
     seed: int = 1
     """seed of behaviour cloning and PPO."""
+    branch_preference: Literal["nearest", "fixed"] = "nearest"
+    """the expert's choice among several ways to reach a configuration (ExpertConfig.branch_preference):
+    `nearest` to the arm (the shipped clone's demonstrations, which reach some goal slots two ways: the clone
+    fails where they part, docs/RESULTS.md) or `fixed`, the same way for the same goal slot every time."""
     ship: bool = False
     """copy the result, with the campaign's record, to assets/checkpoints/general_agent.pt."""
 
@@ -125,7 +130,7 @@ def main(args: Args) -> Path:
                 continue
             if tried_episodes(path) < wanted:
                 record_demos(path, wanted, env_id=env_id, seed=seed, workers=args.workers, save_every=100, resume=True,
-                             policy=policy, load_policy=checkpoints.load_policy)
+                             policy=policy, load_policy=checkpoints.load_policy, branch_preference=args.branch_preference)
             files.append(path)
         return files
 

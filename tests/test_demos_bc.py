@@ -191,3 +191,21 @@ def test_sparse_reward_pays_the_expert_s_placement_more_than_grasping_and_holdin
     assert hold_return == pytest.approx(1.0 - 249 / 250, abs=1e-3)
     assert expert_return == pytest.approx(3.0 - (len(clean.rewards) - 2) / 250, abs=1e-3)
     assert expert_return > hold_return + 1.5
+
+
+def test_a_demonstration_worker_drives_the_expert_with_the_branch_preference_asked_for(monkeypatch):
+    """record_demos(branch_preference=...) reaches the expert of every worker (scripts/train_general_agent.py
+    --branch-preference fixed: demonstrations that reach a goal slot the same way every time)."""
+    from ms_construction.planning import demos
+
+    monkeypatch.setattr(demos, "DEMO_EXPERT_CONFIG", EXPERT)  # the slow machine's planning time
+    monkeypatch.setattr(demos, "_collector", None)
+    try:
+        for _ in range(PLAN_TRIES):
+            kept, policy_steps = demos._collect(("WindowInstallation-v1", "cp4", 500_000, 0.0, None, None, "fixed"))
+            if kept:
+                break
+        assert demos._collector.expert.cfg.branch_preference == "fixed"
+        assert kept and kept[0]["placed"] and policy_steps == 0
+    finally:
+        demos._collector.close()

@@ -59,3 +59,27 @@ def test_recorded_trajectory_replays_from_its_actions_to_the_same_success(tmp_pa
         np.testing.assert_array_equal(np.asarray(replayed["traj_0"]["actions"]), actions)
     assert len(recorded) == result.steps and recorded[-1] and not recorded[:-1].any()
     np.testing.assert_array_equal(success, recorded)
+
+
+def test_a_fixed_branch_preference_reaches_a_goal_slot_the_same_way_every_time():
+    """Window slot 0 episodes that the nearest-first expert ended in either of two wrist branches (seeds 500000,
+    500006, 500007, 500014; docs/RESULTS.md, 'the expert's several ways'): with branch_preference="fixed" they end
+    in one arm configuration."""
+    import dataclasses
+
+    env = make_env("WindowInstallation-v1")
+    expert = MotionPlanningExpert(env, dataclasses.replace(TEST_EXPERT_CONFIG, branch_preference="fixed"))
+    finals = []
+    for seed in (500_000, 500_006, 500_007, 500_014):
+        for _ in range(PLAN_TRIES):
+            result = expert.run(seed)
+            if result.placed:
+                break
+        assert result.placed, result.failure
+        assert int(env.unwrapped.goal_slot[0]) == 0
+        finals.append(env.unwrapped.agent.robot.get_qpos()[0].numpy().copy())
+    env.close()
+    expert.close()
+    assert all(np.max(np.abs(q - finals[0])) < 0.5 for q in finals), np.round(finals, 2)
+    with pytest.raises(ValueError, match="branch_preference"):
+        dataclasses.replace(TEST_EXPERT_CONFIG, branch_preference="random")

@@ -21,6 +21,7 @@ so the data cover the states the policy actually reaches, not only the expert's.
 
 from __future__ import annotations
 
+import dataclasses
 import multiprocessing as mp
 import os
 import time
@@ -163,15 +164,15 @@ PolicyLoader = Callable[[Path, str], tuple]
 _collector, _policy = None, None
 
 
-def _collect(job: tuple[str, str, int, float, Optional[str], Optional[PolicyLoader]]) -> tuple[list[dict], int]:
+def _collect(job: tuple[str, str, int, float, Optional[str], Optional[PolicyLoader], str]) -> tuple[list[dict], int]:
     """One episode in a worker process (its collector kept for the next): the expert's, or with a
     policy checkpoint, the expert's takeovers where that policy fails. Returns the placed
     demonstrations and the env steps the policy took."""
     global _collector, _policy
-    env_id, stage, seed, noise, policy_path, load_policy = job
+    env_id, stage, seed, noise, policy_path, load_policy, branch_preference = job
     torch.set_num_threads(1)
     if _collector is None:
-        _collector = DemoCollector(env_id, stage)
+        _collector = DemoCollector(env_id, stage, dataclasses.replace(DEMO_EXPERT_CONFIG, branch_preference=branch_preference))
     if policy_path is None:
         demos, policy_steps = [_collector.collect(seed, noise)], 0
     else:
@@ -233,21 +234,23 @@ def policy_steps(path: Path) -> int:
 
 def record_demos(out: Path, episodes: int, env_id: str = "ConstructionPickPlace-v1", seed: int = 100_000,
                  noise: float = 0.1, curriculum_stage: str = "cp4", workers: int = 2, save_every: int = 50,
-                 resume: bool = False, policy: Optional[Path] = None, load_policy: Optional[PolicyLoader] = None
-                 ) -> Path:
+                 resume: bool = False, policy: Optional[Path] = None, load_policy: Optional[PolicyLoader] = None,
+                 branch_preference: str = "nearest") -> Path:
     """Episodes seed, seed + 1, ... (every other one with DART noise `noise`); the placed ones are
     written to `out` every `save_every` episodes and at the end; `resume` continues `out`.
     With a `policy` checkpoint: the expert's takeovers where that policy fails (`DemoCollector.takeovers`);
     `load_policy(path, env_id) -> (policy, control_mode)` loads it in each worker process (a
     module-level function, such as `baselines.ppo.checkpoints.load_policy`: the package does not
-    know the learner's network)."""
+    know the learner's network). `branch_preference`: the expert's (ExpertConfig), `fixed` for demonstrations
+    that reach a goal slot the same way every time."""
     if policy is not None and load_policy is None:
         raise ValueError("record_demos(policy=...) needs load_policy, e.g. baselines.ppo.checkpoints.load_policy")
     demos, tried, wall_s = load_demos(out) if resume and out.exists() else ([], 0, 0.0)
     steps_of_policy = policy_steps(out) if resume and out.exists() else 0
     start = time.time() - wall_s
     policy_job = (None, None) if policy is None else (str(policy), load_policy)
-    jobs = [(env_id, curriculum_stage, seed + i, noise if i % 2 else 0.0, *policy_job) for i in range(tried, episodes)]
+    jobs = [(env_id, curriculum_stage, seed + i, noise if i % 2 else 0.0, *policy_job, branch_preference)
+            for i in range(tried, episodes)]
     desc = "expert demos" if policy is None else "expert takeovers"
     bar = tqdm(total=episodes, initial=tried, desc=desc, unit="ep", dynamic_ncols=True)
     with mp.get_context("spawn").Pool(workers) as pool:

@@ -10,7 +10,9 @@
 Plans run on mplib 0.1.1 (OMPL RRTConnect, FCL) against the committed site collision parts with a
 safety margin; every time-parameterized trajectory is checked again, densely, before it runs.
 The install tcp pose is `goal * symmetry * hold^-1` for the element's actual hold pose, over the
-element's symmetric goal rotations, the reachable one nearest to the arm chosen.
+element's symmetric goal rotations, the reachable one nearest to the arm chosen (or, with
+`branch_preference="fixed"`, the one nearest to a fixed reference configuration, and so for the pre-grasp
+configurations: the same goal slot is then reached the same way whichever way the arm happens to stand).
 The env must be a single physx_cpu env in pd_joint_pos control; every action is an absolute joint
 target at the control rate, so a recorded episode replays from its actions. (`planning/demos.py`
 puts it in front of a pd_joint_delta_pos env to record the learner's actions.)
@@ -42,6 +44,12 @@ from ms_construction.planning.collision_model import (
 )
 from ms_construction.planning.trajectory import tcp_line, time_parameterize
 from ms_construction.parameters import ELEMENT_KINDS
+
+
+BRANCH_PREFERENCES = ("nearest", "fixed")
+FIXED_REFERENCE = REST_QPOS + np.array([-0.5, 0, 0, 0, 0, 0])
+"""the `fixed` branch preference's reference: the rest pose with the base turned a little to one side, so that
+the two ways of turning to a pick behind the arm (+-pi) are never a tie."""
 
 
 @dataclass(frozen=True)
@@ -87,6 +95,16 @@ class ExpertConfig:
     """... for at most this many control steps."""
     pull_steps: int = 10
     """control steps at most to wait for the grasped element to reach the plate."""
+    branch_preference: str = "nearest"
+    """which of several reachable configurations (IK branches, base turns, symmetric goals) a phase heads for:
+    `nearest` to the arm, the quickest (the shipped clone's demonstrations), or `fixed`: nearest to
+    FIXED_REFERENCE whatever the arm's configuration, so that a goal slot is always reached the same way. With
+    `nearest`, near-ties (a pick behind the arm, two wrist branches at a window) go either way from episode to
+    episode, and a behaviour clone learns the average of the two where they part (docs/RESULTS.md)."""
+
+    def __post_init__(self):
+        if self.branch_preference not in BRANCH_PREFERENCES:
+            raise ValueError(f"branch_preference {self.branch_preference!r}: use one of {', '.join(BRANCH_PREFERENCES)}")
 
 
 @dataclass
@@ -304,9 +322,17 @@ class MotionPlanningExpert:
             for g in self._turns(sol, 0):
                 if self.free.collides(g):
                     continue
+                if self.cfg.branch_preference == "fixed":
+                    goals.append((self._preference(g), g))
+                    continue
                 onward = min((self._travel(g, self._nearest_turns(i, g), slice(0, 5)) for i in installs), default=0.0)
                 goals.append((self._travel(self.q, g) + onward, g))
         return [g for _, g in sorted(goals, key=lambda t: t[0])]
+
+    def _preference(self, q: np.ndarray) -> float:
+        """The `fixed` branch preference's rank of a configuration: its summed joint moves from FIXED_REFERENCE,
+        each in seconds at the velocity limits (a sum, so that every joint's branch counts, not the slowest's)."""
+        return float(np.sum(np.abs(q - FIXED_REFERENCE) / self.vel))
 
     def _install_lines(self, loaded: ArmPlanner, loaded_exact: ArmPlanner) -> list[np.ndarray]:
         """Joint paths of the straight install approach (pre-install first), over the element's
@@ -337,6 +363,8 @@ class MotionPlanningExpert:
                     lines.append(line[::-1])
         if not lines:
             raise PhaseFailure(f"carry: no install approach ({'; '.join(sorted(rejected)) or 'no IK at the goal'})")
+        if self.cfg.branch_preference == "fixed":
+            return sorted(lines, key=lambda line: self._preference(line[-1]))
         return sorted(lines, key=lambda line: self._travel(self.q, line[0]))
 
     # ------------------------------------------------------------------------------------- #
