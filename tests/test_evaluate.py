@@ -167,14 +167,14 @@ def test_the_written_section_tables_each_agent_s_failures_by_kind(tmp_path, monk
                     place_success_ci95=evaluation.wilson(placed, n), mean_return=2.0, mean_length=150.0,
                     policy_time_per_episode_s=0.05, episode_results=episodes)
 
-    short = dict(seed=9, placed=False, held_at_end=True, final_place_dist=1.2, final_place_angle_deg=90.0)
+    lost = dict(seed=9, placed=False, held_at_end=True, final_place_dist=1.2, final_place_angle_deg=90.0)
     dropped = dict(seed=9, placed=False, held_at_end=False, final_place_dist=0.6, final_place_angle_deg=10.0)
-    ours = {"WindowInstallation-v1": task([short]), "Flooring-v1": task([])}
+    ours = {"WindowInstallation-v1": task([lost]), "Flooring-v1": task([])}
     earlier = tmp_path / "clone.json"
     earlier.write_text(json.dumps({"command": "python scripts/evaluate.py --all", "tasks": {"WindowInstallation-v1": task([dropped])}}))
     monkeypatch.setattr(evaluation, "RESULTS_PATH", tmp_path / "RESULTS.md")
     evaluation.write_results(evaluation.Args(all=True), ours, evaluation.read_beside((f"the clone={earlier}",)))
     text = (tmp_path / "RESULTS.md").read_text()
     assert "| agent | WindowInstallation-v1 | Flooring-v1 |" in text
-    assert "| this agent | 1 short (1.2-1.2 m) | none |" in text
+    assert "| this agent | 1 short and turned (1.2-1.2 m, 90-90 deg) | none |" in text
     assert "| the clone | 1 dropped (0.6-0.6 m) | - |" in text
