@@ -50,8 +50,6 @@ class Args:
     policy: Optional[Path] = None
     """a policy checkpoint (ppo.py / bc.py): record instead the expert's takeovers of the episodes this
     policy fails, from the states it led to (DAgger-style; ms_construction/planning/demos.py)."""
-
-
     branch_preference: Literal["nearest", "fixed"] = "nearest"
     """the expert's choice among several ways to reach a configuration (ExpertConfig.branch_preference): `nearest`
     to the arm (the shipped clone's demonstrations) or `fixed`, the same way for the same goal slot every time."""

@@ -10,7 +10,6 @@ A JSON of `evaluate.py --all` gives a row per task; one of `--env-id` a single r
 
 from __future__ import annotations
 
-import json
 import shlex
 import sys
 from dataclasses import dataclass
@@ -18,6 +17,7 @@ from pathlib import Path
 
 import tyro
 
+from baselines.ppo.evaluation import read_labelled
 from ms_construction.reporting import update_section
 
 
@@ -31,30 +31,20 @@ class Args:
     results: Path = Path("docs/RESULTS.md")
 
 
-def tasks_of(spec: str) -> tuple[str, str, dict]:
-    label, _, path = spec.partition("=")
-    if not path or not Path(path).is_file():
-        raise SystemExit(f"--rows {spec}: use LABEL=JSON, a file that scripts/evaluate.py --json wrote")
-    data = json.loads(Path(path).read_text())
-    if "tasks" not in data and "place_success" not in data:
-        raise SystemExit(f"--rows {spec}: {path} is not a JSON of scripts/evaluate.py --json")
-    return label, path, data.get("tasks", {data.get("env_id"): data})
-
-
-def table(rows: list[tuple[str, str, dict]]) -> str:
+def table(rows: dict[str, dict]) -> str:
     pct = lambda p: f"{100 * p:.1f}"  # noqa: E731
     lines = ["| agent | task | episodes | place success % [95% CI] | mean length | evaluation |", "|---|---|---|---|---|---|"]
-    for label, path, tasks in rows:
-        for env_id, r in tasks.items():
+    for label, row in rows.items():
+        for env_id, r in row["tasks"].items():
             lo, hi = r["place_success_ci95"]
             lines.append(f"| {label} | {env_id} | {r['episodes']} | {pct(r['place_success'])} [{pct(lo)}, {pct(hi)}] | "
-                         f"{r['mean_length']:.0f} | {path} |")
+                         f"{r['mean_length']:.0f} | {row['path']} |")
     return "\n".join(lines)
 
 
 def main(args: Args) -> str:
     command = "python scripts/eval_table.py " + " ".join(shlex.quote(a) for a in sys.argv[1:])
-    body = f"Command: `{command}`\n\n" + table([tasks_of(spec) for spec in args.rows])
+    body = f"Command: `{command}`\n\n" + table(read_labelled(args.rows, "--rows"))
     print(body)
     if args.write_results:
         update_section(args.results, args.section, title="Results", body=body)

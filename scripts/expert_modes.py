@@ -25,6 +25,7 @@ import h5py
 import numpy as np
 import tyro
 
+from baselines.ppo.evaluation import read_labelled
 from ms_construction.reporting import update_section
 
 ARM = "construction_arm"
@@ -95,17 +96,6 @@ def failures_by_slot(env_id: str, episodes: list[dict]) -> dict[str, list[int]]:
     return dict(sorted(counts.items()))
 
 
-def agent_episodes(spec: str, env_id: str) -> tuple[str, list[dict]]:
-    label, _, path = spec.partition("=")
-    if not path or not Path(path).is_file():
-        raise SystemExit(f"--agent {spec}: use LABEL=JSON, a file that scripts/evaluate.py --json wrote")
-    data = json.loads(Path(path).read_text())
-    tasks = data.get("tasks", {data.get("env_id"): data})
-    if env_id not in tasks:
-        raise SystemExit(f"--agent {spec}: {path} holds no episodes of {env_id}")
-    return label, tasks[env_id]["episode_results"]
-
-
 def report(env_id: str, result: dict, failed: dict[str, dict], tol: float) -> str:
     lines = [f"{env_id}: per goal slot, the arm configurations the expert's placed episodes end in (joints in rad; "
              f"the same configuration within {tol} rad), the side its base joint turned to on the way, and the "
@@ -124,12 +114,15 @@ def main(args: Args) -> dict:
     for path in args.traj:
         if not path.is_file():
             raise SystemExit(f"--traj {path}: no such file (write one with scripts/run_expert.py --save-trajectory)")
+    agents = read_labelled(args.agent, "--agent")
     out, tables = {}, []
     for path in args.traj:
         env_id = path.name.split(".")[0]
         result = modes(path, args.tol)
-        failed = {label: failures_by_slot(env_id, episodes)
-                  for label, episodes in (agent_episodes(spec, env_id) for spec in args.agent)}
+        missing = [label for label, a in agents.items() if env_id not in a["tasks"]]
+        if missing:
+            raise SystemExit(f"--agent: the JSON of {', '.join(missing)} holds no episodes of {env_id}")
+        failed = {label: failures_by_slot(env_id, a["tasks"][env_id]["episode_results"]) for label, a in agents.items()}
         out[env_id] = dict(traj=str(path), slots=result, failed_by_slot=failed)
         tables.append(report(env_id, result, failed, args.tol))
     command = "python scripts/expert_modes.py " + " ".join(shlex.quote(a) for a in sys.argv[1:])

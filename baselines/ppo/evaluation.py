@@ -204,7 +204,8 @@ def _episode(job: tuple) -> dict:
         _worker[key] = (agent, ManiSkillVectorEnv(env, 1, auto_reset=False, record_metrics=True))
     agent, env = _worker[key]
     torch.manual_seed(seed)
-    [episode] = run_episodes(agent if gain == 1 else Gain(agent, gain), env, find_max_episode_steps_value(env._env), seed, deterministic=not sample)
+    policy = agent if gain == 1 else Gain(agent, gain)
+    [episode] = run_episodes(policy, env, find_max_episode_steps_value(env._env), seed, deterministic=not sample)
     if video_dir:
         env.call("flush_video", f"{env_id}_seed{seed}")  # (call's own first parameter is `name`)
     return episode
@@ -363,18 +364,22 @@ def main(args: Args) -> dict[str, dict]:
     return results
 
 
-def read_beside(specs: tuple[str, ...]) -> dict[str, dict]:
-    """--beside LABEL=JSON ...: each label's per-task results, from a JSON of `--all --json`."""
+def read_labelled(specs: tuple[str, ...], option: str) -> dict[str, dict]:
+    """LABEL=JSON ... (the command-line `option` that gave them): each label's file, command and per-task
+    results, from a JSON that scripts/evaluate.py --json wrote (with --all, or of one task)."""
     out = {}
     for spec in specs:
         label, _, path = spec.partition("=")
-        if not label or not path:
-            raise SystemExit(f"--beside {spec}: use LABEL=JSON (a file written by scripts/evaluate.py --all --json)")
-        if not Path(path).is_file() or "tasks" not in json.loads(Path(path).read_text()):
-            raise SystemExit(f"--beside {spec}: {path} is not a JSON that scripts/evaluate.py --all --json wrote")
-        data = json.loads(Path(path).read_text())
-        out[label] = dict(path=path, command=data.get("command", "?"), tasks=data["tasks"])
+        data = json.loads(Path(path).read_text()) if label and path and Path(path).is_file() else {}
+        if "tasks" not in data and "place_success" not in data:
+            raise SystemExit(f"{option} {spec}: use LABEL=JSON, a file that scripts/evaluate.py --json wrote")
+        out[label] = dict(path=path, command=data.get("command", "?"), tasks=data.get("tasks", {data.get("env_id"): data}))
     return out
+
+
+def read_beside(specs: tuple[str, ...]) -> dict[str, dict]:
+    """--beside LABEL=JSON ...: each label's per-task results (`read_labelled`)."""
+    return read_labelled(specs, "--beside")
 
 
 def beside_table(beside: dict[str, dict]) -> str:
