@@ -23,7 +23,7 @@ from typing import Literal, Optional
 import tyro
 
 from baselines.ppo.checkpoints import load_policy
-from ms_construction.planning.demos import record_demos
+from ms_construction.planning.demos import demo_expert_config, record_demos
 
 
 @dataclass
@@ -53,12 +53,16 @@ class Args:
     branch_preference: Literal["nearest", "fixed"] = "nearest"
     """the expert's choice among several ways to reach a configuration (ExpertConfig.branch_preference): `nearest`
     to the arm (the shipped clone's demonstrations) or `fixed`, the same way for the same goal slot every time."""
+    demo_pace: Literal["slow", "fast"] = "slow"
+    """the expert's speed (ms_construction/planning/demos.py DEMO_PACES): `slow`, every joint at 0.55 of its
+    limits (the shipped clones' demonstrations), or `fast`, as quick as the delta actions allow with room to spare."""
 
 
 def main(args: Args) -> None:
     record_demos(args.out, args.episodes, env_id=args.env_id, seed=args.seed, noise=args.noise,
                  curriculum_stage=args.curriculum_stage, workers=args.workers, save_every=args.save_every,
-                 resume=args.resume, policy=args.policy, load_policy=load_policy, branch_preference=args.branch_preference)
+                 resume=args.resume, policy=args.policy, load_policy=load_policy,
+                 expert=demo_expert_config(args.branch_preference, args.demo_pace))
 
 
 if __name__ == "__main__":

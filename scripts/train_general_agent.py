@@ -46,7 +46,7 @@ import torch
 import tyro
 
 from baselines.ppo import bc, checkpoints, evaluation, ppo
-from ms_construction.planning.demos import load_demos, policy_steps, record_demos, tried_episodes
+from ms_construction.planning.demos import demo_expert_config, load_demos, policy_steps, record_demos, tried_episodes
 from ms_construction.reporting import WallTimes
 
 SHIPPED = Path("assets/checkpoints/general_agent.pt")
@@ -100,6 +100,10 @@ class Args:
     """the expert's choice among several ways to reach a configuration (ExpertConfig.branch_preference):
     `nearest` to the arm (the shipped clone's demonstrations, which reach some goal slots two ways: the clone
     fails where they part, docs/RESULTS.md) or `fixed`, the same way for the same goal slot every time."""
+    demo_pace: Literal["slow", "fast"] = "slow"
+    """the expert's speed in demonstrations and takeovers (ms_construction/planning/demos.py DEMO_PACES): `slow`,
+    every joint at 0.55 of its limits (the shipped clones'), or `fast`, as quick as the delta actions allow with
+    room to spare (shorter episodes: slack before the step limit for the clone)."""
     ship: bool = False
     """copy the result, with the campaign's record, to assets/checkpoints/general_agent.pt."""
 
@@ -130,7 +134,8 @@ def main(args: Args) -> Path:
                 continue
             if tried_episodes(path) < wanted:
                 record_demos(path, wanted, env_id=env_id, seed=seed, workers=args.workers, save_every=100, resume=True,
-                             policy=policy, load_policy=checkpoints.load_policy, branch_preference=args.branch_preference)
+                             policy=policy, load_policy=checkpoints.load_policy,
+                             expert=demo_expert_config(args.branch_preference, args.demo_pace))
             files.append(path)
         return files
 

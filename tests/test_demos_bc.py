@@ -193,19 +193,30 @@ def test_sparse_reward_pays_the_expert_s_placement_more_than_grasping_and_holdin
     assert expert_return > hold_return + 1.5
 
 
-def test_a_demonstration_worker_drives_the_expert_with_the_branch_preference_asked_for(monkeypatch):
-    """record_demos(branch_preference=...) reaches the expert of every worker (scripts/train_general_agent.py
-    --branch-preference fixed: demonstrations that reach a goal slot the same way every time)."""
+def test_a_demonstration_worker_drives_the_expert_asked_for(monkeypatch):
+    """record_demos(expert=...) reaches the expert of every worker (scripts/train_general_agent.py
+    --branch-preference fixed --demo-pace fast: one way per goal slot, and joints capped at 0.08 rad per step)."""
     from ms_construction.planning import demos
 
-    monkeypatch.setattr(demos, "DEMO_EXPERT_CONFIG", EXPERT)  # the slow machine's planning time
+    fast_fixed = dataclasses.replace(demos.demo_expert_config("fixed", "fast"), rrt_time=SLOW_MACHINE_RRT_TIME)
     monkeypatch.setattr(demos, "_collector", None)
     try:
         for _ in range(PLAN_TRIES):
-            kept, policy_steps = demos._collect(("WindowInstallation-v1", "cp4", 500_000, 0.0, None, None, "fixed"))
+            kept, policy_steps = demos._collect(("WindowInstallation-v1", "cp4", 500_000, 0.0, None, None, fast_fixed))
             if kept:
                 break
-        assert demos._collector.expert.cfg.branch_preference == "fixed"
+        expert = demos._collector.expert
+        assert expert.cfg.branch_preference == "fixed" and expert.cfg.max_joint_step == 0.08
+        # the shoulder joints gain speed (0.8 of their limits), the wrist joints are held to the cap
+        assert np.all(expert.vel * expert.dt <= 0.08 + 1e-9)
+        assert np.all(expert.vel[:3] > demos.DEMO_EXPERT_CONFIG.speed * expert.vmax[:3])
         assert kept and kept[0]["placed"] and policy_steps == 0
     finally:
         demos._collector.close()
+
+
+def test_an_unknown_demonstration_pace_is_refused():
+    from ms_construction.planning import demos
+
+    with pytest.raises(ValueError, match="slow, fast"):
+        demos.demo_expert_config("fixed", "quick")

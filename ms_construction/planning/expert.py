@@ -74,6 +74,10 @@ class ExpertConfig:
     """m; the install line must be free this far past the point where the element counts as placed."""
     speed: float = 0.8
     """fraction of the arm's joint velocity limits for sampled paths."""
+    max_joint_step: Optional[float] = None
+    """rad; if set, no joint's target moves more than this per control step on sampled paths, whatever `speed`
+    allows: the learner's delta actions move a target at most 0.1 rad per step, which caps the wrist joints (the
+    fastest) long before the shoulder, so that the shoulder joints may keep a higher fraction of their limits."""
     acceleration: float = 2.0
     """joint acceleration limits, in (rad/s^2) per (rad/s) of velocity limit."""
     line_speed: float = 0.35
@@ -151,8 +155,10 @@ class MotionPlanningExpert:
         manifest = self.u.site.manifest
         vmax = np.asarray(manifest["arm_params"]["velocity"], float)
         self.vmax = vmax
-        self.vel, self.acc = config.speed * vmax, config.acceleration * vmax
         self.dt = 1.0 / self.u.control_freq
+        self.vel, self.acc = config.speed * vmax, config.acceleration * vmax
+        if config.max_joint_step is not None:
+            self.vel = np.minimum(self.vel, config.max_joint_step / self.dt)
         self.grasp_in_el = {k: _pose(manifest["elements"][k]["grasp_pose"]) for k in ELEMENT_KINDS}
         self.el_size = {k: np.asarray(manifest["elements"][k]["size"], float) for k in ELEMENT_KINDS}
         self._tmp = tempfile.TemporaryDirectory(prefix="ms_construction_planning_")
@@ -332,7 +338,7 @@ class MotionPlanningExpert:
     def _preference(self, q: np.ndarray) -> float:
         """The `fixed` branch preference's rank of a configuration: its summed joint moves from FIXED_REFERENCE,
         each in seconds at the velocity limits (a sum, so that every joint's branch counts, not the slowest's)."""
-        return float(np.sum(np.abs(q - FIXED_REFERENCE) / self.vel))
+        return float(np.sum(np.abs(q - FIXED_REFERENCE) / self.vmax))
 
     def _install_lines(self, loaded: ArmPlanner, loaded_exact: ArmPlanner) -> list[np.ndarray]:
         """Joint paths of the straight install approach (pre-install first), over the element's

@@ -1,0 +1,90 @@
+"""How long the expert's demonstrations are, per task: the slack a clone of them has before the 250-step limit.
+
+    python scripts/demo_lengths.py \
+        --demos 'slow=runs/general_agent_fixed/demos/general.npz' 'fast=runs/general_agent_fast/demos/general.npz' \
+        --write-results
+
+Each LABEL=NPZ is a demonstrations file of scripts/collect_demos.py or scripts/train_general_agent.py (its
+demos/*.npz; a label given several files counts them together). Takeover files (*_takeovers<r>.npz) start
+mid-episode: leave them out. The lengths are the recorded episodes', the placed ones (the only ones kept).
+"""
+
+from __future__ import annotations
+
+import json
+import shlex
+import sys
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Optional
+
+import numpy as np
+import tyro
+
+from ms_construction.parameters import ELEMENT_KINDS
+from ms_construction.reporting import update_section
+
+STEP_LIMIT = 250
+
+
+@dataclass
+class Args:
+    demos: tuple[str, ...]
+    """LABEL=NPZ ...: demonstrations files, one label per expert setting."""
+    json: Optional[Path] = None
+    """write the figures to this file."""
+    write_results: bool = False
+    """write the table into the section `demo-lengths` of docs/RESULTS.md."""
+    results: Path = Path("docs/RESULTS.md")
+
+
+def lengths(path: Path) -> dict[str, np.ndarray]:
+    """Per element kind, the length of every episode in the file."""
+    with np.load(path) as f:
+        episode, task = f["episode"], f["task"]
+    starts = np.flatnonzero(np.diff(episode, prepend=-1))
+    ends = np.append(starts[1:], len(episode))
+    kinds = task[starts]
+    return {kind: (ends - starts)[kinds == i] for i, kind in enumerate(ELEMENT_KINDS) if np.any(kinds == i)}
+
+
+def summary(per_kind: dict[str, list[np.ndarray]]) -> dict[str, dict]:
+    out = {}
+    for kind, parts in per_kind.items():
+        n = np.concatenate(parts)
+        out[kind] = dict(episodes=int(len(n)), mean=float(n.mean()), p95=float(np.percentile(n, 95)), max=int(n.max()),
+                         over_200=float(np.mean(n > 200)))
+    return out
+
+
+def main(args: Args) -> dict:
+    grouped: dict[str, dict[str, list[np.ndarray]]] = {}
+    for spec in args.demos:
+        label, _, path = spec.partition("=")
+        if not label or not Path(path).is_file():
+            raise SystemExit(f"--demos {spec}: use LABEL=NPZ, a demonstrations file (scripts/collect_demos.py)")
+        for kind, n in lengths(Path(path)).items():
+            grouped.setdefault(label, {}).setdefault(kind, []).append(n)
+    result = {label: summary(per_kind) for label, per_kind in grouped.items()}
+    lines = ["| expert | task | episodes | mean length | 95th percentile | longest | longer than 200 steps |",
+             "|---|---|---|---|---|---|---|"]
+    for label, kinds in result.items():
+        for kind in ELEMENT_KINDS:
+            if kind in kinds:
+                s = kinds[kind]
+                lines.append(f"| {label} | {kind} | {s['episodes']} | {s['mean']:.0f} | {s['p95']:.0f} | {s['max']} | "
+                             f"{100 * s['over_200']:.1f}% |")
+    table = "\n".join(lines)
+    print(table)
+    if args.json:
+        args.json.parent.mkdir(parents=True, exist_ok=True)
+        args.json.write_text(json.dumps(result, indent=1))
+    if args.write_results:
+        command = "python scripts/demo_lengths.py " + " ".join(shlex.quote(a) for a in sys.argv[1:])
+        update_section(args.results, "demo-lengths", f"Command: `{command}` (step limit {STEP_LIMIT})\n\n{table}",
+                       "Results")
+    return result
+
+
+if __name__ == "__main__":
+    main(tyro.cli(Args))

@@ -1,0 +1,36 @@
+"""scripts/demo_lengths.py: the expert's episode lengths per task from demonstrations files, as a section of RESULTS."""
+
+import importlib.util
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from ms_construction.planning.demos import save_demos
+
+spec = importlib.util.spec_from_file_location("demo_lengths", Path(__file__).resolve().parents[1] / "scripts" / "demo_lengths.py")
+demo_lengths = importlib.util.module_from_spec(spec)
+sys.modules["demo_lengths"] = demo_lengths  # dataclasses look their module up
+spec.loader.exec_module(demo_lengths)
+
+
+def demo(task: str, steps: int) -> dict:
+    return dict(obs=np.zeros((steps, 3), np.float32), actions=np.zeros((steps, 6), np.float32),
+                rewards=np.zeros(steps, np.float32), placed=True, task=task, seed=0, noise=0.0)
+
+
+def test_lengths_per_task_and_label_files_counted_together(tmp_path):
+    general, window = tmp_path / "general.npz", tmp_path / "window.npz"
+    save_demos(general, [demo("ceiling", 150), demo("window", 210), demo("ceiling", 190)], tried=3)
+    save_demos(window, [demo("window", 100)], tried=1)
+    results = tmp_path / "RESULTS.md"
+    out = demo_lengths.main(demo_lengths.Args(demos=(f"slow={general}", f"slow={window}", f"one={window}"),
+                                              write_results=True, results=results))
+    assert out["slow"]["ceiling"] == dict(episodes=2, mean=170.0, p95=pytest.approx(188.0), max=190, over_200=0.0)
+    assert out["slow"]["window"]["episodes"] == 2 and out["slow"]["window"]["over_200"] == 0.5
+    assert list(out["one"]) == ["window"]
+    text = results.read_text()
+    assert "| slow | window | 2 | 155 | 204 | 210 | 50.0% |" in text and "<!-- begin demo-lengths (generated) -->" in text
+    with pytest.raises(SystemExit, match="LABEL=NPZ"):
+        demo_lengths.main(demo_lengths.Args(demos=(str(general),)))
