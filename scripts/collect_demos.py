@@ -56,13 +56,17 @@ class Args:
     demo_pace: Literal["slow", "fast"] = "slow"
     """the expert's speed (ms_construction/planning/demos.py DEMO_PACES): `slow`, every joint at 0.55 of its
     limits (the shipped clones' demonstrations), or `fast`, as quick as the delta actions allow with room to spare."""
+    direct_paths: bool = False
+    """the expert takes a straight (or one-corner) joint path wherever one is free, RRTConnect only elsewhere
+    (ExpertConfig.direct_first): the same start and goal give the same motion, where RRTConnect's paths wander
+    differently every time and a clone averages them (docs/RESULTS.md, 'the quick one-way expert')."""
 
 
 def main(args: Args) -> None:
     record_demos(args.out, args.episodes, env_id=args.env_id, seed=args.seed, noise=args.noise,
                  curriculum_stage=args.curriculum_stage, workers=args.workers, save_every=args.save_every,
                  resume=args.resume, policy=args.policy, load_policy=load_policy,
-                 expert=demo_expert_config(args.branch_preference, args.demo_pace))
+                 expert=demo_expert_config(args.branch_preference, args.demo_pace, args.direct_paths))
 
 
 if __name__ == "__main__":

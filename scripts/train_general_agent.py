@@ -104,6 +104,10 @@ class Args:
     """the expert's speed in demonstrations and takeovers (ms_construction/planning/demos.py DEMO_PACES): `slow`,
     every joint at 0.55 of its limits (the shipped clones'), or `fast`, as quick as the delta actions allow with
     room to spare (shorter episodes: slack before the step limit for the clone)."""
+    direct_paths: bool = False
+    """the expert takes a straight (or one-corner) joint path wherever one is free, RRTConnect only elsewhere
+    (ExpertConfig.direct_first): the same start and goal give the same motion, where RRTConnect's paths wander
+    differently every time and a clone averages them (docs/RESULTS.md, 'the quick one-way expert')."""
     ship: bool = False
     """copy the result, with the campaign's record, to assets/checkpoints/general_agent.pt."""
 
@@ -135,7 +139,7 @@ def main(args: Args) -> Path:
             if tried_episodes(path) < wanted:
                 record_demos(path, wanted, env_id=env_id, seed=seed, workers=args.workers, save_every=100, resume=True,
                              policy=policy, load_policy=checkpoints.load_policy,
-                             expert=demo_expert_config(args.branch_preference, args.demo_pace))
+                             expert=demo_expert_config(args.branch_preference, args.demo_pace, args.direct_paths))
             files.append(path)
         return files
 

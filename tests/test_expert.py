@@ -83,3 +83,28 @@ def test_a_fixed_branch_preference_reaches_a_goal_slot_the_same_way_every_time()
     assert all(np.max(np.abs(q - finals[0])) < 0.5 for q in finals), np.round(finals, 2)
     with pytest.raises(ValueError, match="branch_preference"):
         dataclasses.replace(TEST_EXPERT_CONFIG, branch_preference="random")
+
+
+def test_direct_paths_first_make_the_same_episode_the_same_motion():
+    """ExpertConfig.direct_first: where a straight (or one-corner) joint path is free, the expert takes it instead of
+    RRTConnect's, so the same seed gives the same joint targets every time (a Flooring-v1 episode whose approach and
+    carry are both direct), and the episode still places."""
+    import dataclasses
+
+    class Recording(MotionPlanningExpert):
+        def _step(self, target):
+            self.targets.append(np.array(target))
+            return super()._step(target)
+
+    env = make_env("Flooring-v1")
+    expert = Recording(env, dataclasses.replace(TEST_EXPERT_CONFIG, branch_preference="fixed", direct_first=True))
+    runs = []
+    for _ in range(2):
+        expert.targets = []
+        result = expert.run(500_059)
+        assert result.placed, result.failure
+        runs.append(np.array(expert.targets))
+    env.close()
+    expert.close()
+    assert runs[0].shape == runs[1].shape
+    np.testing.assert_allclose(runs[0], runs[1], atol=1e-9)

@@ -50,11 +50,12 @@ DEMO_PACES = {"slow": DEMO_EXPERT_CONFIG, "fast": FAST_DEMO_EXPERT_CONFIG}
 """--demo-pace of scripts/collect_demos.py and train_general_agent.py."""
 
 
-def demo_expert_config(branch_preference: str = "nearest", pace: str = "slow") -> ExpertConfig:
-    """The demonstrating expert's settings: `pace` (DEMO_PACES) with `branch_preference` (ExpertConfig)."""
+def demo_expert_config(branch_preference: str = "nearest", pace: str = "slow", direct_first: bool = False) -> ExpertConfig:
+    """The demonstrating expert's settings: `pace` (DEMO_PACES) with `branch_preference` and `direct_first`
+    (ExpertConfig)."""
     if pace not in DEMO_PACES:
         raise ValueError(f"demonstration pace {pace!r}: use one of {', '.join(DEMO_PACES)}")
-    return dataclasses.replace(DEMO_PACES[pace], branch_preference=branch_preference)
+    return dataclasses.replace(DEMO_PACES[pace], branch_preference=branch_preference, direct_first=direct_first)
 
 
 class JointTargetsAsDeltas(gym.Wrapper):

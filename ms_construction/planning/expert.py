@@ -82,6 +82,10 @@ class ExpertConfig:
     """joint acceleration limits, in (rad/s^2) per (rad/s) of velocity limit."""
     line_speed: float = 0.35
     """fraction of the velocity limits on straight tcp lines (descend, lift, install)."""
+    direct_first: bool = False
+    """try paths that need no sampling first (`_direct_paths`: the straight joint move to each goal configuration,
+    then two with one corner), RRTConnect only where they all collide: the same start and goal then give the same
+    path (RRTConnect's wander, differently every time, and a clone of the demonstrations averages them)."""
     rrt_time: float = 1.0
     """s; time limit of one RRTConnect call."""
     rrt_attempts: int = 4
@@ -403,6 +407,10 @@ class MotionPlanningExpert:
             raise PhaseFailure(f"{phase}: no collision-free goal configuration")
         for i, goal in enumerate(goals[: self.cfg.goal_candidates]):
             best, direct = None, len(time_parameterize(np.array([self.q, goal]), self.vel, self.acc, self.dt))
+            for path in self._direct_paths(goal) if self.cfg.direct_first else []:
+                traj = time_parameterize(path, self.vel, self.acc, self.dt)
+                if len(traj) <= (max_steps or np.inf) and not planner.path_collides(np.vstack([self.q, traj])):
+                    return i, traj
             for _ in range(self.cfg.rrt_attempts):
                 path = planner.rrt_connect(self.q, goal, self.cfg.rrt_time)
                 if path is None:
@@ -419,6 +427,13 @@ class MotionPlanningExpert:
                 return i, best
         raise PhaseFailure(f"{phase}: RRTConnect found no collision-free path"
                            + (f" within {max_steps} steps" if max_steps is not None else ""))
+
+    def _direct_paths(self, goal: np.ndarray) -> list[np.ndarray]:
+        """Joint polylines to `goal` that need no sampling (`direct_first`): straight, then through one corner, the
+        shoulder and elbow (joints 1 and 2: the element's height and reach) moved last or first."""
+        turn_first, lift_first = goal.copy(), self.q.copy()
+        turn_first[1:3], lift_first[1:3] = self.q[1:3], goal[1:3]
+        return [np.array([self.q, goal]), np.array([self.q, turn_first, goal]), np.array([self.q, lift_first, goal])]
 
     def _check_free(self, planner: ArmPlanner, path: np.ndarray, phase: str) -> None:
         hit = planner.collision_on(path)
