@@ -7,6 +7,8 @@
 Each LABEL=NPZ is a demonstrations file of scripts/collect_demos.py or scripts/train_general_agent.py (its
 demos/*.npz; a label given several files counts them together). Takeover files (*_takeovers<r>.npz) start
 mid-episode: leave them out. The lengths are the recorded episodes', the placed ones (the only ones kept).
+`--keep JSON` carries the rows of an earlier run of this script (its --json) into the table first, so that an
+expert setting's row outlives the run folder its demonstrations were in.
 """
 
 from __future__ import annotations
@@ -32,7 +34,9 @@ class Args:
     demos: tuple[str, ...]
     """LABEL=NPZ ...: demonstrations files, one label per expert setting."""
     json: Optional[Path] = None
-    """write the figures to this file."""
+    """write the figures to this file (with the rows of --keep)."""
+    keep: Optional[Path] = None
+    """an earlier --json of this script whose rows go first (labels also given in --demos are measured anew)."""
     write_results: bool = False
     """write the table into the section `demo-lengths` of docs/RESULTS.md."""
     results: Path = Path("docs/RESULTS.md")
@@ -65,7 +69,9 @@ def main(args: Args) -> dict:
             raise SystemExit(f"--demos {spec}: use LABEL=NPZ, a demonstrations file (scripts/collect_demos.py)")
         for kind, n in lengths(Path(path)).items():
             grouped.setdefault(label, {}).setdefault(kind, []).append(n)
-    result = {label: summary(per_kind) for label, per_kind in grouped.items()}
+    result = json.loads(args.keep.read_text()) if args.keep else {}
+    result = {**{label: rows for label, rows in result.items() if label not in grouped},
+              **{label: summary(per_kind) for label, per_kind in grouped.items()}}
     lines = ["| expert | task | episodes | mean length | 95th percentile | longest | longer than 200 steps |",
              "|---|---|---|---|---|---|---|"]
     for label, kinds in result.items():

@@ -1,6 +1,7 @@
 """scripts/demo_lengths.py: the expert's episode lengths per task from demonstrations files, as a section of RESULTS."""
 
 import importlib.util
+import json
 import sys
 from pathlib import Path
 
@@ -32,5 +33,10 @@ def test_lengths_per_task_and_label_files_counted_together(tmp_path):
     assert list(out["one"]) == ["window"]
     text = results.read_text()
     assert "| slow | window | 2 | 155 | 204 | 210 | 50.0% |" in text and "<!-- begin demo-lengths (generated) -->" in text
+    kept = tmp_path / "kept.json"
+    kept.write_text(json.dumps({"old": out["slow"], "one": {}}))
+    again = demo_lengths.main(demo_lengths.Args(demos=(f"one={window}",), keep=kept, write_results=True, results=results))
+    assert list(again) == ["old", "one"] and again["old"] == out["slow"] and again["one"] == out["one"]
+    assert "| old | window | 2 | 155 | 204 | 210 | 50.0% |" in results.read_text()
     with pytest.raises(SystemExit, match="LABEL=NPZ"):
         demo_lengths.main(demo_lengths.Args(demos=(str(general),)))
