@@ -69,8 +69,10 @@ def main(args: Args) -> dict:
             raise SystemExit(f"--demos {spec}: use LABEL=NPZ, a demonstrations file (scripts/collect_demos.py)")
         for kind, n in lengths(Path(path)).items():
             grouped.setdefault(label, {}).setdefault(kind, []).append(n)
-    result = json.loads(args.keep.read_text()) if args.keep else {}
-    result = {**{label: rows for label, rows in result.items() if label not in grouped},
+    if args.keep and not args.keep.is_file():
+        raise SystemExit(f"--keep {args.keep}: no such file; give an earlier --json of this script")
+    kept = json.loads(args.keep.read_text()) if args.keep else {}
+    result = {**{label: rows for label, rows in kept.items() if label not in grouped},
               **{label: summary(per_kind) for label, per_kind in grouped.items()}}
     lines = ["| expert | task | episodes | mean length | 95th percentile | longest | longer than 200 steps |",
              "|---|---|---|---|---|---|---|"]
