@@ -10,18 +10,35 @@ from typing import Optional
 import numpy as np
 import sapien
 
+import xml.etree.ElementTree as ET
+
 from ms_construction.agents.construction_arm import REST_QPOS
+from ms_construction.assets import ARM_URDF_PATH
 
 
 class ArmIK:
     """Damped least-squares IK for the tcp link, restarted from several seeds."""
 
-    def __init__(self, robot, tcp_link_name: str = "tcp"):
-        art = robot._objs[0] if hasattr(robot, "_objs") else robot
-        self.model = art.create_pinocchio_model()
-        names = [link.name for link in art.get_links()]
+    def __init__(self, robot=None, tcp_link_name: str = "tcp"):
+        """From a loaded articulation (physx_cpu), or, with `robot=None`, from the committed URDF alone (any
+        backend, no scene: the URDF's joint order is the articulation's, a serial chain)."""
+        if robot is None:
+            from sapien.wrapper.pinocchio_model import PinocchioModel
+
+            xml = ARM_URDF_PATH.read_text()
+            self.model = PinocchioModel(xml, [0, 0, -9.81])
+            names = _urdf_names(xml, "link")
+            self.model.set_link_order(names)
+            self.model.set_joint_order([j.get("name") for j in ET.fromstring(xml).iter("joint")
+                                        if j.get("type") in ("revolute", "prismatic")])
+            limits = np.array([[float(j.find("limit").get("lower")), float(j.find("limit").get("upper"))]
+                               for j in ET.fromstring(xml).iter("joint") if j.get("type") in ("revolute", "prismatic")])
+        else:
+            art = robot._objs[0] if hasattr(robot, "_objs") else robot
+            self.model = art.create_pinocchio_model()
+            names = [link.name for link in art.get_links()]
+            limits = np.concatenate([j.get_limits() for j in art.get_active_joints()])
         self.tcp_index = next(i for i, n in enumerate(names) if n == tcp_link_name or n.endswith("_" + tcp_link_name))
-        limits = np.concatenate([j.get_limits() for j in art.get_active_joints()])
         self.lower, self.upper = limits[:, 0], limits[:, 1]
 
     def _wrap(self, q: np.ndarray) -> np.ndarray:
@@ -70,6 +87,10 @@ class ArmIK:
             return None
         err_p, err_r = pose_error(self.fk(q), target)
         return q if err_p <= pos_tol and err_r <= rot_tol_deg else None
+
+
+def _urdf_names(xml: str, tag: str) -> list[str]:
+    return [node.get("name") for node in ET.fromstring(xml) if node.tag == tag]
 
 
 def pose_error(a: sapien.Pose, b: sapien.Pose) -> tuple[float, float]:

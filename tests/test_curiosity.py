@@ -75,3 +75,36 @@ def test_normalized_variant_divides_by_the_running_std_and_is_not_capped():
 def test_a_strength_that_is_not_positive_is_refused():
     with pytest.raises(ValueError, match="strength"):
         ICM(43, 6, strength=0.0)
+
+
+def test_reward_and_losses_match_numbers_computed_by_hand():
+    """An ICM with weights set by hand: the encoder the identity up to its two Swish layers, the forward model
+    predicting the constant c, the inverse model the constant action 0.5. With s' = 0, phi(s') = 0, so the
+    forward error is 0.5 |c|^2 and the inverse loss the squared distance of the actions from 0.5."""
+    icm = ICM(2, 1, strength=0.02, encoding_size=2, hidden=2)
+    with torch.no_grad():
+        for layer in [m for m in icm.modules() if isinstance(m, torch.nn.Linear)]:
+            layer.weight.zero_()
+            layer.bias.zero_()
+        enc = [m for m in icm.encoder.modules() if isinstance(m, torch.nn.Linear)]
+        for layer in enc:
+            layer.weight.copy_(torch.eye(2))
+        icm.forward_model[-1].bias.copy_(torch.tensor([3.0, 4.0]))
+        icm.inverse[-1].bias.fill_(0.5)
+    icm.updated.fill_(True)
+    obs = torch.tensor([[1.0, -2.0], [0.5, 0.0]])
+    next_obs = torch.zeros(2, 2)
+    act = torch.tensor([[1.0], [-1.0]])
+    # 0.5 * (3^2 + 4^2) = 12.5, times the strength 0.02: 0.25 (below the cap of 1)
+    assert torch.allclose(icm.intrinsic_reward(obs, next_obs, act), torch.tensor([0.25, 0.25]))
+    parts = icm.losses(obs, next_obs, act)
+    assert torch.isclose(parts["forward"], torch.tensor(12.5))
+    assert torch.isclose(parts["inverse"], torch.tensor(((1 - 0.5) ** 2 + (-1 - 0.5) ** 2) / 2))  # 1.25
+    assert torch.isclose(parts["loss"], torch.tensor(10 * (0.2 * 12.5 + 0.8 * 1.25)))
+    # error 0.5 * 10^2 = 50 = 1 / strength: reward exactly 1; beyond it, still 1
+    with torch.no_grad():
+        icm.forward_model[-1].bias.copy_(torch.tensor([10.0, 0.0]))
+    assert torch.allclose(icm.intrinsic_reward(obs, next_obs, act), torch.ones(2))
+    with torch.no_grad():
+        icm.forward_model[-1].bias.copy_(torch.tensor([20.0, 0.0]))
+    assert torch.allclose(icm.intrinsic_reward(obs, next_obs, act), torch.ones(2))

@@ -11,13 +11,14 @@ import numpy as np
 import pytest
 import sapien
 import torch
+
 from mani_skill.utils.wrappers import CPUGymWrapper, RecordEpisode
 
 from ms_construction.curriculum import STAGES
 from ms_construction.envs import ENV_IDS
 from ms_construction.parameters import ELEMENT_KINDS
 
-from tests.helpers import JointMover, StepLog, make_env, quat_z, to_sapien
+from tests.helpers import PLAN_TRIES, TEST_EXPERT_CONFIG, JointMover, StepLog, make_env, quat_z, to_sapien
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -220,9 +221,13 @@ def test_sparse_reward_is_algorithm_one_step_by_step():
     from ms_construction.planning import MotionPlanningExpert
 
     env = StepLog(make_env("Flooring-v1", reward_mode="sparse"))
-    expert = MotionPlanningExpert(env)
-    assert expert.run(1).placed
+    expert = MotionPlanningExpert(env, TEST_EXPERT_CONFIG)  # as robust as the other expert tests
+    for _ in range(PLAN_TRIES):
+        result = expert.run(1)
+        if result.placed:
+            break
     expert.close()
+    assert result.placed, result.failure
     r = np.array(env.rewards)
     grasp_steps = np.flatnonzero(r == 1.0)
     assert len(grasp_steps) == 1, "+1 exactly once, on the first grasp"
@@ -336,38 +341,54 @@ def test_cpu_hold_computes_the_same_velocities_as_the_batched_hold(env_id):
     env.close()
 
 
-def test_held_element_driven_into_the_slab_does_not_pass_through():
-    """Hold a ceiling panel under solid slab (no opening) and drive the plate 0.3 m past the slab's
-    underside: the panel stops at the slab."""
-    env = make_env("CeilingInstallation-v1")
+PUSH_PAST = 0.2
+"""m; how far beyond the surface the plate's target would put the element's leading face."""
+SOLID_SURFACES = {
+    # env: (tcp position facing a solid part of the site, tcp rotation [w, x, y, z] (its z axis: where the
+    #       element is pushed), axis of the world the surface faces along, where the surface is along it)
+    "CeilingInstallation-v1": ([0.0, -0.6, 2.2], [1, 0, 0, 0], 2, "story_height"),  # up into the slab, no opening
+    "WindowInstallation-v1": ([0.85, 0.0, 0.45], [np.cos(np.pi / 4), 0, np.sin(np.pi / 4), 0], 0, "wall_x"),  # below the sills
+    "Flooring-v1": ([0.0, 0.7, 0.25], [0, 1, 0, 0], 2, None),  # down onto the ground slab, away from the recesses
+}
+
+
+@pytest.mark.parametrize("env_id", list(SOLID_SURFACES))
+def test_held_element_driven_into_the_site_does_not_pass_through(env_id):
+    """Hold each kind of element facing a solid part of the site (the slab's underside, the wall under the
+    window sills, the ground) and drive the plate 0.3 m past the surface: the element stops at the surface."""
+    env = make_env(env_id)
     env.reset(seed=0)
     m = JointMover(env)
     u = m.u
-    underside = u.site.manifest["site_params"]["story_height"]
-    # plate facing up at a solid part of the slab, the panel 0.15 m below the underside
-    below = sapien.Pose([0.0, -0.6, underside - 0.2], [1, 0, 0, 0])  # tcp z up: identity rotation
-    q = m.solve(below)
+    position, rotation, axis, key = SOLID_SURFACES[env_id]
+    surface = 0.0 if key is None else u.site.manifest["site_params"][key]
+    sign = 1.0 if axis == 0 or key is not None else -1.0  # which way along the axis the plate pushes
+    kind = ELEMENT_KINDS[int(u.task_id[0])]
+    thickness = u.site.manifest["elements"][kind]["size"][2]
+    start = sapien.Pose(position, rotation)
+    q = m.solve(start)
     u.agent.robot.set_qpos(torch.tensor(q[None], dtype=torch.float32))
     u.agent.controller.reset()
     m.q = q
-    hold = sapien.Pose([0, 0, u.site.manifest["elements"]["ceiling"]["size"][2] / 2], [0, 1, 0, 0])
+    hold = sapien.Pose([0, 0, thickness / 2], [0, 1, 0, 0])  # the grasp face (+z) against the plate
     state = u.get_state_dict()
     state["task"]["held"][:] = True
     state["task"]["hold_pose_in_tcp"][:] = torch.tensor([[*hold.p, *hold.q]])
     u.set_state_dict(state)
-    u.obj.set_pose(below * hold)
+    u.obj.set_pose(start * hold)
     m.move_to(q, 5)
     assert bool(u.held[0])
-    top_before = float(u.obj.pose.p[0, 2]) + 0.015
-    assert top_before < underside - 0.03
-    q_up = m.ik.solve(sapien.Pose([0.0, -0.6, underside + 0.1], [1, 0, 0, 0]), seeds=[q], n_random=0)
-    assert q_up is not None
-    tops = []
+    lead = lambda: sign * (float(u.obj.pose.p[0, axis]) + sign * thickness / 2)  # noqa: E731  the leading face
+    assert lead() < sign * surface - 0.03, "the element starts short of the surface"
+    push = sign * (sign * surface - lead() + PUSH_PAST)  # the plate's way along the axis: the element this far past
+    q_past = m.ik.solve(sapien.Pose(np.array(position) + np.eye(3)[axis] * push, rotation), seeds=[q], n_random=0)
+    assert q_past is not None, "the pushed-through pose is reachable"
+    leads = []
     for _ in range(3):
-        m.move_to(q_up, 10, stop_on_done=False)
-        tops.append(float(u.obj.pose.p[0, 2]) + 0.015)
-    assert max(tops) < underside + 0.01, f"panel top reached {max(tops):.3f} m, slab underside {underside} m"
-    assert max(tops) > underside - 0.05, "the panel never reached the slab"
+        m.move_to(q_past, 10, stop_on_done=False)
+        leads.append(lead())
+    assert max(leads) < sign * surface + 0.01, f"{kind}: leading face reached {max(leads):.3f}, surface at {sign * surface}"
+    assert max(leads) > sign * surface - 0.05, f"{kind}: the element never reached the surface"
     env.close()
 
 

@@ -12,20 +12,31 @@ from baselines.ppo.ppo import Args as PPOArgs
 from ms_construction.vector_env import CPUVectorEnv
 
 
-def test_shipped_general_agent_places_on_every_task(tmp_path):
+SHIPPED_EPISODES = 80
+SHIPPED_MAX_FAILURES = 1
+
+
+def test_shipped_general_agent_places_at_its_published_rate(tmp_path):
+    """The main job's agent on SHIPPED_EPISODES fixed test seeds per task fails at most SHIPPED_MAX_FAILURES.
+
+    Why these numbers: docs/RESULTS.md publishes 99.5-100% placed per task (50,000 steps each). With 80 episodes
+    and at most 1 failure, an agent that places 99.5% passes on unseen seeds 94% of the time, and one 5 points
+    worse (94.5%) passes only 6% of the time (binomial: P(X <= 1), X ~ Bin(80, 0.055) = 0.061); at 90% it passes
+    0.2% of the time. The seeds are fixed (physx_cpu replays them exactly), so the shipped agent's outcome here
+    is the same on every run; the slack of one failure keeps a machine whose floating point differs from
+    failing on one borderline episode."""
     out = tmp_path / "eval.json"
-    results = evaluation.main(evaluation.Args(all=True, episodes=10, seed=1_000_000, json=out))
+    results = evaluation.main(evaluation.Args(all=True, episodes=SHIPPED_EPISODES, seed=1_000_000, json=out))
     data = json.loads(out.read_text())
     assert set(data["tasks"]) == {"CeilingInstallation-v1", "WindowInstallation-v1", "Flooring-v1"}
     for env_id, r in data["tasks"].items():
-        assert r["episodes"] == 10 and len(r["episode_results"]) == 10
+        assert r["episodes"] == SHIPPED_EPISODES and len(r["episode_results"]) == SHIPPED_EPISODES
         for key in ("pick_success", "place_success"):
-            assert 0.0 <= r[key] <= 1.0
             lo, hi = r[f"{key}_ci95"]
-            assert 0.0 <= lo <= r[key] <= hi <= 1.0
+            assert (lo, hi) == pytest.approx(evaluation.wilson(round(r[key] * SHIPPED_EPISODES), SHIPPED_EPISODES))
         assert r["mean_length"] <= 250 and isinstance(r["mean_return"], float)
-        # a broken checkpoint or a task regression fails here
-        assert r["place_success"] >= 0.8, (env_id, r["place_success"])
+        failures = [e["seed"] for e in r["episode_results"] if not e["placed"]]
+        assert len(failures) <= SHIPPED_MAX_FAILURES, (env_id, failures)
         assert r["pick_success"] >= r["place_success"]
     assert results["Flooring-v1"]["place_success"] == data["tasks"]["Flooring-v1"]["place_success"]
 
@@ -98,6 +109,15 @@ def test_bad_arguments_are_refused_with_the_allowed_values(tmp_path):
 def test_wilson_interval_holds_the_estimate(k, n):
     lo, hi = evaluation.wilson(k, n)
     assert 0 <= lo <= k / n <= hi <= 1 and hi - lo < 0.5
+
+
+@pytest.mark.parametrize("k,n,lo,hi", [(81, 263, 0.2553, 0.3662), (15, 148, 0.0624, 0.1605), (1, 29, 0.0061, 0.1718),
+                                       (0, 20, 0.0, 0.1611)])
+def test_wilson_interval_matches_newcombe_s_published_values(k, n, lo, hi):
+    """Newcombe (1998), Statistics in Medicine 17:857-872, Table I, method 3 (score interval without continuity
+    correction). A Wald interval gives 0.2522-0.3638 and 0.0527-0.1500 for the first two: it would fail here."""
+    got = evaluation.wilson(k, n)
+    assert got == pytest.approx((lo, hi), abs=6e-5)
 
 
 def test_sampled_actions_are_seeded_by_the_episode_and_stay_out_of_the_published_table(tmp_path):

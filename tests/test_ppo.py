@@ -4,6 +4,7 @@ import csv
 import dataclasses
 import math
 import os
+import random
 import shutil
 import signal
 import subprocess
@@ -166,8 +167,14 @@ def test_interrupted_run_resumes_with_the_uninterrupted_run_s_state(tmp_path, mo
             assert torch.equal(st[key], ref["optimizer"]["state"][pid][key]), (pid, key)
     for k, v in restored.icm.state_dict().items():
         assert torch.equal(v, ref["icm"][k]), k
+    icm_opt = restored.icm_optimizer.state_dict()
+    assert icm_opt["state"], "the curiosity optimizer has taken steps"
+    for pid, st in icm_opt["state"].items():
+        for key in ("exp_avg", "exp_avg_sq", "step"):
+            assert torch.equal(st[key], ref["icm_optimizer"]["state"][pid][key]), ("icm", pid, key)
     assert torch.equal(torch.get_rng_state(), ref["rng"]["torch"])
     assert np.random.get_state()[1].tolist() == ref["rng"]["numpy"][1].tolist()
+    assert random.getstate() == ref["rng"]["python"], "Python's random state is restored too"
     restored.eval_envs.close()
 
     resumed = ppo.main(ppo.Args(resume=str(ckpt_i)))
@@ -396,3 +403,34 @@ def test_the_command_line_refuses_a_garbage_checkpoint_without_a_traceback(tmp_p
                          capture_output=True, text=True, timeout=300, env=SCRIPT_ENV)
     assert out.returncode != 0 and "Traceback" not in out.stderr, out.stderr
     assert f"{path} is not a checkpoint" in out.stderr.strip().splitlines()[-1], out.stderr
+
+
+def test_near_goal_starts_widen_with_success_and_a_resumed_run_goes_on_from_its_radius(tmp_path, monkeypatch):
+    """The start-state curriculum in a short run of the dense recipe: radius 0 starts every near-goal episode
+    installed (placed at once), so the radius widens by its step after each iteration while they keep placing;
+    the policy changes; a resumed run sets the workers' radius from its checkpoint, not from --near-goal-radius."""
+    calls = []
+    original = ppo.call_task
+    monkeypatch.setattr(ppo, "call_task", lambda envs, name, *a: (calls.append((name, a)), original(envs, name, *a))[1])
+    common = dict(reward_mode="normalized_dense", curiosity="none", curriculum=("cp4",), near_goal_share=1.0,
+                  near_goal_radius=0.0, near_goal_step=0.05, near_goal_promote=0.5, total_timesteps=160)
+    args = tiny_args(tmp_path, exp_name="near", **common)
+    torch.manual_seed(args.seed)
+    initial = {k: v.clone() for k, v in ppo.setup(args).agent.state_dict().items()}
+    progress = ppo.main(args)
+    rows = read_csv(tmp_path / "near" / "progress.csv")
+    radii = [float(r["near_goal_radius"]) for r in rows]
+    assert radii[0] == 0.0 and int(rows[0]["near_goal_episodes"]) > 0 and float(rows[0]["near_goal_place_success"]) == 1.0
+    assert progress.near_goal_radius == pytest.approx(0.05 * sum(float(r["near_goal_place_success"]) >= 0.5 for r in rows))
+    assert progress.near_goal_radius > 0
+    assert ("set_near_goal_starts", (1.0, 0.0)) in calls and ("set_near_goal_starts", (1.0, 0.05)) in calls
+    ckpt = torch.load(tmp_path / "near" / "checkpoint.pt", weights_only=False)
+    assert ckpt["progress"]["near_goal_radius"] == progress.near_goal_radius
+    assert any(not torch.equal(v, ckpt["agent"][k]) for k, v in initial.items()), "the policy changed"
+
+    calls.clear()
+    resumed = ppo.main(ppo.Args(resume=str(tmp_path / "near" / "checkpoint.pt"), extend=True, total_timesteps=240,
+                                curriculum=("cp4",)))
+    first = next(c for c in calls if c[0] == "set_near_goal_starts")
+    assert first == ("set_near_goal_starts", (1.0, progress.near_goal_radius)), calls
+    assert resumed.global_step == 240

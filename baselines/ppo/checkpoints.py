@@ -55,6 +55,8 @@ class Progress:
     smoothed_success: Optional[float] = None
     stage_changes: list = field(default_factory=list)
     """(global_step, stage) at every stage start."""
+    near_goal_radius: Optional[float] = None
+    """the start-state curriculum's radius now (--near-goal-share); None before it starts."""
 
 
 def save_checkpoint(path: Path, args, progress: Progress, agent: Agent, optimizer, icm, icm_optimizer,
@@ -175,11 +177,14 @@ CSV_FIELDS = [
     "intrinsic_return", "episode_length", "eval_pick_success", "eval_place_success", "eval_extrinsic_return",
     "smoothed_eval_success", "sps", "learning_rate", "value_loss", "policy_loss", "entropy", "approx_kl",
     "icm_forward_loss", "icm_inverse_loss", "bc_loss", "clip_coef", "ent_coef", "end_place_dist",
-    "end_place_angle_deg", "held_at_end",
+    "end_place_angle_deg", "held_at_end", "near_goal_radius", "near_goal_episodes", "near_goal_place_success",
+    "ordinary_place_success", "ordinary_place_ceiling", "ordinary_place_window", "ordinary_place_flooring",
 ]
 """`end_*` and `held_at_end`: where the iteration's training episodes ended (mean place distance in m and
 angle error in degrees to the goal at the last step, share with the element held), what a run that
-places nothing still shows."""
+places nothing still shows. `near_goal_*`: the start-state curriculum's radius and its episodes (--near-goal-share);
+`ordinary_place_success`: the place success of the other training episodes, those from ordinary resets, and
+`ordinary_place_<task>` the same per task type."""
 
 
 class CSVLog:

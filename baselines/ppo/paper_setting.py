@@ -93,6 +93,8 @@ class Run:
     what: str
     command: str
     shipped: Optional[Path] = None
+    method: Optional[str] = None
+    """the campaign record's method line (default: the paper setting's)."""
 
 
 def general_runs(num_envs: Optional[int] = None, seed: int = 1) -> list[Run]:
@@ -154,20 +156,22 @@ def training_wall_s(progress_csv: Path, samples_per_iteration: int) -> float:
         return sum(samples_per_iteration / float(row["sps"]) for row in csv.DictReader(f) if row["sps"])
 
 
-def ship(run: Run) -> Path:
+def ship(run: Run, before_the_end: bool = False) -> Path:
     """The final policy of a run that has reached the end of its plan to `run.shipped`, with its Args and
     its campaign record (method, env steps, stages, wall time, hardware), for scripts/evaluate.py; the
-    optimizers and random states stay in the run's own checkpoint in campaign/, which resumes it."""
+    optimizers and random states stay in the run's own checkpoint in campaign/, which resumes it. With
+    `before_the_end`, the policy where the run stands now (its record says at which step of its plan)."""
     ckpt = load_checkpoint(checkpoint_of(run))
     a, progress = ckpt["args"], ckpt["progress"]
-    if progress["global_step"] < run.args.total_timesteps:
+    if progress["global_step"] < run.args.total_timesteps and not before_the_end:
         raise SystemExit(f"{run.name}: at step {progress['global_step']:,} of {run.args.total_timesteps:,}; "
                          f"ship it when it has run to the end ({run.command})")
     wall = training_wall_s(checkpoint_of(run).with_name("progress.csv"), a["num_envs"] * a["num_steps"])
     policy = {k: v for k, v in ckpt.items() if k not in ("optimizer", "icm_optimizer", "rng")}
     policy["campaign"] = dict(command=run.command, record={
-        "method": f"{run.what} (PPO, sparse reward, curiosity {a['curiosity']}; baselines/ppo/paper_setting.py)",
-        "env steps": f"{progress['global_step']:,}",
+        "method": run.method or f"{run.what} (PPO, sparse reward, curiosity {a['curiosity']}; baselines/ppo/paper_setting.py)",
+        "env steps": f"{progress['global_step']:,}" + ("" if progress["global_step"] >= run.args.total_timesteps
+                                                       else f" (of the {run.args.total_timesteps:,} planned)"),
         "stages": ", ".join(f"{stage} from step {step:,}" for step, stage in progress["stage_changes"]),
         "wall time": f"{wall / 3600:.1f} h of training iterations (rollouts and updates, summed from progress.csv; "
                      "evaluations, start-ups and pauses not counted), across sessions, with whatever else ran beside it",

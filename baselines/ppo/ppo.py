@@ -52,7 +52,7 @@ from baselines.ppo.checkpoints import CSVLog, Progress, check_fit, load_checkpoi
 from baselines.ppo.curiosity import ICM
 from baselines.ppo.evaluation import evaluate_envs, finished_episodes, reset
 from baselines.ppo.networks import Agent, make_agent, value_heads
-from baselines.ppo.update import adam, bootstrap_mask, gae, ppo_update
+from baselines.ppo.update import adam, ppo_update, signal_advantages
 from baselines.ppo.start_states import StartFromStates
 from ms_construction.curriculum import STAGE_NAMES
 from ms_construction.envs import ENV_IDS
@@ -152,6 +152,11 @@ class Args:
     the time (--obs-elapsed-time) can value right: an episode cut short of its goal loses what placing
     would have paid. `never`: no end. Default: `always` with the dense rewards, `truncated` with sparse (ML-Agents',
     which bootstraps interrupted episodes only)."""
+    success_value: Literal["absorbing", "critic"] = "absorbing"
+    """what an episode that ends by success bootstraps with, where it does (--bootstrap-at-done always or
+    terminated): `absorbing`, the success step's reward for ever (reward / (1 - gamma)), as the task card defines
+    success; `critic`, the critic's value of the last observation (ManiSkill's PPO), a guess about a state it
+    never trains on."""
     hidden_size: int = 256
     """width of the policy and value networks."""
     num_layers: int = 3
@@ -208,6 +213,21 @@ class Args:
     task_weights: Optional[tuple[float, float, float]] = None
     """the general task's sampling weights of ceiling, window and flooring in the training envs (None: uniform;
     `1 2 1`: window installation half the episodes); evaluation always samples uniformly."""
+
+    near_goal_share: float = 0.0
+    """the start-state curriculum (reverse curriculum generation, Florensa et al. 2017; no demonstrations): this
+    share of the training episodes start with the element held on a collision-free path out of its goal (the
+    tasks' `set_near_goal_starts`), at most `near_goal_radius` of the path's length out; evaluation always
+    resets as usual."""
+    near_goal_radius: float = 0.1
+    """the curriculum's first radius (fraction of a start path, 0: installed)..."""
+    near_goal_step: float = 0.1
+    """...widened by this after every iteration in which at least `near_goal_min_episodes` near-goal episodes
+    ended and at least `near_goal_promote` of them placed (up to 1)."""
+    near_goal_promote: float = 0.6
+    """success from near-goal starts that widens the radius."""
+    near_goal_min_episodes: int = 4
+    """near-goal episodes an iteration needs before its success counts."""
 
     curiosity: Literal["none", "icm", "icm_normalized"] = "icm"
     """intrinsic reward (baselines/ppo/curiosity.py): `icm` as ML-Agents computes it (the forward model's
@@ -268,12 +288,27 @@ def make_envs(args: Args, num_envs: int, device: torch.device, eval_mode: bool =
     return ManiSkillVectorEnv(env, num_envs, ignore_terminations=not partial, record_metrics=True)
 
 
+def call_task(envs: Envs, name: str, *args) -> None:
+    """The task's method `name(*args)` in every env of `envs` (set_curriculum_stage, set_near_goal_starts)."""
+    if isinstance(envs, CPUVectorEnv):
+        envs.call(name, *args)
+    else:
+        getattr(envs.unwrapped, name)(*args)
+
+
 def set_curriculum_stage(envs: Envs, stage: str) -> None:
     """Every env of `envs` to the tolerances of `stage` (Table I)."""
-    if isinstance(envs, CPUVectorEnv):
-        envs.call("set_curriculum_stage", stage)
-    else:
-        envs.unwrapped.set_curriculum_stage(stage)
+    call_task(envs, "set_curriculum_stage", stage)
+
+
+def widen_near_goal(args: Args, progress: Progress, near_goal_success: list[float]) -> bool:
+    """Widen the start-state curriculum's radius after an iteration whose near-goal episodes placed often
+    enough (--near-goal-promote); whether it widened."""
+    if (len(near_goal_success) < args.near_goal_min_episodes or np.mean(near_goal_success) < args.near_goal_promote
+            or progress.near_goal_radius >= 1.0):
+        return False
+    progress.near_goal_radius = min(1.0, progress.near_goal_radius + args.near_goal_step)
+    return True
 
 
 # ------------------------------------------------------------------------------------------------- #
@@ -325,6 +360,9 @@ def validate(args: Args) -> None:
                                           or sum(args.task_weights) <= 0):
         raise SystemExit(f"--task-weights {args.task_weights}: three weights >= 0, not all 0 (ceiling, window, flooring), "
                          "of the general task ConstructionPickPlace-v1 only")
+    for name in ("near_goal_share", "near_goal_radius", "near_goal_promote"):
+        if not 0 <= getattr(args, name) <= 1:
+            raise SystemExit(f"--{name.replace('_', '-')} must lie in [0, 1], got {getattr(args, name)}")
     if not 0 <= args.start_states_share <= 1:
         raise SystemExit(f"--start-states-share must lie in [0, 1], got {args.start_states_share}")
     if args.start_states_keep_clock and not args.start_states:
@@ -505,6 +543,10 @@ def train(run: Run) -> Progress:
         progress.stage_changes.append((0, stage))
     for e in (envs, run.eval_envs):
         set_curriculum_stage(e, stage)
+    if args.near_goal_share > 0:
+        if progress.near_goal_radius is None:
+            progress.near_goal_radius = args.near_goal_radius
+        call_task(envs, "set_near_goal_starts", args.near_goal_share, progress.near_goal_radius)
 
     run_dir.mkdir(parents=True, exist_ok=True)
     writer = SummaryWriter(str(run_dir))
@@ -567,6 +609,8 @@ def train(run: Run) -> Progress:
                     next_obs_buf[step, ep["ended"]] = infos["final_observation"][ep["ended"]]
                     for key in EPISODE_STATS.values():
                         episodes[key] += ep[key][ep["ended"]].float().tolist()
+                    episodes["near_goal"] += ep["near_goal_start"][ep["ended"]].tolist()
+                    episodes["task_id"] += ep["task_id"][ep["ended"]].tolist()
 
             # ---- log-probabilities and values, and the intrinsic reward, on the whole rollout ----
             flat = lambda x: x.reshape(-1, *x.shape[2:])  # noqa: E731
@@ -588,15 +632,8 @@ def train(run: Run) -> Progress:
                 next_value = agent.get_value(next_obs)
                 # V(last observation) where an episode ended and bootstraps (see bootstrap_mask)
                 v_final = agent.get_value(flat(next_obs_buf)).view(args.num_steps, args.num_envs, heads)
-                truncated = dones - terminated
-                signals = [(rewards if args.curiosity != "icm_normalized" else rewards + intrinsic, args.gamma,
-                            bootstrap_mask(terminated, truncated, args.bootstrap_at_done))]
-                if heads == 2:  # ML-Agents' curiosity: its own discount, and every episode end bootstraps
-                    signals.append((intrinsic, args.icm_gamma, dones))
-                advantages = torch.stack([gae(r, values[..., h], next_value[:, h], v_final[..., h] * mask, dones, gamma,
-                                              args.gae_lambda) for h, (r, gamma, mask) in enumerate(signals)], -1)
-                returns = advantages + values
-                advantages = advantages.mean(-1)  # ML-Agents: the mean of the signals' advantages
+                advantages, returns = signal_advantages(args, rewards, intrinsic, values, next_value, v_final, dones,
+                                                        terminated)
 
             # ---- update ----
             batch = dict(obs=flat(obs_buf), next_obs=flat(next_obs_buf), actions=flat(actions),
@@ -618,6 +655,17 @@ def train(run: Run) -> Progress:
                 row.update({column: float(np.mean(episodes[key])) for column, key in EPISODE_STATS.items()})
                 if episodes["intrinsic_return"]:
                     row["intrinsic_return"] = float(np.mean(episodes["intrinsic_return"]))
+            near = np.asarray(episodes["near_goal"], dtype=bool)
+            placed, task = np.asarray(episodes["success"], dtype=float), np.asarray(episodes["task_id"], dtype=int)
+            for k, kind in enumerate(ELEMENT_KINDS):
+                if ((task == k) & ~near).any():
+                    row[f"ordinary_place_{kind}"] = float(placed[(task == k) & ~near].mean())
+            if args.near_goal_share > 0:
+                row.update(near_goal_radius=progress.near_goal_radius, near_goal_episodes=int(near.sum()),
+                           near_goal_place_success=float(placed[near].mean()) if near.any() else float("nan"),
+                           ordinary_place_success=float(placed[~near].mean()) if (~near).any() else float("nan"))
+                if widen_near_goal(args, progress, placed[near].tolist()):
+                    call_task(envs, "set_near_goal_starts", args.near_goal_share, progress.near_goal_radius)
             if progress.iteration % args.eval_freq == 0 or progress.iteration == num_iterations:
                 result = evaluate_envs(agent, run.eval_envs, args.num_eval_steps, seed=args.seed + 10_000 + progress.iteration)
                 s, a = result["eval_place_success"], args.success_smoothing

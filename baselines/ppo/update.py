@@ -38,6 +38,32 @@ def gae(rewards: torch.Tensor, values: torch.Tensor, next_value: torch.Tensor, f
     return advantages
 
 
+def signal_advantages(args, rewards: torch.Tensor, intrinsic: torch.Tensor, values: torch.Tensor,
+                      next_value: torch.Tensor, final_values: torch.Tensor, dones: torch.Tensor,
+                      terminated: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+    """The advantages [steps, envs] and the value heads' returns [steps, envs, heads] of a rollout, one GAE per
+    reward signal with the settings of `args` (ppo.py's Args): the extrinsic signal (`rewards`, plus the
+    `intrinsic` reward for `icm_normalized`) with `gamma`, bootstrapping at the episode ends
+    `bootstrap_at_done` names; with `icm` (ML-Agents' curiosity, two value heads) the intrinsic signal too,
+    with `icm_gamma` and a bootstrap at every episode end (curiosity ignores them). `values`, `next_value` and
+    `final_values` hold one column per head; the advantage is the mean of the signals' (ML-Agents). With
+    `success_value="absorbing"` an episode that ended by success and bootstraps there (dense rewards) takes the
+    value of staying in its last state for ever, its reward / (1 - gamma), not the critic's guess: the critic
+    never trains on a state after success (the env resets), and a guess below that lets holding near the goal
+    outvalue placing."""
+    truncated = dones - terminated
+    extrinsic = rewards + intrinsic if args.curiosity == "icm_normalized" else rewards
+    if getattr(args, "success_value", "critic") == "absorbing":
+        final_values = final_values.clone()
+        final_values[..., 0] = torch.where(terminated.bool(), extrinsic / (1 - args.gamma), final_values[..., 0])
+    signals = [(extrinsic, args.gamma, bootstrap_mask(terminated, truncated, args.bootstrap_at_done))]
+    if values.shape[-1] == 2:
+        signals.append((intrinsic, args.icm_gamma, dones))
+    advantages = torch.stack([gae(r, values[..., h], next_value[:, h], final_values[..., h] * mask, dones, gamma,
+                                  args.gae_lambda) for h, (r, gamma, mask) in enumerate(signals)], -1)
+    return advantages.mean(-1), advantages + values
+
+
 def ppo_update(agent: Agent, optimizer: optim.Optimizer, batch: dict, args, icm: Optional[ICM] = None,
                icm_optimizer: Optional[optim.Optimizer] = None, demos: Optional[tuple] = None,
                value_only: bool = False) -> dict[str, float]:

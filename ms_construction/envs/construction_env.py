@@ -27,6 +27,7 @@ from mani_skill.utils.structs.types import GPUMemoryConfig, SimConfig
 from ms_construction.agents.construction_arm import ConstructionArm
 from ms_construction.agents.suction_gripper import PLATE_ELEMENT_COLLISION_BIT, SuctionGripper, grasp_ray
 from ms_construction.curriculum import TOLERANCE_KEYS, resolve_tolerances, stage_tolerances, validate_tolerances
+from ms_construction.goal_configurations import install_configurations, symmetry_period
 from ms_construction.parameters import (
     DROP_CLEARANCE,
     ELEMENT_KINDS,
@@ -37,7 +38,7 @@ from ms_construction.parameters import (
     STORAGE_XY,
     SYMMETRIES_DEG,
 )
-from ms_construction.rotations import pose_mul, qangle_deg, qaxis, qconj, qmul, quat_z
+from ms_construction.rotations import pose_inv, pose_mul, qangle_deg, qaxis, qconj, qmul, quat_z
 from ms_construction.site import ConstructionSiteSceneBuilder, build_element
 
 ROBOT_INIT_QPOS_NOISE = 0.02
@@ -113,6 +114,7 @@ class ConstructionTaskEnv(BaseEnv):
         self.obs_elapsed_time = bool(obs_elapsed_time)
         self.robot_init_qpos_noise = robot_init_qpos_noise
         self._step_grasp_frame, self._in_step_readout = None, False
+        self.near_goal_share, self.near_goal_radius = 0.0, 0.0
         kwargs.setdefault("render_backend", default_render_backend())
         super().__init__(*args, robot_uids=robot_uids, **kwargs)
 
@@ -195,10 +197,16 @@ class ConstructionTaskEnv(BaseEnv):
                                       self.gpu_sim_enabled)
         self.picked = torch.zeros(n, dtype=torch.bool, device=dev)
         self.first_grasp_now = torch.zeros(n, dtype=torch.bool, device=dev)
+        self.near_goal_start = torch.zeros(n, dtype=torch.bool, device=dev)
+        self._start_paths = None  # the start-state curriculum's paths, loaded when it is first switched on
         self.tolerances = torch.tensor([[self._tol_init[k] for k in TOLERANCE_KEYS]], **f32).repeat(n, 1)
         self.obj = self.elements[self.TASKS[0]]
         self._element_body_index: Optional[torch.Tensor] = None  # [kinds, num_envs], GPU only
         self._task_onehot = torch.eye(len(kinds), **f32)
+        # the dense reward's carry: installation configurations [3, slots, K, 6] (IK, a few seconds: made when
+        # first needed) and joint 6's period per kind
+        self._install_q: Optional[torch.Tensor] = None
+        self._sym_period = torch.tensor([symmetry_period(k) for k in kinds], **f32)
 
     def _build_goal_marker(self, kind: str, manifest: dict) -> Actor:
         """A translucent green ghost of the element at its goal (human render only)."""
@@ -244,6 +252,72 @@ class ConstructionTaskEnv(BaseEnv):
             self.held[env_idx] = False
             self.picked[env_idx] = False
             self.first_grasp_now[env_idx] = False
+            self.near_goal_start[env_idx] = False
+            if self.near_goal_share > 0:
+                self._start_near_goal(env_idx)
+
+    # ------------------------------------------------------------------------------------- #
+    # start-state curriculum (reverse curriculum generation, Florensa et al. 2017)
+    # ------------------------------------------------------------------------------------- #
+    def set_near_goal_starts(self, share: float, radius: float) -> None:
+        """From the next reset on, a `share` of episodes start with the element already held, the arm posed a
+        fraction in [0, `radius`] of the way out along a start path from its installation configuration
+        (`goal_configurations.StartPaths`: backed off the goal along the plate's axis, then on the joint line to
+        a lift above the staging table), within the path's collision-free part. Everything comes from IK of
+        the goal and the table (no demonstrations). `info["near_goal_start"]` marks those episodes. A training
+        device: evaluations use ordinary resets (share 0, the default)."""
+        for name, value in (("share", share), ("radius", radius)):
+            if not 0 <= value <= 1:
+                raise ValueError(f"near-goal starts: {name} must lie in [0, 1], got {value}")
+        if share > 0 and self._start_paths is None:
+            from ms_construction.goal_configurations import start_paths
+
+            paths = start_paths()
+            f32 = dict(dtype=torch.float32, device=self.device)
+            self._start_paths = dict(waypoints=torch.tensor(paths.waypoints, **f32), free=torch.tensor(paths.free, **f32),
+                                     usable=torch.tensor(paths.usable, device=self.device).flatten(2).float())
+        self.near_goal_share, self.near_goal_radius = float(share), float(radius)
+
+    @staticmethod
+    def _path_points(waypoints: torch.Tensor, fraction: torch.Tensor) -> torch.Tensor:
+        """[m, 6]: the configurations `fraction` [m] of the way along polylines of joint configurations [m, p, 6],
+        by their summed joint-space (L1) length (goal_configurations.path_point, batched)."""
+        seg = (waypoints[:, 1:] - waypoints[:, :-1]).abs().sum(-1)  # [m, p - 1]
+        at = (fraction * seg.sum(-1))[:, None]
+        start = torch.cumsum(seg, -1) - seg
+        w = ((at - start) / seg.clamp(min=1e-9)).clamp(0, 1) * (seg > 0)  # how far along each segment
+        return waypoints[:, 0] + (w[..., None] * (waypoints[:, 1:] - waypoints[:, :-1])).sum(1)
+
+    def _start_near_goal(self, env_idx: torch.Tensor) -> None:
+        sp, b = self._start_paths, len(env_idx)
+        chosen = torch.rand(b) < self.near_goal_share
+        if not bool(chosen.any()):
+            return
+        idx = env_idx[chosen]
+        task, slot = self.task_id[idx], self.goal_slot[idx]
+        path = torch.multinomial(sp["usable"][task, slot], 1)[:, 0]  # a usable (configuration, side) of the slot
+        c, side = path // 2, path % 2
+        frac = torch.rand(len(idx)) * torch.clamp(sp["free"][task, slot, c, side], max=self.near_goal_radius)
+        q = self._path_points(sp["waypoints"][task, slot, c, side], frac)
+        turn = (torch.rand(len(idx)) * 2 - 1) * START_YAW_NOISE_DEG  # the element's turn on the plate
+        q[:, 5] += torch.deg2rad(turn)
+        qpos = self.agent.robot.get_qpos()[env_idx].clone()
+        qpos[chosen] = q
+        self.agent.reset(qpos)
+        if self.gpu_sim_enabled:  # link poses follow the new joint positions only after a kinematics update
+            self.scene._gpu_apply_all()
+            self.scene.px.gpu_update_articulation_kinematics()
+            self.scene._gpu_fetch_all()
+        tcp = self.agent.tcp.pose.raw_pose[idx]
+        grasp = self._grasp_in_el[task]
+        hold = pose_inv(torch.cat([grasp[:, :3], qmul(grasp[:, 3:], quat_z(turn))], -1))
+        element = self.obj.pose.raw_pose[env_idx].clone()
+        element[chosen] = pose_mul(tcp, hold)
+        self.obj.set_pose(Pose.create(element))
+        self.gripper.held[idx] = True
+        self.gripper.hold_pose_in_tcp[idx] = hold
+        self.picked[idx] = True
+        self.near_goal_start[idx] = True
 
     def _place_goal_markers(self, env_idx: torch.Tensor) -> None:
         task, goal = self.task_id[env_idx], self._goal_table[self.task_id[env_idx], self.goal_slot[env_idx]]
@@ -383,6 +457,7 @@ class ConstructionTaskEnv(BaseEnv):
             place_dist=place_dist,
             place_angle_deg=place_angle,
             task_id=self.task_id.clone(),
+            near_goal_start=self.near_goal_start.clone(),
         )
 
     def _grasp_frame(self) -> torch.Tensor:
@@ -422,23 +497,50 @@ class ConstructionTaskEnv(BaseEnv):
         reward[info["success"]] = 2.0
         return reward
 
+    CARRY_RANGE = 12.0
+    """rad; the carry term falls linearly from 1 at an installation configuration to 0 this far (summed over the
+    joints) from the nearest one: a lift above the staging table leaves the arm 2.6-10.3 rad from its goal."""
+
+    def plate_turn(self) -> torch.Tensor:
+        """[n] rad; how far the held element is turned on the plate about the plate's axis (the grasp keeps the
+        element's yaw relative to the plate); 0 when it lies as in `install_configurations`."""
+        grasp_q = self._grasp_in_el[self.task_id, 3:]
+        turn = qmul(qconj(grasp_q), qconj(self.hold_pose_in_tcp[:, 3:]))  # a rotation about the plate's z axis
+        return 2 * torch.atan2(turn[:, 3], turn[:, 0])
+
+    def carry_distance(self) -> torch.Tensor:
+        """[n] rad; how far the arm is from holding its element installed, in joint space (summed over the joints):
+        to the nearest installation configuration of the env's goal slot, joint 6 shifted by the element's turn
+        on the plate and compared modulo the element's symmetry period. Falls at every step of a straight joint
+        move to the goal from anywhere (the turret turning the way its limits allow), and so along any carry
+        that heads there; no demonstrations involved."""
+        if self._install_q is None:
+            self._install_q = torch.tensor(install_configurations(), dtype=torch.float32, device=self.device)
+        q = self.agent.robot.get_qpos()
+        diff = q[:, None, :] - self._install_q[self.task_id, self.goal_slot]  # [n, K, 6]
+        period = self._sym_period[self.task_id][:, None]
+        d6 = torch.remainder(diff[..., 5] - self.plate_turn()[:, None] + period / 2, period) - period / 2
+        return (diff[..., :5].abs().sum(-1) + d6.abs()).min(-1).values
+
     def compute_dense_reward(self, obs: Any, action: torch.Tensor, info: dict):
-        """Staged: reach and face the grasp surface (<= 1); held: 2 + carry (<= 1) + orient (<= 1);
-        placed: 5, more than any other step, for a learner that bootstraps at success (ManiSkill's
-        convention; see the task card)."""
+        """Staged, as ManiSkill's tasks: reach and face the grasp surface (<= 1); held: 2 + carry (<= 1) + fit
+        (<= 1); placed: 5, more than any other step, for a learner that bootstraps at success (ManiSkill's
+        convention; see the task card). Carry is linear in the arm's joint-space distance from its installation
+        configuration (`carry_distance`), so it pulls at the same rate from the pick to the goal, the way the
+        turret's limits allow, and turns the element as it carries it; fit is 1 - tanh(5 d) of the element's
+        distance d from its goal, scaled by its angle error, which takes over for the last decimetres."""
         tcp = self.agent.tcp.pose.raw_pose
         grasp = self._grasp_frame()
-        el, goal = self.obj.pose.raw_pose, self._goal_table[self.task_id, self.goal_slot]
         # tanh(d), not tanh(3d): the element starts about 2 m from the plate and must still pull
         reach = 1 - torch.tanh(torch.linalg.norm(grasp[:, :3] - tcp[:, :3], dim=-1))
         face = (1 + (qaxis(tcp[:, 3:], 2) * qaxis(grasp[:, 3:], 2)).sum(-1)) / 2
         # bearing around the pedestal: straight-line distance alone pulls the plate over the
         # pedestal (a dead end) when the target is behind the arm; turning the turret must pay
         approach = 0.25 * _bearing(tcp[:, :2], grasp[:, :2]) + 0.75 * reach * (0.5 + 0.5 * face)
-        carry = 0.25 * _bearing(el[:, :2], goal[:, :2]) + 0.75 * (1 - torch.tanh(info["place_dist"]))
-        orient = 1 - info["place_angle_deg"] / 180
+        carry = 1 - (self.carry_distance() / self.CARRY_RANGE).clamp(max=1)
+        fit = (1 - torch.tanh(5 * info["place_dist"])) * (1 - info["place_angle_deg"] / 180)
         held = info["is_grasped"].float()
-        reward = (1 - held) * approach + held * (2 + carry + orient)
+        reward = (1 - held) * approach + held * (2 + carry + fit)
         return torch.where(info["success"], torch.full_like(reward, self.DENSE_REWARD_MAX), reward)
 
     def compute_normalized_dense_reward(self, obs: Any, action: torch.Tensor, info: dict):

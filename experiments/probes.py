@@ -1,0 +1,81 @@
+"""The from-scratch work's short probes (Flooring-v1 first): what each changed, and what its curve showed.
+
+    python -m experiments.probes            # the table into docs/experiments/from_scratch.md, from the CSVs
+
+Each probe is a ppo.py run of a few hundred thousand env steps; its progress.csv is kept in
+docs/data/from_scratch/probes/<name>.csv (copy it there from runs/probes/<name>/ when it ends). The table
+reports, over the last fifth of each probe's iterations, the means of its training episodes: pick success,
+place success of ordinary resets and of near-goal starts, the start radius reached, and where the element
+ended (m from its goal).
+"""
+
+from __future__ import annotations
+
+import csv
+import math
+from pathlib import Path
+
+from ms_construction.reporting import update_section
+
+PROBE_DIR = Path("docs/data/from_scratch/probes")
+PAGE = Path("docs/experiments/from_scratch.md")
+COMMON = ("python baselines/ppo/ppo.py --env-id Flooring-v1 --curiosity none --curriculum cp4 --num-steps 1000 "
+          "--log-dir runs/probes --eval-freq 5")
+PROBES = {
+    "probeA_floor_jointcarry": ("the new dense reward (joint-space carry), ppo.py's dense defaults (gamma 0.99, 4 x 4 "
+                                "minibatches, bootstrap with the critic at success)",
+                                "--reward-mode dense --num-minibatches 4 --total-timesteps 300000"),
+    "probeB_floor_neargoal": ("A + half the episodes from near-goal starts (paths to a lift 0.25 m above the table)",
+                              "--reward-mode dense --num-minibatches 4 --total-timesteps 300000 --near-goal-share 0.5 "
+                              "--success-value critic"),
+    "probeC_floor_neargoal_absorbing": ("B + success valued as absorbing (its reward for ever) instead of the critic's guess",
+                                        "--reward-mode dense --num-minibatches 4 --total-timesteps 300000 "
+                                        "--near-goal-share 0.5"),
+    "probeD_floor_ng_norm_g95_e8": ("C + normalized_dense, gamma 0.95, 8 epochs of 8 minibatches; paths with a raised "
+                                    "corner to a lift 0.5 m up",
+                                    "--reward-mode normalized_dense --gamma 0.95 --update-epochs 8 --num-minibatches 8 "
+                                    "--total-timesteps 300000 --near-goal-share 0.5"),
+    "probeE_floor_ng_table": ("D + the start paths go on down to the element lying on the table (radius 1: just grasped)",
+                              "--reward-mode normalized_dense --gamma 0.95 --update-epochs 8 --num-minibatches 8 "
+                              "--total-timesteps 400000 --near-goal-share 0.5"),
+}
+"""name: (what it changed, its arguments beyond COMMON), in the order they ran."""
+
+
+def _mean(rows: list[dict], key: str) -> float:
+    values = [float(r[key]) for r in rows if r.get(key) not in ("", None) and not math.isnan(float(r[key]))]
+    return sum(values) / len(values) if values else float("nan")
+
+
+def _pct(x: float) -> str:
+    return "-" if math.isnan(x) else f"{100 * x:.0f}%"
+
+
+def table() -> str:
+    lines = ["| probe | what it changed | env steps | pick | placed, ordinary resets | placed, near-goal starts | "
+             "start radius | element ends (m from goal) |", "|---|---|---|---|---|---|---|---|"]
+    for name, (what, _) in PROBES.items():
+        path = PROBE_DIR / f"{name}.csv"
+        if not path.is_file():
+            continue
+        with open(path, newline="") as f:
+            rows = list(csv.DictReader(f))
+        last = rows[-max(1, len(rows) // 5):]
+        ordinary = _mean(last, "ordinary_place_success")
+        if math.isnan(ordinary):  # a probe without near-goal starts: every episode is an ordinary one
+            ordinary = _mean(last, "place_success")
+        radius = last[-1].get("near_goal_radius") or ""
+        lines.append(f"| {name.split('_')[0]} | {what} | {int(rows[-1]['global_step']):,} | {_pct(_mean(last, 'pick_success'))} | "
+                     f"{_pct(ordinary)} | {_pct(_mean(last, 'near_goal_place_success'))} | "
+                     f"{float(radius):.1f} | {_mean(last, 'end_place_dist'):.2f} |" if radius else
+                     f"| {name.split('_')[0]} | {what} | {int(rows[-1]['global_step']):,} | {_pct(_mean(last, 'pick_success'))} | "
+                     f"{_pct(ordinary)} | - | - | {_mean(last, 'end_place_dist'):.2f} |")
+    commands = "\n".join(f"- {name.split('_')[0]}: `{COMMON} {args} --exp-name {name}`" for name, (_, args) in PROBES.items())
+    return ("Command: `python -m experiments.probes` (from docs/data/from_scratch/probes/*.csv).\n\n"
+            "Means over the last fifth of each probe's iterations, of its training episodes (stochastic policy).\n\n"
+            + "\n".join(lines) + "\n\nThe probes' commands:\n\n" + commands)
+
+
+if __name__ == "__main__":
+    update_section(PAGE, "from-scratch-probes", table(), "Learning from reward alone: the experiment")
+    print(f"wrote the probe table to {PAGE}")

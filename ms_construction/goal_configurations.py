@@ -1,0 +1,228 @@
+"""The arm's joint configurations at the two ends of a carry, from inverse kinematics of the site's poses alone.
+
+- `install_configurations`: per task type and goal slot, the configurations that hold the element installed
+  (its goal pose, the element centred on the plate with no turn about the plate's axis), turret facing the
+  goal. The dense reward's carry term measures the arm's way to the nearest of them in joint space: a
+  distance that falls at every step of a carry from wherever the element was picked, turns the turret the
+  way its limits allow, and holds the element's orientation (wrist joints) and position together.
+- `lift_configurations`: per task type, the configuration that holds the element lifted above the middle
+  of the staging table, one per side the turret can reach the table from. The start-state curriculum poses
+  the arm on the joint line between a lift and an installation.
+
+Nothing here comes from demonstrations: the URDF, the manifest's goal and grasp poses, and IK.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import functools
+
+import numpy as np
+import sapien
+
+from ms_construction.assets import load_manifest
+from ms_construction.kinematics import ArmIK
+from ms_construction.parameters import DROP_CLEARANCE, ELEMENT_KINDS, START_YAW_DEG, SYMMETRIES_DEG
+
+CONFIGS_PER_SLOT = 4
+"""installation configurations kept per goal slot (IK branches: elbow, wrist flip); fewer found are repeated."""
+LIFT_HEIGHT = 0.5
+"""m; the lift configurations hold the element's grasp face this far above where it lies on the table."""
+STANDOFF = 0.3
+"""m; the start paths' middle point backs the element off its goal this far along the plate's axis (out of
+its opening), as the planning expert's install line does."""
+IK_SEEDS = 64
+"""random IK restarts per pose (seeded: the tables are the same in every process)."""
+
+
+def symmetry_period(kind: str) -> float:
+    """rad; the element's installation repeats when the plate turns by this about its axis (2 pi / symmetries)."""
+    return 2 * np.pi / len(SYMMETRIES_DEG[kind])
+
+
+def _wrap(a: np.ndarray | float) -> np.ndarray | float:
+    return (np.asarray(a) + np.pi) % (2 * np.pi) - np.pi
+
+
+def _solutions(ik: ArmIK, target: sapien.Pose) -> list[np.ndarray]:
+    rng = np.random.default_rng(0)
+    seeds = [rng.uniform(ik.lower, ik.upper) for _ in range(IK_SEEDS)]
+    return ik.solve_all(target, seeds, min_distance=0.05)
+
+
+def _pose(raw) -> sapien.Pose:
+    raw = np.asarray(raw, dtype=np.float64)
+    return sapien.Pose(raw[:3], raw[3:])
+
+
+@functools.lru_cache(maxsize=None)
+def install_configurations() -> np.ndarray:
+    """[kinds, slots, CONFIGS_PER_SLOT, 6]: configurations at each goal (kinds in ELEMENT_KINDS order). Joint 6
+    is wrapped into [-pi, pi) modulo nothing: the reward compares it modulo the element's symmetry period and
+    shifts it by the element's actual turn on the plate."""
+    m, ik = load_manifest(), ArmIK()
+    table = []
+    for kind in ELEMENT_KINDS:
+        grasp = _pose(m["elements"][kind]["grasp_pose"])
+        period = symmetry_period(kind)
+        per_slot = []
+        for slot, goal in enumerate(m["goal_poses"][kind]):
+            bearing = np.arctan2(goal[1], goal[0])
+            kept: list[np.ndarray] = []
+            for q in _solutions(ik, _pose(goal) * grasp):
+                if abs(_wrap(q[0] - bearing)) > np.pi / 2:  # reaching back over the pedestal
+                    continue
+                q = q.copy()
+                q[5] = (q[5] + period / 2) % period - period / 2
+                if all(np.abs(q - k).max() > 0.05 for k in kept):
+                    kept.append(q)
+            if not kept:
+                raise RuntimeError(f"no IK solution facing {kind} goal slot {slot}: the site and the arm disagree")
+            kept.sort(key=lambda q: np.abs(q[1:5]).sum())  # the least folded first (deterministic order)
+            kept = (kept * CONFIGS_PER_SLOT)[:CONFIGS_PER_SLOT]
+            per_slot.append(kept)
+        table.append(per_slot)
+    return np.asarray(table, dtype=np.float32)
+
+
+@functools.lru_cache(maxsize=None)
+def backoff_configurations() -> np.ndarray:
+    """[kinds, slots, CONFIGS_PER_SLOT, 6]: each installation configuration with the element backed off its goal by
+    STANDOFF along the plate's axis (out of its opening, as the planning expert's install line starts), the IK
+    solution reached from the installation; the installation itself where IK finds none in that branch."""
+    ik, install = ArmIK(), install_configurations().astype(np.float64)
+    out = install.copy()
+    for index in np.ndindex(install.shape[:3]):
+        q = ik.solve_from(ik.fk(install[index]) * sapien.Pose([0, 0, -STANDOFF]), install[index])
+        if q is not None:
+            out[index] = q
+    return out.astype(np.float32)
+
+
+@functools.lru_cache(maxsize=None)
+def lift_configurations(height: float = LIFT_HEIGHT) -> np.ndarray:
+    """[kinds, 2, 6]: the element lifted `height` above where it lies in the middle of the staging table at its
+    nominal yaw (0: lying there, the plate on it), with the turret at about +pi (row 0) and about -pi (row 1);
+    of each side's IK solutions the one whose joints 2-5 are nearest the rest pose."""
+    from ms_construction.agents.construction_arm import REST_QPOS
+
+    m, ik = load_manifest(), ArmIK()
+    st = m["staging"]
+    out = []
+    for k, kind in enumerate(ELEMENT_KINDS):
+        size = m["elements"][kind]["size"]
+        grasp = _pose(m["elements"][kind]["grasp_pose"])
+        z = st["center"][2] + size[2] / 2 + DROP_CLEARANCE
+        yaw = np.deg2rad(START_YAW_DEG[kind])
+        on_table = sapien.Pose([st["center"][0], st["center"][1], z], [np.cos(yaw / 2), 0, 0, np.sin(yaw / 2)])
+        target = on_table * grasp * sapien.Pose([0, 0, -height])  # back along the plate's axis: up
+        sols = _solutions(ik, target)
+        sides = []
+        for sign in (1, -1):
+            side = [q for q in sols if abs(q[0] - sign * np.pi) < np.pi / 2]
+            side += [q + np.eye(6)[0] * 2 * np.pi * sign for q in sols
+                     if abs(q[0] + 2 * np.pi * sign - sign * np.pi) < np.pi / 2 and ik.lower[0] <= q[0] + 2 * np.pi * sign <= ik.upper[0]]
+            if not side:
+                raise RuntimeError(f"no IK solution lifting the {kind} above the staging table with the turret at {sign:+d} pi")
+            sides.append(min(side, key=lambda q: np.abs(q[1:5] - REST_QPOS[1:5]).sum()))
+        out.append(sides)
+    return np.asarray(out, dtype=np.float32)
+
+
+START_TURNS_DEG = (-15.0, 0.0, 15.0)
+"""the element's turns on the plate at which a start path is checked (the starts draw theirs within them)."""
+PATH_CHECKS = 60
+"""points checked along each start path."""
+PATH_ARM_MARGIN = 0.01
+"""m; the arm's links are inflated by this much for the check; the element is taken 2 mm smaller than it is, so
+that an element flush in its opening (the path's first point) is clear."""
+
+
+
+@dataclasses.dataclass(frozen=True)
+class StartPaths:
+    """Joint paths from each installation configuration out to a lift above the staging table, in the layout
+    [kinds, slots, CONFIGS_PER_SLOT, 2 turret sides, ...]: the start-state curriculum poses the arm at a
+    fraction of a path's joint-space length (0: installed)."""
+
+    waypoints: np.ndarray
+    """[..., 5, 6]: installation; backed off by STANDOFF along the plate's axis; a corner; the lift; the element
+    lying on the staging table where a grasp leaves it (the last two with joint 6 nearest the installation's
+    modulo the element's symmetry: the wrist does not spin for nothing). The corner is the back-off with the
+    lift's arm joints (2-5), raised before it turns, where that keeps more of the path clear than the straight
+    joint line (then the corner is the back-off itself)."""
+    free: np.ndarray
+    """[...]: the fraction of the path that is clear of the site and of the arm itself for the held element, by
+    the planning expert's collision model (PATH_ARM_MARGIN) at each of START_TURNS_DEG."""
+    usable: np.ndarray
+    """[...] bool: the paths starts are drawn on, those of each goal slot whose clear fraction is at least half
+    the slot's best."""
+
+
+def _clear_fraction(planners: list, waypoints: np.ndarray, turns: list[float]) -> float:
+    clear = 0.0
+    for a in np.linspace(0.0, 1.0, PATH_CHECKS + 1):
+        q = path_point(waypoints, a)
+        for planner, t in zip(planners, turns):
+            shifted = q.copy()
+            shifted[5] += t
+            if planner.collides(shifted):
+                return clear
+        clear = a
+    return clear
+
+
+@functools.lru_cache(maxsize=None)
+def start_paths() -> StartPaths:
+    """The start paths (see StartPaths). Needs mplib: a few seconds, once per process."""
+    import tempfile
+    from pathlib import Path
+
+    from ms_construction.planning.arm_planner import ArmPlanner
+    from ms_construction.planning.collision_model import planning_srdf, planning_urdf, site_collision_objects
+
+    m = load_manifest()
+    install, lift = install_configurations().astype(np.float64), lift_configurations().astype(np.float64)
+    table = lift_configurations(0.0).astype(np.float64)
+    backoff = backoff_configurations().astype(np.float64)
+    site = site_collision_objects(m)
+    shape = install.shape[:3] + (2,)
+    waypoints, free = np.zeros(shape + (5, 6)), np.zeros(shape)
+    turns = [float(np.deg2rad(t)) for t in START_TURNS_DEG]
+    with tempfile.TemporaryDirectory(prefix="ms_construction_paths_") as workdir:
+        for k, kind in enumerate(ELEMENT_KINDS):
+            grasp, size = _pose(m["elements"][kind]["grasp_pose"]), np.asarray(m["elements"][kind]["size"])
+            period = symmetry_period(kind)
+            planners = [ArmPlanner(planning_urdf(PATH_ARM_MARGIN, size, (grasp * sapien.Pose(q=[np.cos(t / 2), 0, 0, np.sin(t / 2)])).inv(),
+                                                 -0.002), planning_srdf(True), Path(workdir), f"{kind}_{i}", dict(site))
+                        for i, t in enumerate(turns)]
+            for index in np.ndindex(shape[1:]):
+                slot, c, side = index
+                q_install, q_back = install[k, slot, c], backoff[k, slot, c]
+                q_lift, q_table = lift[k, side].copy(), table[k, side].copy()
+                for q in (q_lift, q_table):
+                    q[5] = q_install[5] + ((q[5] - q_install[5] + period / 2) % period - period / 2)
+                if np.array_equal(q_back, q_install):  # no way out of the opening in this branch
+                    waypoints[(k,) + index] = [q_install] * 3 + [q_lift, q_table]
+                    continue
+                corner = q_back.copy()
+                corner[1:5] = q_lift[1:5]
+                options = [np.array([q_install, q_back, q_back, q_lift, q_table]),
+                           np.array([q_install, q_back, corner, q_lift, q_table])]
+                clear = [_clear_fraction(planners, w, turns) for w in options]
+                best = int(np.argmax(clear))
+                waypoints[(k,) + index], free[(k,) + index] = options[best], clear[best]
+    best = free.reshape(shape[0], shape[1], -1).max(-1)[:, :, None, None]
+    return StartPaths(waypoints.astype(np.float32), free.astype(np.float32), (free >= 0.5 * best) & (best > 0))
+
+
+def path_point(waypoints: np.ndarray, fraction: float) -> np.ndarray:
+    """The configuration `fraction` of the way along a polyline of joint configurations [p, 6], by its summed
+    joint-space (L1) length (the batched twin for the env is ConstructionTaskEnv._path_points)."""
+    seg = np.abs(np.diff(waypoints, axis=0)).sum(-1)
+    at = fraction * seg.sum()
+    ends = np.cumsum(seg)
+    i = min(int(np.searchsorted(ends, at)), len(seg) - 1)
+    start = ends[i] - seg[i]
+    w = 0.0 if seg[i] == 0 else (at - start) / seg[i]
+    return waypoints[i] + w * (waypoints[i + 1] - waypoints[i])

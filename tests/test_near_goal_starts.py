@@ -1,0 +1,119 @@
+"""The dense reward's carry term and the start-state curriculum (`set_near_goal_starts`), both built from IK of the
+site's poses alone (ms_construction/goal_configurations.py).
+
+- The carry distance is 0 with the element installed, whatever its turn on the plate, and falls at every step of
+  a straight joint move from a lift above the staging table, on either turret side, to every installation
+  configuration of every goal slot (the turret turning the way its limits allow: through 0, never across +-pi).
+- A near-goal start is a valid state: the element held against the plate, nothing penetrating, still after a
+  step; radius 0 starts it installed (placed at the first step), and evaluation-style resets are untouched.
+"""
+
+import numpy as np
+import pytest
+import torch
+
+from ms_construction.goal_configurations import CONFIGS_PER_SLOT, install_configurations, lift_configurations, symmetry_period
+from ms_construction.parameters import ELEMENT_KINDS
+from ms_construction.rotations import pose_inv, pose_mul, qmul, quat_z
+
+from tests.helpers import make_env
+
+TASK_ENVS = {"ceiling": "CeilingInstallation-v1", "window": "WindowInstallation-v1", "flooring": "Flooring-v1"}
+
+
+def _hold(u, turn_deg: float) -> torch.Tensor:
+    grasp = u._grasp_in_el[u.task_id]
+    return pose_inv(torch.cat([grasp[:, :3], qmul(grasp[:, 3:], quat_z(torch.tensor([turn_deg])))], -1))
+
+
+@pytest.mark.parametrize("kind", ELEMENT_KINDS)
+def test_carry_distance_falls_on_every_carry_from_either_side_and_is_zero_installed(kind):
+    env = make_env(TASK_ENVS[kind], control_mode="pd_joint_delta_pos", reward_mode="dense")
+    env.reset(seed=0)
+    u, k = env.unwrapped, ELEMENT_KINDS.index(kind)
+    install, lift, period = install_configurations(), lift_configurations(), symmetry_period(kind)
+    u.set_held(True)
+    for slot in range(install.shape[1]):
+        u.goal_slot[:] = slot
+        for side in range(2):
+            for turn in (-12.0, 0.0, 9.0):
+                u.gripper.hold_pose_in_tcp[:] = _hold(u, turn)
+                start = lift[k, side].astype(np.float64)
+                u.agent.robot.set_qpos(torch.tensor(start[None], dtype=torch.float32))
+                assert float(u.carry_distance()[0]) < u.CARRY_RANGE, "the carry term pulls from the table already"
+                # to each installation configuration, the nearest first (the one the carry term measures at the start)
+                wrap = lambda a: (a + period / 2) % period - period / 2  # noqa: E731
+                goals = sorted(install[k, slot].astype(np.float64), key=lambda g: np.abs(g[:5] - start[:5]).sum()
+                               + abs(wrap(start[5] - g[5] - np.deg2rad(turn))))
+                for c, goal in enumerate(goals):
+                    goal = goal.copy()
+                    goal[5] += np.deg2rad(turn)
+                    # the wrist turned by whole symmetry periods to face the goal's way (the element looks the same)
+                    line_start = start.copy()
+                    line_start[5] = goal[5] + wrap(start[5] - goal[5])
+                    assert abs(goal[0] - line_start[0]) < 2 * np.pi, "the turret stays within its limits"
+                    dists = []
+                    for f in np.linspace(0.0, 1.0, 30):
+                        q = line_start + f * (goal - line_start)
+                        u.agent.robot.set_qpos(torch.tensor(q[None], dtype=torch.float32))
+                        dists.append(float(u.carry_distance()[0]))
+                    assert dists[-1] < 1e-3, (slot, c, side, turn, dists[-1])
+                    if c == 0:
+                        assert np.all(np.diff(dists) < 0), (slot, side, turn, np.round(dists, 3))
+                    else:  # heading for another branch, the carry term may first measure the nearest one
+                        assert dists[-1] < dists[0]
+    env.close()
+
+
+def _penetrations(u, depth: float = 0.005) -> list:
+    out = []
+    for contact in u.scene.px.get_contacts():
+        sep = min((p.separation for p in contact.points), default=0.0)
+        if sep < -depth:
+            out.append(([b.entity.name for b in contact.bodies], round(sep, 4)))
+    return out
+
+
+@pytest.mark.parametrize("kind", ELEMENT_KINDS)
+def test_near_goal_starts_are_valid_held_states(kind):
+    env = make_env(TASK_ENVS[kind], control_mode="pd_joint_delta_pos", reward_mode="dense")
+    u = env.unwrapped
+    u.set_near_goal_starts(1.0, 1.0)
+    dists = []
+    for seed in range(8):
+        env.reset(seed=seed)
+        element = u.obj.pose.raw_pose.clone()
+        # the element lies on the plate as a grasp leaves it
+        expected = pose_mul(u.agent.tcp.pose.raw_pose, u.hold_pose_in_tcp)
+        assert torch.allclose(element[:, :3], expected[:, :3], atol=1e-3)
+        _, _, terminated, _, info = env.step(torch.zeros(1, 6))
+        assert bool(info["is_grasped"][0]) and bool(info["picked"][0]) and bool(info["near_goal_start"][0])
+        assert not bool(info["first_grasp"][0]), "a near-goal start is not a grasp: the sparse reward's +1 is not paid"
+        assert _penetrations(u) == [], (seed, _penetrations(u))
+        assert float(torch.linalg.norm(u.obj.pose.raw_pose[0, :3] - element[0, :3])) < 0.01, "held still"
+        dists.append(float(info["place_dist"][0]))
+    assert max(dists) > 0.3, "radius 1 starts reach well away from the goal"
+    # radius 0: installed, placed at the first step
+    u.set_near_goal_starts(1.0, 0.0)
+    env.reset(seed=100)
+    assert float(u.carry_distance()[0]) < 1e-3
+    _, reward, terminated, _, info = env.step(torch.zeros(1, 6))
+    assert bool(info["success"][0]) and bool(terminated[0]) and float(reward[0]) == u.DENSE_REWARD_MAX
+    # share 0 (the default, and every evaluation): ordinary resets
+    u.set_near_goal_starts(0.0, 1.0)
+    _, info = env.reset(seed=101)
+    assert not bool(u.held[0]) and not bool(u.picked[0]) and not bool(u.near_goal_start[0])
+    with pytest.raises(ValueError, match="radius must lie in"):
+        u.set_near_goal_starts(0.5, 1.5)
+    env.close()
+
+
+def test_the_env_s_batched_path_points_are_the_reference_s():
+    from ms_construction.envs.construction_env import ConstructionTaskEnv
+    from ms_construction.goal_configurations import path_point, start_paths
+
+    wp = start_paths().waypoints.reshape(-1, 5, 6)
+    frac = torch.linspace(0, 1, len(wp))
+    got = ConstructionTaskEnv._path_points(torch.tensor(wp), frac)
+    for i in range(len(wp)):
+        np.testing.assert_allclose(got[i].numpy(), path_point(wp[i].astype(np.float64), float(frac[i])), atol=1e-5)
