@@ -3,6 +3,7 @@
     python -m experiments.from_scratch --dry-run        # the plan, and where each run stands
     python -m experiments.from_scratch                  # run (or resume) it; ships when it reaches its budget
     python -m experiments.from_scratch --ship-now       # ship the policy where the run stands now
+    python -m experiments.from_scratch --report         # its section of docs/RESULTS.md and its curve
 
 One PPO run (baselines/ppo/ppo.py) on ConstructionPickPlace-v1, resumed from its checkpoint in campaign/ when it
 has one (commit the checkpoint and progress.csv between sessions), shipped to
@@ -21,15 +22,23 @@ assets/checkpoints/scratch_general_agent.pt with its campaign record. The recipe
 
 from __future__ import annotations
 
+import csv
 import dataclasses
+import json
+import math
 import os
 from dataclasses import dataclass
+from pathlib import Path
 from typing import Optional
 
+import numpy as np
 import tyro
 
 from baselines.ppo import ppo
-from baselines.ppo.paper_setting import CAMPAIGN_DIR, SHIPPED_DIR, Run, describe, run_or_resume, ship
+from baselines.ppo.evaluation import PAPER_TABLE_II, failures, kinds, pct
+from baselines.ppo.paper_setting import CAMPAIGN_DIR, SHIPPED_DIR, Run, describe, run_or_resume, ship, training_wall_s
+from ms_construction.parameters import ELEMENT_KINDS
+from ms_construction.reporting import update_section
 
 BUDGET = 20_000_000
 """env steps at most (the issue's budget on this CPU)."""
@@ -58,6 +67,103 @@ def scratch_runs(num_envs: Optional[int] = None, seed: int = 1) -> list[Run]:
                        "demonstrations: none")]
 
 
+EVAL_JSON = Path("docs/data/paper/scratch_general_agent_eval_50k.json")
+"""the shipped agent's evaluation with the paper's protocol (the command `report` prints writes it)."""
+CURVE = Path("docs/images/scratch_curve.png")
+WINDOW = 50
+"""iterations in the curve's moving average (100,000 env steps at 2,000 per iteration)."""
+
+
+def _column(rows: list[dict], key: str) -> np.ndarray:
+    return np.array([float(r[key]) if r.get(key) not in ("", None) else np.nan for r in rows])
+
+
+def _smooth(x: np.ndarray, window: int) -> np.ndarray:
+    """The mean of the last `window` values that are there (iterations in which no such episode ended are not)."""
+    out = np.full_like(x, np.nan)
+    for i in range(len(x)):
+        part = x[max(0, i - window + 1):i + 1]
+        if np.isfinite(part).any():
+            out[i] = np.nanmean(part)
+    return out
+
+
+def draw_curve(rows: list[dict], out: Path) -> None:
+    """Place success of the training episodes from ordinary resets per task, and of the near-goal starts, against
+    env steps (moving averages over WINDOW iterations; the policy's sampled actions)."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    steps = _column(rows, "global_step") / 1e6
+    fig, ax = plt.subplots(figsize=(8, 4.2))
+    for kind, color in zip(ELEMENT_KINDS, ("tab:blue", "tab:orange", "tab:green")):
+        ax.plot(steps, 100 * _smooth(_column(rows, f"ordinary_place_{kind}"), WINDOW), color=color,
+                label=f"placed, ordinary resets: {kind}")
+    ax.plot(steps, 100 * _smooth(_column(rows, "near_goal_place_success"), WINDOW), color="gray", ls="--",
+            label="placed, near-goal starts (all tasks)")
+    ax2 = ax.twinx()
+    ax2.plot(steps, _column(rows, "near_goal_radius"), color="black", lw=0.8, ls=":", label="start radius (right axis)")
+    ax2.set_ylim(0, 1.05)
+    ax2.set_ylabel("near-goal start radius (fraction of the path)")
+    ax.set_xlabel("env steps (millions)")
+    ax.set_ylabel(f"training episodes placed, % (mean of {WINDOW} iterations)")
+    ax.set_ylim(0, 100)
+    ax.set_title("The general agent from reward alone: training curve (cp4)")
+    lines = ax.get_legend_handles_labels()
+    more = ax2.get_legend_handles_labels()
+    ax.legend(lines[0] + more[0], lines[1] + more[1], loc="upper left", fontsize=8)
+    fig.tight_layout()
+    out.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(out, dpi=110)
+    plt.close(fig)
+
+
+def report(run: Run, results: Path = Path("docs/RESULTS.md")) -> str:
+    """The section `from-scratch` of docs/RESULTS.md: where the campaign stands, its curve, and (once shipped
+    and evaluated) its Table II row beside the paper's with its failures by kind."""
+    progress = Path(run.args.log_dir) / run.args.exp_name / "progress.csv"
+    with open(progress, newline="") as f:
+        rows = list(csv.DictReader(f))
+    done = int(rows[-1]["global_step"])
+    late = [r for r in rows if int(r["global_step"]) > done - 200_000]
+    mean = lambda key: np.nanmean(_column(late, key)) if np.isfinite(_column(late, key)).any() else math.nan  # noqa: E731
+    fmt = lambda x: "-" if math.isnan(x) else f"{100 * x:.1f}"  # noqa: E731
+    wall = training_wall_s(progress, run.args.num_envs * run.args.num_steps)
+    draw_curve(rows, CURVE)
+    lines = [f"Command: `{COMMAND} --report` (from campaign/{run.args.exp_name}/progress.csv; the recipe: "
+             "experiments/from_scratch.py). Demonstrations: none.", "",
+             "| env steps done / budget | training wall time | start radius now | training episodes of the last 200,000 "
+             "steps placed, ordinary resets: ceiling / window / flooring % | placed, near-goal starts % | picked % |",
+             "|---|---|---|---|---|---|",
+             f"| {done:,} / {run.args.total_timesteps:,} | {wall / 3600:.1f} h | {float(rows[-1]['near_goal_radius'] or 0):.1f} | "
+             + " / ".join(fmt(mean(f"ordinary_place_{k}")) for k in ELEMENT_KINDS)
+             + f" | {fmt(mean('near_goal_place_success'))} | {fmt(mean('pick_success'))} |", "",
+             f"![from-scratch curve]({Path(*CURVE.parts[1:])})", "",
+             f"*Made by `{COMMAND} --report`: the training episodes' place success per task (ordinary resets) and "
+             "from near-goal starts, with the start radius.*", ""]
+    if EVAL_JSON.is_file():
+        data = json.loads(EVAL_JSON.read_text())
+        lines += [f"Evaluated with the paper's protocol: `{data['command']}`.", "",
+                  "| task | pick % [95% CI] | place % [95% CI] | paper's general agent: pick / place % | failures by kind |",
+                  "|---|---|---|---|---|"]
+        for env_id, r in data["tasks"].items():
+            lost = [e for e in r["episode_results"] if not e["placed"]]
+            not_picked = sum(not e["picked"] for e in lost)
+            failed = failures([e for e in lost if e["picked"]])
+            text = ", ".join(([f"{not_picked} never picked"] if not_picked else []) + ([kinds(failed)] if failed else [])) or "none"
+            paper = PAPER_TABLE_II[env_id]
+            lines.append(f"| {env_id} | {pct(r['pick_success'], r['pick_success_ci95'])} | "
+                         f"{pct(r['place_success'], r['place_success_ci95'])} | {paper[0]:.2f} / {paper[1]:.2f} | {text} |")
+    else:
+        lines.append(f"Not shipped yet: `{COMMAND} --ship-now` ships the policy where the run stands, then "
+                     f"`python scripts/evaluate.py --checkpoint {run.shipped} --all --steps 50000 --json {EVAL_JSON}`.")
+    body = "\n".join(lines)
+    update_section(results, "from-scratch", body, "Results")
+    return body
+
+
 @dataclass
 class Args:
     num_envs: Optional[int] = None
@@ -67,12 +173,16 @@ class Args:
     """print the plan and where the run stands, and exit."""
     ship_now: bool = False
     """ship the policy where the run stands now (its record says at which step of the plan), and exit."""
+    report: bool = False
+    """write its section of docs/RESULTS.md and its curve (docs/images/scratch_curve.png), and exit."""
 
 
 def main(args: Args) -> None:
     for run in scratch_runs(args.num_envs, args.seed):
         print(describe(run))
-        if args.ship_now:
+        if args.report:
+            print(report(run))
+        elif args.ship_now:
             ship(run, before_the_end=True)
         elif not args.dry_run:
             run_or_resume(run)

@@ -59,7 +59,7 @@ class Args:
     direct_paths: bool = False
     """the expert takes a straight (or one-corner) joint path wherever one is free, RRTConnect only elsewhere
     (ExpertConfig.direct_first): the same start and goal give the same motion, where RRTConnect's paths wander
-    differently every time and a clone averages them (docs/RESULTS.md, 'the quick one-way expert')."""
+    differently every time and a clone averages them (docs/experiments/general_agent.md, 'the quick one-way expert')."""
 
 
 def main(args: Args) -> None:

@@ -38,8 +38,8 @@ class Args:
     keep: Optional[Path] = None
     """an earlier --json of this script whose rows go first (labels also given in --demos are measured anew)."""
     write_results: bool = False
-    """write the table into the section `demo-lengths` of docs/RESULTS.md."""
-    results: Path = Path("docs/RESULTS.md")
+    """write the table into the section `demo-lengths` of docs/experiments/general_agent.md."""
+    results: Path = Path("docs/experiments/general_agent.md")
 
 
 def lengths(path: Path) -> dict[str, np.ndarray]:

@@ -44,8 +44,8 @@ class Args:
     json: Optional[Path] = None
     """write the branches, turns and failures to this file."""
     write_results: bool = False
-    """write the table into the section `expert-modes` of docs/RESULTS.md."""
-    results: Path = Path("docs/RESULTS.md")
+    """write the table into the section `expert-modes` of docs/experiments/general_agent.md."""
+    results: Path = Path("docs/experiments/general_agent.md")
 
 
 def branches(configs: list[np.ndarray], tol: float) -> list[dict]:

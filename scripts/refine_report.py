@@ -1,5 +1,5 @@
 """The refinement runs in docs/: what each run of `python -m baselines.ppo.refine` did on the validation
-seeds, as a table and failures by kind in docs/RESULTS.md and a curve as a PNG.
+seeds, as a table and failures by kind in docs/experiments/general_agent.md and a curve as a PNG.
 
     python scripts/refine_report.py --runs runs/refine runs/refine2 --write-results
 
@@ -46,8 +46,8 @@ class Args:
     out: Path = Path("docs/images/refine_validation.png")
     """the curve: each run's validation place success per task against its PPO env steps."""
     write_results: bool = False
-    """write the section `refinement` of docs/RESULTS.md."""
-    results: Path = Path("docs/RESULTS.md")
+    """write the section `refinement` of docs/experiments/general_agent.md."""
+    results: Path = Path("docs/experiments/general_agent.md")
 
 
 def validation_summary(path: Path) -> dict:

@@ -6,7 +6,7 @@ PPO fine-tuning on the general task at cp4 -> the shipped checkpoint.
     python scripts/train_general_agent.py --ppo-timesteps 400000      # then PPO fine-tuning as well
 
 The shipped agent is the behaviour clone: PPO fine-tuning of it, as far as it was tried (probe 5 in
-docs/RESULTS.md), lowered its success, so `--ppo-timesteps` is 0 by default.
+docs/experiments/general_agent.md), lowered its success, so `--ppo-timesteps` is 0 by default.
 
 Each stage writes into --run-dir and is skipped when its output is there, so an interrupted
 campaign continues when the same command runs again (PPO resumes from its checkpoint):
@@ -99,7 +99,7 @@ class Args:
     branch_preference: Literal["nearest", "fixed"] = "nearest"
     """the expert's choice among several ways to reach a configuration (ExpertConfig.branch_preference):
     `nearest` to the arm (the shipped clone's demonstrations, which reach some goal slots two ways: the clone
-    fails where they part, docs/RESULTS.md) or `fixed`, the same way for the same goal slot every time."""
+    fails where they part, docs/experiments/general_agent.md) or `fixed`, the same way for the same goal slot every time."""
     demo_pace: Literal["slow", "fast"] = "slow"
     """the expert's speed in demonstrations and takeovers (ms_construction/planning/demos.py DEMO_PACES): `slow`,
     every joint at 0.55 of its limits (the shipped clones'), or `fast`, as quick as the delta actions allow with
@@ -107,7 +107,7 @@ class Args:
     direct_paths: bool = False
     """the expert takes a straight (or one-corner) joint path wherever one is free, RRTConnect only elsewhere
     (ExpertConfig.direct_first): the same start and goal give the same motion, where RRTConnect's paths wander
-    differently every time and a clone averages them (docs/RESULTS.md, 'the quick one-way expert')."""
+    differently every time and a clone averages them (docs/experiments/general_agent.md, 'the quick one-way expert')."""
     ship: bool = False
     """copy the result, with the campaign's record, to assets/checkpoints/general_agent.pt."""
 

@@ -138,7 +138,7 @@ def test_the_campaign_report_summarizes_each_run_and_stage_and_draws_figure_3_an
     results = tmp_path / "RESULTS.md"
     res = subprocess.run([sys.executable, str(ROOT / "scripts/paper_report.py"), "--campaign-dir", str(tmp_path / "campaign"),
                           "--write-results", "--results", str(results), "--images", str(tmp_path / "images"),
-                          "--eval-dir", str(tmp_path / "evaluations")],
+                          "--eval-dir", str(tmp_path / "evaluations"), "--readme", str(tmp_path / "README.md")],
                          capture_output=True, text=True, cwd=ROOT, env={**os.environ, "PYTHONPATH": str(ROOT)})
     assert res.returncode == 0, res.stderr
     text = results.read_text()
@@ -169,6 +169,12 @@ def test_the_campaign_report_summarizes_each_run_and_stage_and_draws_figure_3_an
            "| - | not yet | - |" in table
     expert = next(line for line in table.splitlines() if line.startswith("| ours: planning expert"))
     assert expert.count("100.0 [96.3, 100.0] / 100.0 [96.3, 100.0]") == 3, "100 of 100 with its Wilson interval"
+    assert "| ours: from reward alone |" in table and "experiments.from_scratch --ship-now" in table
+    # the README's headline: Table II's rows a reader compares first, the same cells
+    headline = (tmp_path / "README.md").read_text()
+    assert "| paper: general agent | 84.55 / 68.04 | 95.32 / 84.82 | 88.43 / 85.17 |" in headline
+    assert "| planning expert | " + " | ".join(["100.0 [96.3, 100.0] / 100.0 [96.3, 100.0]"] * 3) + " |" in headline
+    assert "| paper setting, general agent | not yet | not yet | not yet |" in headline
 
 
 SHIPPED_RUNS = [r for r in ps.general_runs(num_envs=2) + ps.control_group_runs(num_envs=2)

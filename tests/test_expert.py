@@ -63,7 +63,7 @@ def test_recorded_trajectory_replays_from_its_actions_to_the_same_success(tmp_pa
 
 def test_a_fixed_branch_preference_reaches_a_goal_slot_the_same_way_every_time():
     """Window slot 0 episodes that the nearest-first expert ended in either of two wrist branches (seeds 500000,
-    500006, 500007, 500014; docs/RESULTS.md, 'the expert's several ways'): with branch_preference="fixed" they end
+    500006, 500007, 500014; docs/experiments/general_agent.md, 'the expert's several ways'): with branch_preference="fixed" they end
     in one arm configuration."""
     import dataclasses
 

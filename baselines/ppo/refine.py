@@ -19,7 +19,7 @@
    the clone stays beside it as general_agent_clone.pt.
 A second round refines a refined agent the same way (--clone assets/checkpoints/general_agent.pt, or a copy of it: a
 residual on its residual, judged against it wherever the first round is judged against the clone; run 14 in
-docs/RESULTS.md).
+docs/experiments/general_agent.md).
 Each step is skipped when its output is in --run-dir, and PPO resumes from its checkpoint, so the
 same command continues an interrupted refinement.
 """
@@ -50,7 +50,7 @@ SHIPPED = Path("assets/checkpoints/general_agent.pt")
 VALIDATION_SEED = 500_000
 CONFIRMATION_SEED = 600_000
 """fresh episodes for the best snapshot and the clone: choosing the best of several snapshots on the same
-validation episodes favours a lucky one (docs/RESULTS.md: one won on validation and lost on the test seeds)."""
+validation episodes favours a lucky one (docs/experiments/general_agent.md: one won on validation and lost on the test seeds)."""
 
 
 @dataclass
@@ -75,11 +75,11 @@ class Args:
     """env processes (physx_cpu): more than the cores keeps them busy while the learner works."""
     num_steps: int = 2500
     """steps per env per rollout: a batch of num_envs x num_steps (10,000: about 75 episodes, so that the
-    clone's few failures are in every update; at 1,000 the updates were mostly noise, docs/RESULTS.md)."""
+    clone's few failures are in every update; at 1,000 the updates were mostly noise, docs/experiments/general_agent.md)."""
     num_minibatches: int = 4
     update_epochs: int = 4
     learning_rate: float = 3e-5
-    """of the residual and the critic (at 1e-4 the validations swung more, docs/RESULTS.md)."""
+    """of the residual and the critic (at 1e-4 the validations swung more, docs/experiments/general_agent.md)."""
     reward_mode: Literal["sparse", "dense", "normalized_dense"] = "normalized_dense"
     """the task's reward: `normalized_dense` (every step pays progress towards the goal, placing pays most with
     `--bootstrap-at-done always`: the task card; run 8, the shipped agent's) or `sparse` (Algorithm 1: the grasp
@@ -105,13 +105,13 @@ class Args:
     """first iterations that train only the critic, on the clone's own rollouts."""
     bootstrap_at_done: Literal["always", "truncated", "terminated"] = "always"
     """`always` (ManiSkill's: a success state bootstraps with its value, as if it kept paying; what the dense
-    rewards are made for) or `truncated` (success is an end; runs 1-6 in docs/RESULTS.md). With the sparse reward,
+    rewards are made for) or `truncated` (success is an end; runs 1-6 in docs/experiments/general_agent.md). With the sparse reward,
     run 7 against run 5 measured the choice: behind at 100k env steps, ahead at 200k and 300k, the best snapshots
     tied on fresh episodes. `terminated` (with --obs-elapsed-time): success bootstraps, the step limit is an end,
     so an episode cut short of its goal loses what placing would have paid."""
     obs_elapsed_time: bool = False
     """the residual and its critic see the episode's elapsed time (ppo.py's --obs-elapsed-time; the clone does not):
-    most failed windows of the refined agents are late arrivals, not lost ones (docs/RESULTS.md), and a correction
+    most failed windows of the refined agents are late arrivals, not lost ones (docs/experiments/general_agent.md), and a correction
     that knows the time can hurry (run 10 tried it with `--bootstrap-at-done terminated`; it did not beat run 8)."""
     validation_episodes: int = 200
     """episodes per task of each validation."""

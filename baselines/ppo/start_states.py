@@ -9,7 +9,7 @@ choose them). `StartFromStates` (a worker-side wrapper, see CPUVectorEnv's `wrap
 of episodes into a state drawn from that bank. An env state does not hold the episode's clock (ManiSkill's
 elapsed steps), so by default the episode then has its whole time limit again; with `keep_clock` it goes
 on from the step the state was taken at, so that a failure that was a late arrival stays one (most failed
-windows are: docs/RESULTS.md). Evaluation never uses it.
+windows are: docs/experiments/general_agent.md). Evaluation never uses it.
 
     python -m baselines.ppo.start_states --checkpoint assets/checkpoints/general_agent_clone.pt --episodes 1500 \\
         --out runs/failure_states.pt

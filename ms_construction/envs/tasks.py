@@ -43,12 +43,22 @@ curriculum stage (`curriculum_stage`, Table I; default cp4: {_CP4["pick"]:.2f} m
 {_CP4["angle_deg"]:g} degrees).
 
 **Rewards:** sparse = Algorithm 1 (-1/{_STEPS} every step, 1 on the first grasp, 2 on placement);
-dense = staged reach and face (<= 1), held (2 + carry <= 1 + orient <= 1), placed
-({ConstructionTaskEnv.DENSE_REWARD_MAX:g}, the most any step pays); normalized_dense = dense / {ConstructionTaskEnv.DENSE_REWARD_MAX:g}. Convention (ManiSkill's):
-the dense rewards are for a learner that bootstraps at every episode end, success included
-(ManiSkill's PPO `bootstrap_at_done="always"`, ppo.py's default for them), so that a placed element
-counts as a state that keeps paying the most; a learner that values success as an end with nothing
-after it finds holding the element near its goal worth more than placing it.
+dense = staged reach and face (<= 1), held (2 + carry <= 1 + fit <= 1), placed
+({ConstructionTaskEnv.DENSE_REWARD_MAX:g}, the most any step pays); normalized_dense = dense / {ConstructionTaskEnv.DENSE_REWARD_MAX:g}. Carry falls
+linearly, to 0 at {ConstructionTaskEnv.CARRY_RANGE:g} rad, with the arm's joint-space distance (summed over the joints) from the nearest
+configuration that holds the element installed (IK of the goal; `carry_distance`): it pulls from the staging
+table on, turns the turret the way its limits allow and turns the element with the wrist as it carries it. Fit
+is 1 - tanh(5 d) of the element's distance d from its goal, times 1 - angle error / 180 degrees. Convention
+(ManiSkill's): the dense rewards are for a learner that bootstraps at every episode end, success included
+(ManiSkill's PPO `bootstrap_at_done="always"`, ppo.py's default for them), so that a placed element counts
+as a state that keeps paying the most (ppo.py's `--success-value absorbing`, its default, bootstraps it with
+exactly that); a learner that values success as an end with nothing after it finds holding the element near
+its goal worth more than placing it. Results trained before 2026-11-25 on a dense reward (refinement run 8)
+used the earlier one, whose carry was 0.75 (1 - tanh d) + a bearing term and whose orient term was separate.
+
+**Start states:** `set_near_goal_starts(share, radius)` makes a share of the following resets start with the
+element held on a collision-free joint path out of its goal (reverse curriculum generation; IK, no
+demonstrations; `info["near_goal_start"]` marks them); for training only, off by default.
 
 **Observation:** `obs_elapsed_time=True` appends the episode's elapsed steps / {_STEPS} (the step limit) as
 the last entry (`extra/elapsed`): the limit is part of the task (success counts within it), and a policy

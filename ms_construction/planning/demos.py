@@ -45,7 +45,7 @@ FAST_DEMO_EXPERT_CONFIG = ExpertConfig(speed=0.8, max_joint_step=0.08, good_enou
 which leaves the shoulder joints (whose limits are lower) 0.8 of their limits instead of 0.55, and more
 RRTConnect attempts for a quicker carry. With one way per goal slot its episodes are 12-15% shorter (16-48
 episodes per task: ceiling mean 190 -> 161-166 steps, window 174 -> 146, flooring 147 -> 127), which leaves a
-clone of them slack before the 250-step limit (docs/RESULTS.md, 'the quick one-way expert')."""
+clone of them slack before the 250-step limit (docs/experiments/general_agent.md, 'the quick one-way expert')."""
 DEMO_PACES = {"slow": DEMO_EXPERT_CONFIG, "fast": FAST_DEMO_EXPERT_CONFIG}
 """--demo-pace of scripts/collect_demos.py and train_general_agent.py."""
 

@@ -108,7 +108,7 @@ class ExpertConfig:
     `nearest` to the arm, the quickest (the shipped clone's demonstrations), or `fixed`: nearest to
     FIXED_REFERENCE whatever the arm's configuration, so that a goal slot is always reached the same way. With
     `nearest`, near-ties (a pick behind the arm, two wrist branches at a window) go either way from episode to
-    episode, and a behaviour clone learns the average of the two where they part (docs/RESULTS.md)."""
+    episode, and a behaviour clone learns the average of the two where they part (docs/experiments/general_agent.md)."""
 
     def __post_init__(self):
         if self.branch_preference not in BRANCH_PREFERENCES:

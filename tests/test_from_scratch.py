@@ -1,0 +1,61 @@
+"""The from-scratch pipeline (experiments/from_scratch.py): its recipe is a valid ppo.py run with no demonstrations,
+it ships with a record that says so, and its report writes the curve and the section from the campaign's CSV."""
+
+import csv
+import dataclasses
+
+import pytest
+import torch
+
+from baselines.ppo import paper_setting as ps
+from baselines.ppo import ppo
+from baselines.ppo.checkpoints import CSV_FIELDS
+from experiments import from_scratch as fs
+
+
+def test_the_recipe_learns_from_reward_alone():
+    [run] = fs.scratch_runs(num_envs=2)
+    a = run.args
+    ppo.validate(a)
+    assert a.env_id == "ConstructionPickPlace-v1" and a.curriculum == ("cp4",) and a.total_timesteps <= 20_000_000
+    assert a.reward_mode == "normalized_dense" and a.near_goal_share > 0 and a.success_value == "absorbing"
+    # nothing from the expert: no demonstrations, no warm start, no residual base, no bank of expert states
+    assert a.demos == () and a.bc_coef == 0 and a.checkpoint is None and a.residual_of is None and a.start_states is None
+    assert a.num_envs * a.num_steps == 2000
+    assert "demonstrations: none" in run.method and run.shipped.name == "scratch_general_agent.pt"
+
+
+def test_a_tiny_run_ships_before_its_end_with_a_record_that_says_where_it_stands(tmp_path):
+    small = dict(num_envs=2, num_steps=20, num_minibatches=2, update_epochs=1, num_eval_envs=1, eval_freq=100,
+                 checkpoint_freq=1, env_id="Flooring-v1", log_dir=str(tmp_path), exp_name="tiny", total_timesteps=80)
+    [run] = fs.scratch_runs(num_envs=2)
+    run = dataclasses.replace(run, args=fs.scratch_args(**small), shipped=tmp_path / "scratch.pt")
+    ps.run_or_resume(dataclasses.replace(run, shipped=None))
+    longer = dataclasses.replace(run, args=dataclasses.replace(run.args, total_timesteps=160))
+    with pytest.raises(SystemExit, match="at step 80 of 160"):
+        ps.ship(longer)
+    ps.ship(longer, before_the_end=True)
+    record = torch.load(run.shipped, weights_only=False)["campaign"]["record"]
+    assert record["env steps"] == "80 (of the 160 planned)" and "demonstrations: none" in record["method"]
+
+
+def test_the_report_draws_the_curve_and_writes_the_section(tmp_path, monkeypatch):
+    run_dir = tmp_path / "campaign" / "scratch_general_agent"
+    run_dir.mkdir(parents=True)
+    with open(run_dir / "progress.csv", "w", newline="") as f:
+        w = csv.DictWriter(f, fieldnames=CSV_FIELDS)
+        w.writeheader()
+        for i in range(1, 301):
+            w.writerow(dict(global_step=2000 * i, iteration=i, stage="cp4", episodes=10, pick_success=0.8, sps=500,
+                            place_success=0.3, near_goal_radius=min(1.0, 0.1 * (1 + i // 30)), near_goal_place_success=0.7,
+                            ordinary_place_ceiling=0.0, ordinary_place_window="" if i % 2 else 0.5,
+                            ordinary_place_flooring=0.25 if i > 200 else 0.0))
+    monkeypatch.setattr(fs, "CURVE", tmp_path / "images" / "scratch_curve.png")
+    monkeypatch.setattr(fs, "EVAL_JSON", tmp_path / "none.json")
+    [run] = fs.scratch_runs(num_envs=2)
+    run = dataclasses.replace(run, args=dataclasses.replace(run.args, log_dir=str(tmp_path / "campaign")))
+    results = tmp_path / "RESULTS.md"
+    body = fs.report(run, results)
+    assert "| 600,000 / 20,000,000 | 0.3 h | 1.0 | 0.0 / 50.0 / 25.0 | 70.0 | 80.0 |" in body
+    assert (tmp_path / "images" / "scratch_curve.png").stat().st_size > 0
+    assert "<!-- begin from-scratch (generated) -->" in results.read_text() and "Not shipped yet" in body
