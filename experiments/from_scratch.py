@@ -13,7 +13,7 @@ assets/checkpoints/scratch_general_agent.pt with its campaign record. The recipe
 |---|---|---|
 | reward | normalized_dense: the tasks' dense reward / 5 | its carry term is linear in the arm's joint-space distance from the installation configuration (IK of the goal, ms_construction/goal_configurations.py), so it pulls from the pick, the way the turret's limits allow |
 | success | absorbing: bootstrapped with its reward for ever | the critic never trains on a state after success; its guess let hovering near the goal outvalue placing |
-| start states | half the training episodes start held on a collision-free joint path out of the goal (`set_near_goal_starts`), the radius widening from 0.1 of the path by 0.1 whenever 60% of them place | reverse curriculum generation (Florensa et al. 2017) from resets the env computes by IK: no demonstrations; evaluation always resets as usual |
+| start states | half the training episodes start held on a collision-free joint path out of the goal (`set_near_goal_starts`), each task type's radius widening from 0.1 of the path by 0.1 once 60% of its last 20 such episodes placed | reverse curriculum generation (Florensa et al. 2017) from resets the env computes by IK: no demonstrations; evaluation always resets as usual. One radius for all three types widened on lucky iterations of the easy type (probe F) |
 | discount | gamma 0.95, GAE lambda 0.95 | values of a few dozen steps: the dense reward carries the rest, and the critic learns them quickly |
 | updates | 2,000 samples (2 envs x 1,000 steps), 8 epochs of 8 minibatches, KL stop 0.1 | more gradient steps per env step: env steps are the cost on a CPU |
 | curiosity | none | the dense reward explores |
@@ -39,6 +39,7 @@ from baselines.ppo.evaluation import PAPER_TABLE_II, failures, kinds, pct
 from baselines.ppo.paper_setting import CAMPAIGN_DIR, SHIPPED_DIR, Run, describe, run_or_resume, ship, training_wall_s
 from ms_construction.parameters import ELEMENT_KINDS
 from ms_construction.reporting import update_section
+from ms_construction.curriculum import FINAL_STAGE
 
 BUDGET = 20_000_000
 """env steps at most (the issue's budget on this CPU)."""
@@ -50,10 +51,10 @@ def scratch_args(num_envs: Optional[int] = None, **overrides) -> ppo.Args:
     num_envs = num_envs or os.cpu_count() or 1
     args = ppo.Args(
         env_id="ConstructionPickPlace-v1", reward_mode="normalized_dense", control_mode="pd_joint_delta_pos",
-        sim_backend="physx_cpu", cuda=False, curriculum=("cp4",), total_timesteps=BUDGET, curiosity="none",
+        sim_backend="physx_cpu", cuda=False, curriculum=(FINAL_STAGE,), total_timesteps=BUDGET, curiosity="none",
         success_value="absorbing", bootstrap_at_done="always", gamma=0.95, gae_lambda=0.95,
         num_envs=num_envs, num_steps=2000 // num_envs, update_epochs=8, num_minibatches=8, target_kl=0.1,
-        near_goal_share=0.5, near_goal_radius=0.1, near_goal_step=0.1, near_goal_promote=0.6,
+        near_goal_share=0.5, near_goal_radius=0.1, near_goal_step=0.1, near_goal_promote=0.6, near_goal_window=20,
         eval_freq=25, checkpoint_freq=10, log_dir=str(CAMPAIGN_DIR),
     )
     return dataclasses.replace(args, **overrides)
@@ -104,7 +105,9 @@ def draw_curve(rows: list[dict], out: Path) -> None:
     ax.plot(steps, 100 * _smooth(_column(rows, "near_goal_place_success"), WINDOW), color="gray", ls="--",
             label="placed, near-goal starts (all tasks)")
     ax2 = ax.twinx()
-    ax2.plot(steps, _column(rows, "near_goal_radius"), color="black", lw=0.8, ls=":", label="start radius (right axis)")
+    for kind, color in zip(ELEMENT_KINDS, ("tab:blue", "tab:orange", "tab:green")):
+        ax2.plot(steps, _column(rows, f"near_goal_radius_{kind}"), color=color, lw=0.8, ls=":",
+                 label=f"start radius: {kind} (right axis)")
     ax2.set_ylim(0, 1.05)
     ax2.set_ylabel("near-goal start radius (fraction of the path)")
     ax.set_xlabel("env steps (millions)")
@@ -134,10 +137,11 @@ def report(run: Run, results: Path = Path("docs/RESULTS.md")) -> str:
     draw_curve(rows, CURVE)
     lines = [f"Command: `{COMMAND} --report` (from campaign/{run.args.exp_name}/progress.csv; the recipe: "
              "experiments/from_scratch.py). Demonstrations: none.", "",
-             "| env steps done / budget | training wall time | start radius now | training episodes of the last 200,000 "
+             "| env steps done / budget | training wall time | start radius now: ceiling / window / flooring | training episodes of the last 200,000 "
              "steps placed, ordinary resets: ceiling / window / flooring % | placed, near-goal starts % | picked % |",
              "|---|---|---|---|---|---|",
-             f"| {done:,} / {run.args.total_timesteps:,} | {wall / 3600:.1f} h | {float(rows[-1]['near_goal_radius'] or 0):.1f} | "
+             f"| {done:,} / {run.args.total_timesteps:,} | {wall / 3600:.1f} h | "
+             + " / ".join(f"{float(rows[-1].get(f'near_goal_radius_{k}') or 0):.1f}" for k in ELEMENT_KINDS) + " | "
              + " / ".join(fmt(mean(f"ordinary_place_{k}")) for k in ELEMENT_KINDS)
              + f" | {fmt(mean('near_goal_place_success'))} | {fmt(mean('pick_success'))} |", "",
              f"![from-scratch curve]({Path(*CURVE.parts[1:])})", "",

@@ -38,6 +38,10 @@ PROBES = {
     "probeE_floor_ng_table": ("D + the start paths go on down to the element lying on the table (radius 1: just grasped)",
                               "--reward-mode normalized_dense --gamma 0.95 --update-epochs 8 --num-minibatches 8 "
                               "--total-timesteps 400000 --near-goal-share 0.5"),
+    "probeF_general_shared_radius": ("E's recipe on the general task (ConstructionPickPlace-v1), one start radius for the "
+                                     "three task types, widened after any iteration whose near-goal episodes placed 60%",
+                                     "git checkout d37d6c2 && python -m experiments.from_scratch (the recipe's first "
+                                     "version; stopped at 448,000 steps)"),
 }
 """name: (what it changed, its arguments beyond COMMON), in the order they ran."""
 
@@ -70,7 +74,8 @@ def table() -> str:
                      f"{float(radius):.1f} | {_mean(last, 'end_place_dist'):.2f} |" if radius else
                      f"| {name.split('_')[0]} | {what} | {int(rows[-1]['global_step']):,} | {_pct(_mean(last, 'pick_success'))} | "
                      f"{_pct(ordinary)} | - | - | {_mean(last, 'end_place_dist'):.2f} |")
-    commands = "\n".join(f"- {name.split('_')[0]}: `{COMMON} {args} --exp-name {name}`" for name, (_, args) in PROBES.items())
+    commands = "\n".join(f"- {name.split('_')[0]}: `{args if args.startswith('git ') else f'{COMMON} {args} --exp-name {name}'}`"
+                         for name, (_, args) in PROBES.items())
     return ("Command: `python -m experiments.probes` (from docs/data/from_scratch/probes/*.csv).\n\n"
             "Means over the last fifth of each probe's iterations, of its training episodes (stochastic policy).\n\n"
             + "\n".join(lines) + "\n\nThe probes' commands:\n\n" + commands)

@@ -13,6 +13,8 @@ STAGES: dict[str, dict[str, float]] = {
     "cp4": {"pick": 0.30, "place": 0.10, "angle_deg": 20.0},
 }
 STAGE_NAMES = tuple(STAGES)
+FINAL_STAGE = STAGE_NAMES[-1]
+"""the stage every agent is judged at (cp4: the paper's Table II), and the tasks' default."""
 TOLERANCE_KEYS = ("pick", "place", "angle_deg")
 
 

@@ -24,6 +24,7 @@ import tyro
 
 from baselines.ppo.checkpoints import load_policy
 from ms_construction.planning.demos import demo_expert_config, record_demos
+from ms_construction.curriculum import FINAL_STAGE
 
 
 @dataclass
@@ -37,7 +38,7 @@ class Args:
     noise: float = 0.1
     """std of the DART noise on the executed delta actions (in action units: 0.1 = 0.01 rad) of every
     other episode; the rest run clean."""
-    curriculum_stage: str = "cp4"
+    curriculum_stage: str = FINAL_STAGE
     """tolerance stage the expert places at."""
     workers: int = 2
     """processes, one env and expert each."""

@@ -29,6 +29,7 @@ import tyro  # noqa: E402
 from baselines.ppo.evaluation import failures, kinds  # noqa: E402
 from baselines.ppo.refine import beats, best_snapshot  # noqa: E402
 from ms_construction.reporting import update_section  # noqa: E402
+from baselines.ppo.checkpoints import load_checkpoint
 
 SETTINGS = ("learning_rate", "gamma", "start_states_share", "residual_scale", "residual_l2_coef", "num_envs", "num_steps",
             "critic_warmup_iterations", "bootstrap_at_done", "target_kl", "reward_mode", "reward_scale",
@@ -59,7 +60,7 @@ def validation_summary(path: Path) -> dict:
 
 def summarize(run: Path) -> dict:
     """A refine.py run folder as one JSON-able record."""
-    ckpt = torch.load(run / "ppo" / "checkpoint.pt", map_location="cpu", weights_only=False)
+    ckpt = load_checkpoint(run / "ppo" / "checkpoint.pt")
     saved = ckpt["args"]
     validations, clone = {}, None
     for path in sorted(run.glob("val*_*.json")):

@@ -33,6 +33,7 @@ from ms_construction.envs import ENV_IDS
 from ms_construction.planning import ExpertConfig, MotionPlanningExpert
 from ms_construction.reporting import update_section
 from ms_construction.parameters import ELEMENT_KINDS
+from ms_construction.curriculum import FINAL_STAGE
 
 RESULTS_PATH = Path("docs/RESULTS.md")
 
@@ -45,7 +46,7 @@ class Args:
     """episodes per task."""
     seed: int = 0
     """seed of the first episode; the others follow."""
-    curriculum_stage: str = "cp4"
+    curriculum_stage: str = FINAL_STAGE
     """tolerance stage of the env (cp1..cp4)."""
     save_trajectory: bool = False
     """record the episodes as ManiSkill trajectories (h5 + json) under --out."""

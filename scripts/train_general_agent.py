@@ -46,6 +46,8 @@ import torch
 import tyro
 
 from baselines.ppo import bc, checkpoints, evaluation, ppo
+from baselines.ppo.checkpoints import load_checkpoint
+from ms_construction.curriculum import FINAL_STAGE
 from ms_construction.planning.demos import demo_expert_config, load_demos, policy_steps, record_demos, tried_episodes
 from ms_construction.reporting import WallTimes
 
@@ -188,7 +190,7 @@ def main(args: Args) -> Path:
             timed("PPO", lambda: ppo.main(ppo.Args(resume=str(ppo_ckpt))))
         else:
             timed("PPO", lambda: ppo.main(ppo.Args(
-                checkpoint=str(bc_ckpt), env_id="ConstructionPickPlace-v1", reward_mode="sparse", curriculum=("cp4",),
+                checkpoint=str(bc_ckpt), env_id="ConstructionPickPlace-v1", reward_mode="sparse", curriculum=(FINAL_STAGE,),
                 curiosity="none", freeze_obs_norm=True, critic_warmup_iterations=args.critic_warmup_iterations,
                 demos=tuple(map(str, demo_files + takeover_files)), bc_coef=args.bc_coef, total_timesteps=args.ppo_timesteps,
                 num_envs=args.ppo_num_envs, num_steps=250, num_minibatches=4, learning_rate=args.ppo_learning_rate,
@@ -209,7 +211,7 @@ def ship(args: Args, final: Path, demo_files: list[Path], takeover_files: list[P
     clone_steps = sum(map(policy_steps, takeover_files))
     wall = {"demonstrations": sum(w for _, _, w in demos), "takeovers": sum(w for _, _, w in takeovers),
             **record["wall_s"]}
-    ckpt = torch.load(final, map_location="cpu", weights_only=False)
+    ckpt = load_checkpoint(final)
     ppo_steps = ckpt["progress"]["global_step"] if final.parent.name == "ppo" else 0
     total = demo_steps + takeover_steps + clone_steps + ppo_steps
     ckpt["campaign"] = dict(command="python scripts/train_general_agent.py " + " ".join(shlex.quote(a) for a in sys.argv[1:]),

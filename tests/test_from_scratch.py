@@ -47,7 +47,8 @@ def test_the_report_draws_the_curve_and_writes_the_section(tmp_path, monkeypatch
         w.writeheader()
         for i in range(1, 301):
             w.writerow(dict(global_step=2000 * i, iteration=i, stage="cp4", episodes=10, pick_success=0.8, sps=500,
-                            place_success=0.3, near_goal_radius=min(1.0, 0.1 * (1 + i // 30)), near_goal_place_success=0.7,
+                            place_success=0.3, near_goal_radius=0.5, near_goal_place_success=0.7, near_goal_radius_ceiling=0.2,
+                            near_goal_radius_window=0.4, near_goal_radius_flooring=min(1.0, 0.1 * (1 + i // 30)),
                             ordinary_place_ceiling=0.0, ordinary_place_window="" if i % 2 else 0.5,
                             ordinary_place_flooring=0.25 if i > 200 else 0.0))
     monkeypatch.setattr(fs, "CURVE", tmp_path / "images" / "scratch_curve.png")
@@ -56,6 +57,6 @@ def test_the_report_draws_the_curve_and_writes_the_section(tmp_path, monkeypatch
     run = dataclasses.replace(run, args=dataclasses.replace(run.args, log_dir=str(tmp_path / "campaign")))
     results = tmp_path / "RESULTS.md"
     body = fs.report(run, results)
-    assert "| 600,000 / 20,000,000 | 0.3 h | 1.0 | 0.0 / 50.0 / 25.0 | 70.0 | 80.0 |" in body
+    assert "| 600,000 / 20,000,000 | 0.3 h | 0.2 / 0.4 / 1.0 | 0.0 / 50.0 / 25.0 | 70.0 | 80.0 |" in body
     assert (tmp_path / "images" / "scratch_curve.png").stat().st_size > 0
     assert "<!-- begin from-scratch (generated) -->" in results.read_text() and "Not shipped yet" in body

@@ -195,8 +195,9 @@ def test_checkpoint_for_other_shapes_gives_a_clear_error(tmp_path):
 
 
 def test_short_run_on_the_easiest_stage_shows_a_learning_signal(tmp_path):
-    """40k steps of PPO at cp1 (dense reward, two CPU envs): the deterministic policy's evaluation
-    pick success rises above the untrained policy's, and so does its evaluation return."""
+    """40k steps of PPO at cp1 (dense reward, two CPU envs): the training episodes pick more often in the
+    run's second half than in its first, and the deterministic policy's evaluation return rises above the
+    untrained policy's. (Its evaluation picks, two episodes each, are too few to say more this early.)"""
     args = tiny_args(tmp_path, exp_name="learn", reward_mode="dense", curriculum=("cp1",), curiosity="none",
                      num_steps=250, num_minibatches=4, num_eval_envs=2, total_timesteps=40_000, eval_freq=10,
                      checkpoint_freq=10**6)
@@ -204,12 +205,14 @@ def test_short_run_on_the_easiest_stage_shows_a_learning_signal(tmp_path):
     ppo.set_curriculum_stage(tr.eval_envs, "cp1")
     untrained = evaluation.evaluate_envs(tr.agent, tr.eval_envs, tr.args.num_eval_steps, seed=123)
     ppo.train(tr)
-    evals = [r for r in read_csv(tmp_path / "learn" / "progress.csv") if r["eval_pick_success"]]
+    rows = read_csv(tmp_path / "learn" / "progress.csv")
+    evals = [r for r in rows if r["eval_pick_success"]]
     assert len(evals) == 8
-    best_pick = max(float(r["eval_pick_success"]) for r in evals)
+    picks = [float(r["pick_success"]) for r in rows if r["pick_success"]]
+    first, second = np.mean(picks[:len(picks) // 2]), np.mean(picks[len(picks) // 2:])
     best_return = max(float(r["eval_extrinsic_return"]) for r in evals)
-    print(f"pick {untrained['eval_pick_success']} -> {best_pick}, return {untrained['eval_extrinsic_return']:.0f} -> {best_return:.0f}")
-    assert best_pick > untrained["eval_pick_success"]
+    print(f"training picks {first:.2f} -> {second:.2f}, return {untrained['eval_extrinsic_return']:.0f} -> {best_return:.0f}")
+    assert second > first
     assert best_return > untrained["eval_extrinsic_return"] + 5.0
 
 
@@ -405,32 +408,37 @@ def test_the_command_line_refuses_a_garbage_checkpoint_without_a_traceback(tmp_p
     assert f"{path} is not a checkpoint" in out.stderr.strip().splitlines()[-1], out.stderr
 
 
-def test_near_goal_starts_widen_with_success_and_a_resumed_run_goes_on_from_its_radius(tmp_path, monkeypatch):
-    """The start-state curriculum in a short run of the dense recipe: radius 0 starts every near-goal episode
-    installed (placed at once), so the radius widens by its step after each iteration while they keep placing;
-    the policy changes; a resumed run sets the workers' radius from its checkpoint, not from --near-goal-radius."""
+def test_near_goal_starts_widen_per_task_with_success_and_a_resumed_run_goes_on_from_its_radii(tmp_path, monkeypatch):
+    """The start-state curriculum in a short run of the dense recipe on Flooring-v1: radius 0 starts every
+    near-goal episode installed (placed at once), so the floor's radius widens by its step each time its window of
+    episodes fills with placements, while the other task types' radii stay; the policy changes; a resumed run
+    sets the workers' radii from its checkpoint (with the windows), not from --near-goal-radius."""
     calls = []
     original = ppo.call_task
     monkeypatch.setattr(ppo, "call_task", lambda envs, name, *a: (calls.append((name, a)), original(envs, name, *a))[1])
     common = dict(reward_mode="normalized_dense", curiosity="none", curriculum=("cp4",), near_goal_share=1.0,
-                  near_goal_radius=0.0, near_goal_step=0.05, near_goal_promote=0.5, total_timesteps=160)
+                  near_goal_radius=0.0, near_goal_step=0.05, near_goal_promote=0.5, near_goal_window=4, total_timesteps=160)
     args = tiny_args(tmp_path, exp_name="near", **common)
     torch.manual_seed(args.seed)
     initial = {k: v.clone() for k, v in ppo.setup(args).agent.state_dict().items()}
     progress = ppo.main(args)
     rows = read_csv(tmp_path / "near" / "progress.csv")
-    radii = [float(r["near_goal_radius"]) for r in rows]
-    assert radii[0] == 0.0 and int(rows[0]["near_goal_episodes"]) > 0 and float(rows[0]["near_goal_place_success"]) == 1.0
-    assert progress.near_goal_radius == pytest.approx(0.05 * sum(float(r["near_goal_place_success"]) >= 0.5 for r in rows))
-    assert progress.near_goal_radius > 0
-    assert ("set_near_goal_starts", (1.0, 0.0)) in calls and ("set_near_goal_starts", (1.0, 0.05)) in calls
+    assert float(rows[0]["near_goal_radius_flooring"]) == 0.0 and int(rows[0]["near_goal_episodes"]) > 0
+    assert float(rows[0]["near_goal_place_success"]) == 1.0
+    assert progress.near_goal_radius[:2] == [0.0, 0.0] and progress.near_goal_radius[2] >= 0.05
+    assert ("set_near_goal_starts", (1.0, (0.0, 0.0, 0.0))) in calls
+    assert ("set_near_goal_starts", (1.0, (0.0, 0.0, 0.05))) in calls
     ckpt = torch.load(tmp_path / "near" / "checkpoint.pt", weights_only=False)
     assert ckpt["progress"]["near_goal_radius"] == progress.near_goal_radius
+    assert ckpt["progress"]["near_goal_recent"] == progress.near_goal_recent and len(progress.near_goal_recent[2]) < 4
     assert any(not torch.equal(v, ckpt["agent"][k]) for k, v in initial.items()), "the policy changed"
 
+    restored = ppo.setup(ppo.Args(resume=str(tmp_path / "near" / "checkpoint.pt")))
+    assert restored.progress.near_goal_recent == progress.near_goal_recent
+    restored.eval_envs.close()
     calls.clear()
     resumed = ppo.main(ppo.Args(resume=str(tmp_path / "near" / "checkpoint.pt"), extend=True, total_timesteps=240,
                                 curriculum=("cp4",)))
     first = next(c for c in calls if c[0] == "set_near_goal_starts")
-    assert first == ("set_near_goal_starts", (1.0, progress.near_goal_radius)), calls
+    assert first == ("set_near_goal_starts", (1.0, tuple(progress.near_goal_radius))), calls
     assert resumed.global_step == 240

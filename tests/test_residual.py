@@ -10,7 +10,7 @@ import torch
 
 from baselines.ppo import evaluation, ppo, update
 from baselines.ppo.checkpoints import load_checkpoint, load_policy
-from baselines.ppo.networks import make_agent
+from baselines.ppo.checkpoints import make_agent
 from baselines.ppo import start_states
 from baselines.ppo.start_states import StartFromStates
 

@@ -25,7 +25,7 @@ import tyro
 from tqdm import tqdm
 
 from baselines.ppo.checkpoints import Progress, save_checkpoint
-from baselines.ppo.networks import make_agent
+from baselines.ppo.checkpoints import make_agent
 from baselines.ppo.ppo import Args as PPOArgs
 
 

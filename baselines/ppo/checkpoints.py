@@ -21,10 +21,36 @@ from typing import Optional
 import numpy as np
 import torch
 
-from baselines.ppo.networks import Agent, make_agent
+from baselines.ppo import curiosity
+from baselines.ppo.networks import Agent
+from baselines.ppo.residual import ResidualAgent
+from ms_construction.envs.construction_env import STATE_QUATERNION_STARTS
 
 WHAT_A_CHECKPOINT_IS = ("a checkpoint is the .pt file that baselines/ppo/ppo.py or baselines/ppo/bc.py writes "
                         "(torch.save of a dict with args, obs_dim, act_dim and the agent's weights)")
+def value_heads(args) -> int:
+    """Value heads of the agent `args` describes: two (extrinsic, curiosity) with ML-Agents' curiosity,
+    which has its own discount and ignores episode ends; one otherwise."""
+    get = args.get if isinstance(args, dict) else lambda k, d=None: getattr(args, k, d)
+    return curiosity.value_heads(get("curiosity"))
+
+
+def make_agent(args, obs_dim: int, act_dim: int, base_args: Optional[dict] = None) -> nn.Module:
+    """The Agent that `args` (ppo.py's Args or a checkpoint's saved dict of them) describes; with
+    `residual_of`, a ResidualAgent on a base that `base_args` (the base checkpoint's args) describes; a base that is
+    itself a residual carries its own base's args under `base_args["base_args"]`."""
+    get = args.get if isinstance(args, dict) else lambda k, d=None: getattr(args, k, d)
+    if get("residual_of"):
+        if base_args is None:
+            raise ValueError("a residual agent needs its base's args (the checkpoint's base_args)")
+        time_input = bool(get("obs_elapsed_time", False))  # the base was trained without the time entry
+        base = make_agent(base_args, obs_dim - int(time_input), act_dim, base_args.get("base_args"))
+        return ResidualAgent(base, get("hidden_size"),
+                             get("residual_scale"), value_heads=value_heads(args), time_input=time_input)
+    starts = STATE_QUATERNION_STARTS if get("rotation_features", False) else ()
+    return Agent(obs_dim, act_dim, get("hidden_size"), starts, value_heads(args), get("num_layers", 3))
+
+
 def upgrade_args(saved: dict) -> dict:
     """A checkpoint's saved ppo.py args under their current names and meanings, so that checkpoints
     written by earlier versions still load: `finite_horizon_gae` / `bootstrap_at_truncation` (booleans)
@@ -55,8 +81,11 @@ class Progress:
     smoothed_success: Optional[float] = None
     stage_changes: list = field(default_factory=list)
     """(global_step, stage) at every stage start."""
-    near_goal_radius: Optional[float] = None
-    """the start-state curriculum's radius now (--near-goal-share); None before it starts."""
+    near_goal_radius: Optional[list] = None
+    """the start-state curriculum's radius now per task type (ELEMENT_KINDS order; --near-goal-share); None before
+    it starts."""
+    near_goal_recent: Optional[list] = None
+    """per task type, whether each of its latest near-goal episodes placed (the window a widening looks at)."""
 
 
 def save_checkpoint(path: Path, args, progress: Progress, agent: Agent, optimizer, icm, icm_optimizer,
@@ -179,10 +208,12 @@ CSV_FIELDS = [
     "icm_forward_loss", "icm_inverse_loss", "bc_loss", "clip_coef", "ent_coef", "end_place_dist",
     "end_place_angle_deg", "held_at_end", "near_goal_radius", "near_goal_episodes", "near_goal_place_success",
     "ordinary_place_success", "ordinary_place_ceiling", "ordinary_place_window", "ordinary_place_flooring",
+    "near_goal_radius_ceiling", "near_goal_radius_window", "near_goal_radius_flooring",
 ]
 """`end_*` and `held_at_end`: where the iteration's training episodes ended (mean place distance in m and
 angle error in degrees to the goal at the last step, share with the element held), what a run that
-places nothing still shows. `near_goal_*`: the start-state curriculum's radius and its episodes (--near-goal-share);
+places nothing still shows. `near_goal_*`: the start-state curriculum's radius (the mean of the task types', and each one's) and its episodes
+(--near-goal-share);
 `ordinary_place_success`: the place success of the other training episodes, those from ordinary resets, and
 `ordinary_place_<task>` the same per task type."""
 

@@ -22,6 +22,31 @@ import torch.nn as nn
 
 LOSS_SCALE = 10.0
 """ML-Agents multiplies the curiosity loss by 10."""
+MODES = ("none", "icm", "icm_normalized")
+"""ppo.py's `--curiosity`: none; ML-Agents' ICM (its own value head and discount); ours, normalized and added to
+the extrinsic reward. This module alone says what each mode means (the functions below)."""
+
+
+def value_heads(mode: str) -> int:
+    """Value heads a learner with curiosity `mode` needs: two (extrinsic, curiosity) for ML-Agents' curiosity,
+    which has its own discount and ignores episode ends; one otherwise."""
+    return 2 if mode == "icm" else 1
+
+
+def joins_extrinsic_reward(mode: str) -> bool:
+    """Whether the curiosity reward is added to the extrinsic one (our normalized variant) rather than learnt
+    by its own value head."""
+    return mode == "icm_normalized"
+
+
+def make_icm(mode: str, obs_dim: int, act_dim: int, args) -> "ICM | None":
+    """The ICM module of `mode` with ppo.py's `args` (strength, sizes, forward weight), or None without curiosity."""
+    if mode == "none":
+        return None
+    if mode not in MODES:
+        raise ValueError(f"curiosity {mode!r}: use one of {', '.join(MODES)}")
+    return ICM(obs_dim, act_dim, args.icm_strength, args.icm_feature_dim, args.icm_hidden_size, args.icm_forward_weight,
+               normalize=joins_extrinsic_reward(mode))
 
 
 def _mlp(sizes: list[int]) -> nn.Sequential:

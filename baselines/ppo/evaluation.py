@@ -34,7 +34,7 @@ import torch
 from tqdm import tqdm
 
 from baselines.ppo.checkpoints import load_checkpoint, load_policy
-from ms_construction.curriculum import STAGE_NAMES, stage_tolerances
+from ms_construction.curriculum import FINAL_STAGE, STAGE_NAMES, stage_tolerances
 from ms_construction.envs import ENV_IDS, TASK_ENV_IDS
 from ms_construction.envs.construction_env import ConstructionTaskEnv
 from ms_construction.reporting import update_section
@@ -69,7 +69,7 @@ class Args:
     """instead of --episodes: run episodes until this many env steps per task (the paper: 50000)."""
     seed: int = 1_000_000
     """seed of the first episode; the others follow."""
-    curriculum_stage: str = "cp4"
+    curriculum_stage: str = FINAL_STAGE
     """tolerances the episodes are judged by (Table I)."""
     json: Optional[Path] = None
     """write the figures (and each episode) to this file."""
@@ -258,7 +258,7 @@ def evaluate(args: Args, env_id: str, pool) -> dict:
     return dict(env_id=env_id, **summarize(episodes), **within, episode_results=episodes)
 
 
-def failures(episodes: list[dict], stage: str = "cp4") -> list[dict]:
+def failures(episodes: list[dict], stage: str = FINAL_STAGE) -> list[dict]:
     """The failed episodes, each with its kind at the stage's tolerances (Table I; cp4: 0.10 m, 20 degrees)
     and its distance and angle at the end. Kinds: dropped (the element not on the plate at the end); short
     (further from the goal than the tolerance, turned within it: on course, late or stopped); short and turned

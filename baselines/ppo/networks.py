@@ -10,7 +10,6 @@ import torch
 import torch.nn as nn
 from torch.distributions.normal import Normal
 
-from ms_construction.envs.construction_env import STATE_QUATERNION_STARTS
 from ms_construction.rotations import qmat
 
 
@@ -117,28 +116,3 @@ class Agent(nn.Module):
         if action is None:
             action = probs.sample()
         return action, probs.log_prob(action).sum(1), probs.entropy().sum(1), self.critic(x)
-
-
-def value_heads(args) -> int:
-    """Value heads of the agent `args` describes: two (extrinsic, curiosity) with ML-Agents' curiosity,
-    which has its own discount and ignores episode ends; one otherwise."""
-    get = args.get if isinstance(args, dict) else lambda k, d=None: getattr(args, k, d)
-    return 2 if get("curiosity") == "icm" else 1
-
-
-def make_agent(args, obs_dim: int, act_dim: int, base_args: Optional[dict] = None) -> nn.Module:
-    """The Agent that `args` (ppo.py's Args or a checkpoint's saved dict of them) describes; with
-    `residual_of`, a ResidualAgent on a base that `base_args` (the base checkpoint's args) describes; a base that is
-    itself a residual carries its own base's args under `base_args["base_args"]`."""
-    get = args.get if isinstance(args, dict) else lambda k, d=None: getattr(args, k, d)
-    if get("residual_of"):
-        from baselines.ppo.residual import ResidualAgent
-
-        if base_args is None:
-            raise ValueError("a residual agent needs its base's args (the checkpoint's base_args)")
-        time_input = bool(get("obs_elapsed_time", False))  # the base was trained without the time entry
-        base = make_agent(base_args, obs_dim - int(time_input), act_dim, base_args.get("base_args"))
-        return ResidualAgent(base, get("hidden_size"),
-                             get("residual_scale"), value_heads=value_heads(args), time_input=time_input)
-    starts = STATE_QUATERNION_STARTS if get("rotation_features", False) else ()
-    return Agent(obs_dim, act_dim, get("hidden_size"), starts, value_heads(args), get("num_layers", 3))

@@ -48,6 +48,7 @@ import torch
 from baselines.ppo import ppo
 from baselines.ppo.checkpoints import load_checkpoint
 from ms_construction.envs import TASK_ENV_IDS
+from ms_construction.curriculum import FINAL_STAGE, STAGE_NAMES
 
 STAGE_STEPS = 2_000_000
 """the paper's steps per curriculum stage."""
@@ -70,7 +71,7 @@ def paper_args(num_envs: Optional[int] = None, **overrides) -> ppo.Args:
     args = ppo.Args(
         env_id="ConstructionPickPlace-v1", reward_mode="sparse", control_mode="pd_joint_delta_pos",
         sim_backend="physx_cpu", cuda=False,
-        curriculum=("cp1", "cp2", "cp3", "cp4"), stage_timesteps=STAGE_STEPS, total_timesteps=4 * STAGE_STEPS,
+        curriculum=STAGE_NAMES, stage_timesteps=STAGE_STEPS, total_timesteps=4 * STAGE_STEPS,
         promote_success=2.0,  # never: promotion by step count only
         curiosity="icm", icm_strength=0.02, icm_gamma=0.99, icm_feature_dim=128, icm_hidden_size=256,
         icm_learning_rate=3e-4, icm_forward_weight=0.2,
@@ -113,7 +114,7 @@ def control_group_runs(total_timesteps: int = STAGE_STEPS, num_envs: Optional[in
     """Runs 2: one agent per task at cp4 from the first step, in 2M-step stages of cp4."""
     if total_timesteps % STAGE_STEPS:
         raise SystemExit(f"--total-timesteps {total_timesteps}: use a multiple of {STAGE_STEPS} (one cp4 stage each)")
-    stages = ("cp4",) * (total_timesteps // STAGE_STEPS)
+    stages = (FINAL_STAGE,) * (total_timesteps // STAGE_STEPS)
     command = "python scripts/train_control_groups.py" + ("" if total_timesteps == STAGE_STEPS else f" --total-timesteps {total_timesteps}")
     # the 2M point keeps its own file when the run goes on to 8M: both are published
     suffix = "" if total_timesteps == STAGE_STEPS else f"_{total_timesteps // 1_000_000}m"

@@ -48,10 +48,11 @@ from tqdm import tqdm
 
 from mani_skill.vector.wrappers.gymnasium import ManiSkillVectorEnv
 
-from baselines.ppo.checkpoints import CSVLog, Progress, check_fit, load_checkpoint, restore_rng, save_checkpoint
-from baselines.ppo.curiosity import ICM
+from baselines.ppo.checkpoints import (CSVLog, Progress, check_fit, load_checkpoint, make_agent, restore_rng, save_checkpoint,
+                                       value_heads)
+from baselines.ppo.curiosity import ICM, make_icm
 from baselines.ppo.evaluation import evaluate_envs, finished_episodes, reset
-from baselines.ppo.networks import Agent, make_agent, value_heads
+from baselines.ppo.networks import Agent
 from baselines.ppo.update import adam, ppo_update, signal_advantages
 from baselines.ppo.start_states import StartFromStates
 from ms_construction.curriculum import STAGE_NAMES
@@ -220,14 +221,14 @@ class Args:
     tasks' `set_near_goal_starts`), at most `near_goal_radius` of the path's length out; evaluation always
     resets as usual."""
     near_goal_radius: float = 0.1
-    """the curriculum's first radius (fraction of a start path, 0: installed)..."""
+    """the curriculum's first radius (fraction of a start path, 0: installed), one per task type..."""
     near_goal_step: float = 0.1
-    """...widened by this after every iteration in which at least `near_goal_min_episodes` near-goal episodes
-    ended and at least `near_goal_promote` of them placed (up to 1)."""
+    """...each widened by this (up to 1) once the last `near_goal_window` near-goal episodes of its task type placed
+    at least `near_goal_promote` of the time (the window then starts again)."""
     near_goal_promote: float = 0.6
-    """success from near-goal starts that widens the radius."""
-    near_goal_min_episodes: int = 4
-    """near-goal episodes an iteration needs before its success counts."""
+    """success from near-goal starts that widens a task type's radius."""
+    near_goal_window: int = 20
+    """near-goal episodes of a task type whose success decides a widening."""
 
     curiosity: Literal["none", "icm", "icm_normalized"] = "icm"
     """intrinsic reward (baselines/ppo/curiosity.py): `icm` as ML-Agents computes it (the forward model's
@@ -248,7 +249,7 @@ class Args:
     icm_learning_rate: float = 3e-4
     """Adam learning rate of ICM."""
 
-    curriculum: tuple[str, ...] = ("cp1", "cp2", "cp3", "cp4")
+    curriculum: tuple[str, ...] = STAGE_NAMES
     """tolerance stages in order (Table I); one stage, e.g. `cp4`, trains without a curriculum."""
     stage_timesteps: int = 2_000_000
     """promote to the next stage after this many env steps in a stage (the paper: 2M)."""
@@ -301,14 +302,22 @@ def set_curriculum_stage(envs: Envs, stage: str) -> None:
     call_task(envs, "set_curriculum_stage", stage)
 
 
-def widen_near_goal(args: Args, progress: Progress, near_goal_success: list[float]) -> bool:
-    """Widen the start-state curriculum's radius after an iteration whose near-goal episodes placed often
-    enough (--near-goal-promote); whether it widened."""
-    if (len(near_goal_success) < args.near_goal_min_episodes or np.mean(near_goal_success) < args.near_goal_promote
-            or progress.near_goal_radius >= 1.0):
-        return False
-    progress.near_goal_radius = min(1.0, progress.near_goal_radius + args.near_goal_step)
-    return True
+def widen_near_goal(args: Args, progress: Progress, task_ids: list[int], placed: list[float]) -> bool:
+    """Record the near-goal episodes that ended (their task types and whether they placed) and widen each task
+    type's radius whose last --near-goal-window episodes placed often enough (--near-goal-promote); whether any
+    radius widened. The windows are part of the progress: a resumed run goes on with them."""
+    widened = set()  # the rest of this iteration's episodes of a widened type started at the old radius
+    for k, ok in zip(task_ids, placed):
+        if k in widened:
+            continue
+        window = progress.near_goal_recent[k]
+        window.append(float(ok))
+        del window[:-args.near_goal_window]
+        if len(window) == args.near_goal_window and np.mean(window) >= args.near_goal_promote and progress.near_goal_radius[k] < 1:
+            progress.near_goal_radius[k] = round(min(1.0, progress.near_goal_radius[k] + args.near_goal_step), 6)
+            window.clear()
+            widened.add(k)
+    return bool(widened)
 
 
 # ------------------------------------------------------------------------------------------------- #
@@ -487,10 +496,9 @@ def setup(args: Args) -> Run:
     if base is not None:
         agent.base.load_state_dict(base["agent"])
     optimizer = adam([p for p in agent.parameters() if p.requires_grad], lr=args.learning_rate, eps=1e-5)
-    icm = icm_optimizer = None
-    if args.curiosity != "none":
-        icm = ICM(obs_dim, act_dim, args.icm_strength, args.icm_feature_dim, args.icm_hidden_size, args.icm_forward_weight,
-                  normalize=args.curiosity == "icm_normalized").to(device)
+    icm, icm_optimizer = make_icm(args.curiosity, obs_dim, act_dim, args), None
+    if icm is not None:
+        icm = icm.to(device)
         icm_optimizer = adam(icm.parameters(), lr=args.icm_learning_rate)
 
     progress = Progress()
@@ -545,8 +553,9 @@ def train(run: Run) -> Progress:
         set_curriculum_stage(e, stage)
     if args.near_goal_share > 0:
         if progress.near_goal_radius is None:
-            progress.near_goal_radius = args.near_goal_radius
-        call_task(envs, "set_near_goal_starts", args.near_goal_share, progress.near_goal_radius)
+            progress.near_goal_radius = [args.near_goal_radius] * len(ELEMENT_KINDS)
+            progress.near_goal_recent = [[] for _ in ELEMENT_KINDS]
+        call_task(envs, "set_near_goal_starts", args.near_goal_share, tuple(progress.near_goal_radius))
 
     run_dir.mkdir(parents=True, exist_ok=True)
     writer = SummaryWriter(str(run_dir))
@@ -661,11 +670,12 @@ def train(run: Run) -> Progress:
                 if ((task == k) & ~near).any():
                     row[f"ordinary_place_{kind}"] = float(placed[(task == k) & ~near].mean())
             if args.near_goal_share > 0:
-                row.update(near_goal_radius=progress.near_goal_radius, near_goal_episodes=int(near.sum()),
+                row.update(near_goal_radius=float(np.mean(progress.near_goal_radius)), near_goal_episodes=int(near.sum()),
                            near_goal_place_success=float(placed[near].mean()) if near.any() else float("nan"),
-                           ordinary_place_success=float(placed[~near].mean()) if (~near).any() else float("nan"))
-                if widen_near_goal(args, progress, placed[near].tolist()):
-                    call_task(envs, "set_near_goal_starts", args.near_goal_share, progress.near_goal_radius)
+                           ordinary_place_success=float(placed[~near].mean()) if (~near).any() else float("nan"),
+                           **{f"near_goal_radius_{kind}": r for kind, r in zip(ELEMENT_KINDS, progress.near_goal_radius)})
+                if widen_near_goal(args, progress, task[near].tolist(), placed[near].tolist()):
+                    call_task(envs, "set_near_goal_starts", args.near_goal_share, tuple(progress.near_goal_radius))
             if progress.iteration % args.eval_freq == 0 or progress.iteration == num_iterations:
                 result = evaluate_envs(agent, run.eval_envs, args.num_eval_steps, seed=args.seed + 10_000 + progress.iteration)
                 s, a = result["eval_place_success"], args.success_smoothing

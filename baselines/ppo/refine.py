@@ -42,7 +42,9 @@ import torch
 import tyro
 
 from baselines.ppo import evaluation, ppo
+from baselines.ppo.checkpoints import load_checkpoint
 from baselines.ppo.start_states import collect_failure_states
+from ms_construction.curriculum import FINAL_STAGE
 from ms_construction.reporting import WallTimes
 
 CLONE = Path("assets/checkpoints/general_agent_clone.pt")
@@ -130,7 +132,7 @@ def ppo_args(args: Args, bank: Path) -> ppo.Args:
     return ppo.Args(
         residual_of=str(args.clone), residual_scale=args.residual_scale, residual_l2_coef=args.residual_l2_coef, start_states=str(bank),
         start_states_share=args.start_states_share, start_states_keep_clock=args.bank_keeps_clock, task_weights=args.task_weights, env_id="ConstructionPickPlace-v1", reward_mode=args.reward_mode,
-        curiosity="none", curriculum=("cp4",), total_timesteps=args.total_timesteps, num_envs=args.num_envs,
+        curiosity="none", curriculum=(FINAL_STAGE,), total_timesteps=args.total_timesteps, num_envs=args.num_envs,
         num_steps=args.num_steps, num_minibatches=args.num_minibatches, update_epochs=args.update_epochs,
         learning_rate=args.learning_rate, gamma=args.gamma, reward_scale=args.reward_scale,
         target_kl=0.05, critic_warmup_iterations=args.critic_warmup_iterations, bootstrap_at_done=args.bootstrap_at_done,
@@ -224,8 +226,8 @@ def beats(refined: dict, clone: dict) -> bool:
 def ship(args: Args, ckpt_path: Path, bank: Path, record: dict, validated: tuple[dict, dict],
          confirmed: Optional[tuple[dict, dict]] = None) -> None:
     """`ckpt_path` with its campaign record to assets/checkpoints/general_agent.pt; its CSV beside it."""
-    ckpt = torch.load(ckpt_path, map_location="cpu", weights_only=False)
-    clone = torch.load(args.clone, map_location="cpu", weights_only=False)
+    ckpt = load_checkpoint(ckpt_path)
+    clone = load_checkpoint(args.clone, "--clone")
     bank_info = torch.load(bank, map_location="cpu", weights_only=False)
     ppo_steps = ckpt["progress"]["global_step"]
     wall = record["wall_s"]

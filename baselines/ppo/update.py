@@ -11,7 +11,7 @@ import torch
 import torch.nn as nn
 import torch.optim as optim
 
-from baselines.ppo.curiosity import ICM
+from baselines.ppo.curiosity import ICM, joins_extrinsic_reward
 from baselines.ppo.networks import Agent
 
 
@@ -52,7 +52,7 @@ def signal_advantages(args, rewards: torch.Tensor, intrinsic: torch.Tensor, valu
     never trains on a state after success (the env resets), and a guess below that lets holding near the goal
     outvalue placing."""
     truncated = dones - terminated
-    extrinsic = rewards + intrinsic if args.curiosity == "icm_normalized" else rewards
+    extrinsic = rewards + intrinsic if joins_extrinsic_reward(args.curiosity) else rewards
     if getattr(args, "success_value", "critic") == "absorbing":
         final_values = final_values.clone()
         final_values[..., 0] = torch.where(terminated.bool(), extrinsic / (1 - args.gamma), final_values[..., 0])

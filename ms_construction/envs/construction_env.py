@@ -12,7 +12,7 @@ from __future__ import annotations
 
 import functools
 import os
-from typing import Any, Mapping, Optional, Sequence
+from typing import Any, Mapping, Optional, Sequence, Union
 
 import numpy as np
 import sapien
@@ -26,7 +26,7 @@ from mani_skill.utils.structs.types import GPUMemoryConfig, SimConfig
 
 from ms_construction.agents.construction_arm import ConstructionArm
 from ms_construction.agents.suction_gripper import PLATE_ELEMENT_COLLISION_BIT, SuctionGripper, grasp_ray
-from ms_construction.curriculum import TOLERANCE_KEYS, resolve_tolerances, stage_tolerances, validate_tolerances
+from ms_construction.curriculum import FINAL_STAGE, TOLERANCE_KEYS, resolve_tolerances, stage_tolerances, validate_tolerances
 from ms_construction.goal_configurations import install_configurations, symmetry_period
 from ms_construction.parameters import (
     DROP_CLEARANCE,
@@ -93,7 +93,7 @@ class ConstructionTaskEnv(BaseEnv):
         *args,
         robot_uids: str = "construction_arm",
         robot_init_qpos_noise: float = ROBOT_INIT_QPOS_NOISE,
-        curriculum_stage: str = "cp4",
+        curriculum_stage: str = FINAL_STAGE,
         tolerances: Optional[dict] = None,
         tasks: Optional[Sequence[str]] = None,
         task_weights: Optional[Mapping[str, float]] = None,
@@ -114,7 +114,7 @@ class ConstructionTaskEnv(BaseEnv):
         self.obs_elapsed_time = bool(obs_elapsed_time)
         self.robot_init_qpos_noise = robot_init_qpos_noise
         self._step_grasp_frame, self._in_step_readout = None, False
-        self.near_goal_share, self.near_goal_radius = 0.0, 0.0
+        self.near_goal_share, self.near_goal_radius = 0.0, None
         kwargs.setdefault("render_backend", default_render_backend())
         super().__init__(*args, robot_uids=robot_uids, **kwargs)
 
@@ -259,14 +259,18 @@ class ConstructionTaskEnv(BaseEnv):
     # ------------------------------------------------------------------------------------- #
     # start-state curriculum (reverse curriculum generation, Florensa et al. 2017)
     # ------------------------------------------------------------------------------------- #
-    def set_near_goal_starts(self, share: float, radius: float) -> None:
+    def set_near_goal_starts(self, share: float, radius: Union[float, Sequence[float]]) -> None:
         """From the next reset on, a `share` of episodes start with the element already held, the arm posed a
-        fraction in [0, `radius`] of the way out along a start path from its installation configuration
+        fraction in [0, `radius`] (one for all task types, or one per type in ELEMENT_KINDS order) of the way out
+        along a start path from its installation configuration
         (`goal_configurations.StartPaths`: backed off the goal along the plate's axis, then on the joint line to
         a lift above the staging table), within the path's collision-free part. Everything comes from IK of
         the goal and the table (no demonstrations). `info["near_goal_start"]` marks those episodes. A training
         device: evaluations use ordinary resets (share 0, the default)."""
-        for name, value in (("share", share), ("radius", radius)):
+        radii = [float(radius)] * len(ELEMENT_KINDS) if np.isscalar(radius) else [float(r) for r in radius]
+        if len(radii) != len(ELEMENT_KINDS):
+            raise ValueError(f"near-goal starts: give one radius or {len(ELEMENT_KINDS)} ({', '.join(ELEMENT_KINDS)}), got {radius}")
+        for name, value in [("share", share)] + [("radius", r) for r in radii]:
             if not 0 <= value <= 1:
                 raise ValueError(f"near-goal starts: {name} must lie in [0, 1], got {value}")
         if share > 0 and self._start_paths is None:
@@ -276,7 +280,8 @@ class ConstructionTaskEnv(BaseEnv):
             f32 = dict(dtype=torch.float32, device=self.device)
             self._start_paths = dict(waypoints=torch.tensor(paths.waypoints, **f32), free=torch.tensor(paths.free, **f32),
                                      usable=torch.tensor(paths.usable, device=self.device).flatten(2).float())
-        self.near_goal_share, self.near_goal_radius = float(share), float(radius)
+        self.near_goal_share = float(share)
+        self.near_goal_radius = torch.tensor(radii, dtype=torch.float32, device=self.device)
 
     @staticmethod
     def _path_points(waypoints: torch.Tensor, fraction: torch.Tensor) -> torch.Tensor:
@@ -297,7 +302,7 @@ class ConstructionTaskEnv(BaseEnv):
         task, slot = self.task_id[idx], self.goal_slot[idx]
         path = torch.multinomial(sp["usable"][task, slot], 1)[:, 0]  # a usable (configuration, side) of the slot
         c, side = path // 2, path % 2
-        frac = torch.rand(len(idx)) * torch.clamp(sp["free"][task, slot, c, side], max=self.near_goal_radius)
+        frac = torch.rand(len(idx)) * torch.minimum(sp["free"][task, slot, c, side], self.near_goal_radius[task])
         q = self._path_points(sp["waypoints"][task, slot, c, side], frac)
         turn = (torch.rand(len(idx)) * 2 - 1) * START_YAW_NOISE_DEG  # the element's turn on the plate
         q[:, 5] += torch.deg2rad(turn)

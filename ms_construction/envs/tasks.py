@@ -7,13 +7,13 @@ every observation, so one policy runs on all of them) and rewards.
 from mani_skill.utils.registration import register_env
 
 from ms_construction.agents.suction_gripper import MAX_GRASP_INCIDENCE_DEG
-from ms_construction.curriculum import STAGES
+from ms_construction.curriculum import FINAL_STAGE, STAGES
 from ms_construction.envs.construction_env import ROBOT_INIT_QPOS_NOISE, ConstructionTaskEnv
 from ms_construction.parameters import START_XY_NOISE, START_YAW_NOISE_DEG, SiteParams
 
 _SITE = SiteParams()
 _SLOTS = {"ceiling": len(_SITE.ceiling_slots), "window": len(_SITE.window_ys), "flooring": len(_SITE.floor_slots)}
-_CP4 = STAGES["cp4"]
+_CP4 = STAGES[FINAL_STAGE]
 _STEPS = ConstructionTaskEnv.MAX_EPISODE_STEPS
 
 

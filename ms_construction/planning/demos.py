@@ -36,6 +36,7 @@ from tqdm import tqdm
 
 from ms_construction.planning.expert import ExpertConfig, MotionPlanningExpert
 from ms_construction.parameters import ELEMENT_KINDS
+from ms_construction.curriculum import FINAL_STAGE
 
 DELTA_CONTROL_MODE = "pd_joint_delta_pos"
 DEMO_EXPERT_CONFIG = ExpertConfig(speed=0.55)
@@ -121,7 +122,7 @@ class Demo:
 class DemoCollector:
     """One env and one expert; `collect(seed, noise)` solves a seeded episode and returns its demo."""
 
-    def __init__(self, env_id: str, curriculum_stage: str = "cp4", config: ExpertConfig = DEMO_EXPERT_CONFIG):
+    def __init__(self, env_id: str, curriculum_stage: str = FINAL_STAGE, config: ExpertConfig = DEMO_EXPERT_CONFIG):
         env = gym.make(env_id, num_envs=1, obs_mode="state", control_mode=DELTA_CONTROL_MODE, reward_mode="sparse",
                        sim_backend="physx_cpu", curriculum_stage=curriculum_stage)
         self.env = JointTargetsAsDeltas(env)
@@ -250,7 +251,7 @@ def policy_steps(path: Path) -> int:
 
 
 def record_demos(out: Path, episodes: int, env_id: str = "ConstructionPickPlace-v1", seed: int = 100_000,
-                 noise: float = 0.1, curriculum_stage: str = "cp4", workers: int = 2, save_every: int = 50,
+                 noise: float = 0.1, curriculum_stage: str = FINAL_STAGE, workers: int = 2, save_every: int = 50,
                  resume: bool = False, policy: Optional[Path] = None, load_policy: Optional[PolicyLoader] = None,
                  expert: ExpertConfig = DEMO_EXPERT_CONFIG) -> Path:
     """Episodes seed, seed + 1, ... (every other one with DART noise `noise`); the placed ones are
