@@ -42,6 +42,9 @@ PROBES = {
                                      "three task types, widened after any iteration whose near-goal episodes placed 60%",
                                      "git checkout d37d6c2 && python -m experiments.from_scratch (the recipe's first "
                                      "version; stopped at 448,000 steps)"),
+    "probeG_general_task_radii": ("F with one start radius per task type, widened on a window of its last 20 "
+                                  "near-goal episodes",
+                                  "git checkout dc03ca7 && python -m experiments.from_scratch (stopped at 512,000 steps)"),
 }
 """name: (what it changed, its arguments beyond COMMON), in the order they ran."""
 

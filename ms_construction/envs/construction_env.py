@@ -198,6 +198,7 @@ class ConstructionTaskEnv(BaseEnv):
         self.picked = torch.zeros(n, dtype=torch.bool, device=dev)
         self.first_grasp_now = torch.zeros(n, dtype=torch.bool, device=dev)
         self.near_goal_start = torch.zeros(n, dtype=torch.bool, device=dev)
+        self.carry_prev = torch.full((n,), -1.0, **f32)  # the carry distance at the last dense reward; -1: none
         self._start_paths = None  # the start-state curriculum's paths, loaded when it is first switched on
         self.tolerances = torch.tensor([[self._tol_init[k] for k in TOLERANCE_KEYS]], **f32).repeat(n, 1)
         self.obj = self.elements[self.TASKS[0]]
@@ -253,6 +254,7 @@ class ConstructionTaskEnv(BaseEnv):
             self.picked[env_idx] = False
             self.first_grasp_now[env_idx] = False
             self.near_goal_start[env_idx] = False
+            self.carry_prev[env_idx] = -1.0
             if self.near_goal_share > 0:
                 self._start_near_goal(env_idx)
 
@@ -502,6 +504,9 @@ class ConstructionTaskEnv(BaseEnv):
         reward[info["success"]] = 2.0
         return reward
 
+    PROGRESS_GAIN = 1.25
+    """per rad; the progress term pays this much per radian the carry distance fell since the last step, within
+    +-0.25 around its 0.25 for standing still (a joint at its full 0.1 rad per step earns 0.125 more)."""
     CARRY_RANGE = 12.0
     """rad; the carry term falls linearly from 1 at an installation configuration to 0 this far (summed over the
     joints) from the nearest one: a lift above the staging table leaves the arm 2.6-10.3 rad from its goal."""
@@ -529,11 +534,15 @@ class ConstructionTaskEnv(BaseEnv):
 
     def compute_dense_reward(self, obs: Any, action: torch.Tensor, info: dict):
         """Staged, as ManiSkill's tasks: reach and face the grasp surface (<= 1); held: 2 + carry (<= 1) + fit
-        (<= 1); placed: 5, more than any other step, for a learner that bootstraps at success (ManiSkill's
-        convention; see the task card). Carry is linear in the arm's joint-space distance from its installation
-        configuration (`carry_distance`), so it pulls at the same rate from the pick to the goal, the way the
-        turret's limits allow, and turns the element as it carries it; fit is 1 - tanh(5 d) of the element's
-        distance d from its goal, scaled by its angle error, which takes over for the last decimetres."""
+        (<= 1) + progress (<= 0.5); placed: 5, more than any other step, for a learner that bootstraps at success
+        (ManiSkill's convention; see the task card). Carry is linear in the arm's joint-space distance from its
+        installation configuration (`carry_distance`), so it pulls at the same rate from the pick to the goal, the
+        way the turret's limits allow, and turns the element as it carries it; fit is 1 - tanh(5 d) of the
+        element's distance d from its goal, scaled by its angle error, which takes over for the last decimetres.
+        Progress is the step's fall of the carry distance (PROGRESS_GAIN per rad, within [0, 0.5], 0.25 standing
+        still): a potential difference, so it sums to the carry's net change over an episode and going back and
+        forth earns nothing, but it pays each step's progress at once instead of through the critic's sums. It
+        keeps the last carry distance per env (`carry_prev`, in the task state): call this once per step."""
         tcp = self.agent.tcp.pose.raw_pose
         grasp = self._grasp_frame()
         # tanh(d), not tanh(3d): the element starts about 2 m from the plate and must still pull
@@ -542,10 +551,14 @@ class ConstructionTaskEnv(BaseEnv):
         # bearing around the pedestal: straight-line distance alone pulls the plate over the
         # pedestal (a dead end) when the target is behind the arm; turning the turret must pay
         approach = 0.25 * _bearing(tcp[:, :2], grasp[:, :2]) + 0.75 * reach * (0.5 + 0.5 * face)
-        carry = 1 - (self.carry_distance() / self.CARRY_RANGE).clamp(max=1)
+        held = info["is_grasped"]
+        distance = self.carry_distance()
+        fell = torch.where(held & (self.carry_prev >= 0), self.carry_prev - distance, torch.zeros_like(distance))
+        self.carry_prev = torch.where(held, distance, torch.full_like(distance, -1.0))
+        progress = 0.25 + (self.PROGRESS_GAIN * fell).clamp(-0.25, 0.25)
+        carry = 1 - (distance / self.CARRY_RANGE).clamp(max=1)
         fit = (1 - torch.tanh(5 * info["place_dist"])) * (1 - info["place_angle_deg"] / 180)
-        held = info["is_grasped"].float()
-        reward = (1 - held) * approach + held * (2 + carry + fit)
+        reward = torch.where(held, 2 + carry + fit + progress, approach)
         return torch.where(info["success"], torch.full_like(reward, self.DENSE_REWARD_MAX), reward)
 
     def compute_normalized_dense_reward(self, obs: Any, action: torch.Tensor, info: dict):
@@ -565,6 +578,7 @@ class ConstructionTaskEnv(BaseEnv):
             picked=self.picked[:, None].clone(),
             hold_pose_in_tcp=self.hold_pose_in_tcp.clone(),
             tolerances=self.tolerances.clone(),
+            carry_prev=self.carry_prev[:, None].clone(),
         )
         return state
 
@@ -583,7 +597,9 @@ class ConstructionTaskEnv(BaseEnv):
         task = state.pop("task", None)
         if task is not None:
             idx = slice(None) if env_idx is None else env_idx
-            for key in ("task_id", "goal_slot", "held", "picked", "hold_pose_in_tcp", "tolerances"):
+            for key in ("task_id", "goal_slot", "held", "picked", "hold_pose_in_tcp", "tolerances", "carry_prev"):
+                if key not in task:  # a state saved before the key existed (carry_prev: 2026-11-25)
+                    continue
                 dest = getattr(self, key)
                 k = dest.shape[1] if dest.ndim == 2 else 1
                 value = task[key]

@@ -43,12 +43,14 @@ curriculum stage (`curriculum_stage`, Table I; default cp4: {_CP4["pick"]:.2f} m
 {_CP4["angle_deg"]:g} degrees).
 
 **Rewards:** sparse = Algorithm 1 (-1/{_STEPS} every step, 1 on the first grasp, 2 on placement);
-dense = staged reach and face (<= 1), held (2 + carry <= 1 + fit <= 1), placed
+dense = staged reach and face (<= 1), held (2 + carry <= 1 + fit <= 1 + progress <= 0.5), placed
 ({ConstructionTaskEnv.DENSE_REWARD_MAX:g}, the most any step pays); normalized_dense = dense / {ConstructionTaskEnv.DENSE_REWARD_MAX:g}. Carry falls
 linearly, to 0 at {ConstructionTaskEnv.CARRY_RANGE:g} rad, with the arm's joint-space distance (summed over the joints) from the nearest
 configuration that holds the element installed (IK of the goal; `carry_distance`): it pulls from the staging
 table on, turns the turret the way its limits allow and turns the element with the wrist as it carries it. Fit
-is 1 - tanh(5 d) of the element's distance d from its goal, times 1 - angle error / 180 degrees. Convention
+is 1 - tanh(5 d) of the element's distance d from its goal, times 1 - angle error / 180 degrees. Progress pays
+the step's fall of the carry distance ({ConstructionTaskEnv.PROGRESS_GAIN:g} per rad, in [0, 0.5], 0.25 standing still): a
+potential difference, so going back and forth earns nothing. Convention
 (ManiSkill's): the dense rewards are for a learner that bootstraps at every episode end, success included
 (ManiSkill's PPO `bootstrap_at_done="always"`, ppo.py's default for them), so that a placed element counts
 as a state that keeps paying the most (ppo.py's `--success-value absorbing`, its default, bootstraps it with
