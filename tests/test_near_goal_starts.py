@@ -117,3 +117,38 @@ def test_the_env_s_batched_path_points_are_the_reference_s():
     got = ConstructionTaskEnv._path_points(torch.tensor(wp), frac)
     for i in range(len(wp)):
         np.testing.assert_allclose(got[i].numpy(), path_point(wp[i].astype(np.float64), float(frac[i])), atol=1e-5)
+
+
+def test_progress_pays_each_step_s_fall_of_the_carry_distance_and_nothing_for_going_back_and_forth():
+    env = make_env("Flooring-v1", control_mode="pd_joint_delta_pos", reward_mode="dense")
+    env.reset(seed=0)
+    u = env.unwrapped
+    u.set_held(True)
+    goal = torch.tensor(install_configurations()[2, int(u.goal_slot[0]), 0])
+    far = goal + torch.tensor([-1.0, -0.3, 0.2, 0.0, 0.3, 0.4])
+
+    def reward_at(q):
+        u.agent.robot.set_qpos(q[None])
+        return float(u.compute_dense_reward(None, None, u.evaluate())[0])
+
+    def without_progress(q):
+        u.agent.robot.set_qpos(q[None])
+        info = u.evaluate()
+        fit = (1 - torch.tanh(5 * info["place_dist"])) * (1 - info["place_angle_deg"] / 180)
+        return float(2 + 1 - u.carry_distance() / u.CARRY_RANGE + fit)
+
+    mid, near = far + 0.5 * (goal - far), far + 0.6 * (goal - far)
+    u.carry_prev[:] = -1.0
+    first = reward_at(far)
+    assert first == pytest.approx(without_progress(far) + 0.25, abs=1e-5), "the first held step: no progress yet"
+    toward = reward_at(mid)  # from far: the distance fell
+    still = reward_at(mid)
+    reward_at(near)
+    back = reward_at(mid)  # from near: it rose as much as it falls from mid to near
+    assert still == pytest.approx(without_progress(mid) + 0.25, abs=1e-5)
+    assert toward > still > back
+    step = float(u.PROGRESS_GAIN) * 0.1 * float((goal - far).abs().sum())  # the fall from near to mid, x the gain
+    assert back == pytest.approx(still - min(0.25, step), abs=1e-4)
+    # a round trip mid -> near -> mid earns what standing still twice earns
+    assert reward_at(near) + reward_at(mid) == pytest.approx(2 * 0.25 + without_progress(near) + without_progress(mid), abs=1e-4)
+    env.close()
