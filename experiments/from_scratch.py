@@ -11,7 +11,7 @@ assets/checkpoints/scratch_general_agent.pt with its campaign record. The recipe
 
 | setting | value | why |
 |---|---|---|
-| reward | normalized_dense: the tasks' dense reward / 5 | its carry term is linear in the arm's joint-space distance from the installation configuration (IK of the goal, ms_construction/goal_configurations.py), so it pulls from the pick, the way the turret's limits allow; its progress term pays each step's fall of that distance at once (probe G) |
+| reward | normalized_dense: the tasks' dense reward / 10 (placing pays 10, a held step at most 4.5) | its carry term is linear in the arm's joint-space distance from the installation configuration (IK of the goal, ms_construction/goal_configurations.py), so it pulls from the pick, the way the turret's limits allow; its progress term pays each step's fall of that distance at once (probe G) |
 | success | absorbing: bootstrapped with its reward for ever | the critic never trains on a state after success; its guess let hovering near the goal outvalue placing |
 | start states | half the training episodes start held on a collision-free joint path out of the goal (`set_near_goal_starts`), each task type's radius widening from 0.1 of the path by 0.1 once 60% of its last 20 such episodes placed | reverse curriculum generation (Florensa et al. 2017) from resets the env computes by IK: no demonstrations; evaluation always resets as usual. One radius for all three types widened on lucky iterations of the easy type (probe F) |
 | discount | gamma 0.95, GAE lambda 0.95 | values of a few dozen steps: the dense reward carries the rest, and the critic learns them quickly |

@@ -55,9 +55,9 @@ def test_placing_beats_holding_still_anywhere_along_the_expert_s_episode(env_id)
     thirds = [part.mean().item() for part in torch.tensor_split(dense[:-1][held[:-1]], 3)]
     assert thirds[0] < thirds[1] < thirds[2], thirds
     u_max = dense[-1].item()
-    assert u_max == 5.0, "placing pays the dense reward's maximum"
+    assert u_max == 10.0, "placing pays the dense reward's maximum"
     assert dense[:-1].max() < u_max
-    for name, r in [("dense", dense), ("normalized_dense", dense / 5.0)]:
+    for name, r in [("dense", dense), ("normalized_dense", dense / 10.0)]:
         stay = r[:-1] / (1 - GAMMA)  # stopping at step k's state (k before placing) and holding still there for ever
         placing = returns(r, "always", success_value=r[-1].item() / (1 - GAMMA))[:-1]
         worst = int(torch.argmin(placing - stay))

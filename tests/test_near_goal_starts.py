@@ -134,7 +134,7 @@ def test_progress_pays_each_step_s_fall_of_the_carry_distance_and_nothing_for_go
     def without_progress(q):
         u.agent.robot.set_qpos(q[None])
         info = u.evaluate()
-        fit = (1 - torch.tanh(5 * info["place_dist"])) * (1 - info["place_angle_deg"] / 180)
+        fit = (1 - torch.tanh(5 * info["place_dist"])) * (1 - torch.tanh(torch.deg2rad(info["place_angle_deg"])))
         return float(2 + 1 - u.carry_distance() / u.CARRY_RANGE + fit)
 
     mid, near = far + 0.5 * (goal - far), far + 0.6 * (goal - far)

@@ -48,7 +48,7 @@ dense = staged reach and face (<= 1), held (2 + carry <= 1 + fit <= 1 + progress
 linearly, to 0 at {ConstructionTaskEnv.CARRY_RANGE:g} rad, with the arm's joint-space distance (summed over the joints) from the nearest
 configuration that holds the element installed (IK of the goal; `carry_distance`): it pulls from the staging
 table on, turns the turret the way its limits allow and turns the element with the wrist as it carries it. Fit
-is 1 - tanh(5 d) of the element's distance d from its goal, times 1 - angle error / 180 degrees. Progress pays
+is 1 - tanh(5 d) of the element's distance d from its goal, times 1 - tanh of its angle error in radians. Progress pays
 the step's fall of the carry distance ({ConstructionTaskEnv.PROGRESS_GAIN:g} per rad, in [0, 0.5], 0.25 standing still): a
 potential difference, so going back and forth earns nothing. Convention
 (ManiSkill's): the dense rewards are for a learner that bootstraps at every episode end, success included
