@@ -46,7 +46,7 @@ PROBES = {
                                   "near-goal episodes",
                                   "git checkout dc03ca7 && python -m experiments.from_scratch (stopped at 512,000 steps)"),
     "probeH_general_progress": ("G + the dense reward's progress term (placing still paying 5)",
-                                "git checkout 9115d4e && python -m experiments.from_scratch (stopped at about 470,000 steps)"),
+                                "git checkout 9115d4e && python -m experiments.from_scratch (stopped at 514,000 steps)"),
 }
 """name: (what it changed, its arguments beyond COMMON), in the order they ran."""
 
