@@ -41,7 +41,7 @@ PROBES = {
     "probeF_general_shared_radius": ("E's recipe on the general task (ConstructionPickPlace-v1), one start radius for the "
                                      "three task types, widened after any iteration whose near-goal episodes placed 60%",
                                      "git checkout d37d6c2 && python -m experiments.from_scratch (the recipe's first "
-                                     "version; stopped at 448,000 steps)"),
+                                     "version; stopped at 514,000 steps)"),
     "probeG_general_task_radii": ("F with one start radius per task type, widened on a window of its last 20 "
                                   "near-goal episodes",
                                   "git checkout dc03ca7 && python -m experiments.from_scratch (stopped at 512,000 steps)"),
