@@ -4,6 +4,7 @@
     python -m experiments.from_scratch                  # run (or resume) it; ships when it reaches its budget
     python -m experiments.from_scratch --ship-now       # ship the policy where the run stands now
     python -m experiments.from_scratch --report         # its section of docs/RESULTS.md and its curve
+    python -m experiments.from_scratch --diagnose       # its policy from near-goal starts, into the experiment page
 
 One PPO run (baselines/ppo/ppo.py) on ConstructionPickPlace-v1, resumed from its checkpoint in campaign/ when it
 has one (commit the checkpoint and progress.csv between sessions), shipped to
@@ -35,6 +36,7 @@ import numpy as np
 import tyro
 
 from baselines.ppo import ppo
+from baselines.ppo.checkpoints import load_checkpoint
 from baselines.ppo.evaluation import PAPER_TABLE_II, failures, kinds, pct
 from baselines.ppo.paper_setting import CAMPAIGN_DIR, SHIPPED_DIR, Run, describe, run_or_resume, ship, training_wall_s
 from ms_construction.parameters import ELEMENT_KINDS
@@ -168,6 +170,47 @@ def report(run: Run, results: Path = Path("docs/RESULTS.md")) -> str:
     return body
 
 
+DIAGNOSE_RADIUS = 0.2
+DIAGNOSE_SEEDS = 6
+DIAGNOSE_STEPS = 120
+
+
+def near_goal_rollouts(checkpoint: Path, radius: float = DIAGNOSE_RADIUS, seeds: int = DIAGNOSE_SEEDS,
+                       steps: int = DIAGNOSE_STEPS) -> str:
+    """Where the policy takes an element it starts holding near its goal: per task and seed (near-goal starts at
+    `radius`, the policy's mean, at most `steps` steps), whether it placed, the element's distance and angle to
+    the goal and the arm's carry distance at the start and the end, and the joints at the end."""
+    import gymnasium as gym
+    import torch
+
+    import ms_construction  # noqa: F401  (registration)
+    from baselines.ppo.checkpoints import load_policy
+    from ms_construction.envs import TASK_ENV_IDS
+
+    agent, kwargs = load_policy(checkpoint, "ConstructionPickPlace-v1")
+    kwargs = {k: v for k, v in kwargs.items() if k not in ("obs_mode", "reward_mode")}
+    lines = ["| task | seed | steps | placed | distance to goal, start / end (m) | angle, start / end (deg) | "
+             "carry distance, start / end (rad) | joints at the end (rad) |", "|---|---|---|---|---|---|---|---|"]
+    for env_id in TASK_ENV_IDS.values():
+        env = gym.make(env_id, obs_mode="state", reward_mode="normalized_dense", **kwargs)
+        u = env.unwrapped
+        u.set_near_goal_starts(1.0, radius)
+        for seed in range(seeds):
+            obs, info = env.reset(seed=seed)
+            start = (float(u.evaluate()["place_dist"][0]), float(u.evaluate()["place_angle_deg"][0]), float(u.carry_distance()[0]))
+            for t in range(steps):
+                with torch.no_grad():
+                    obs, _, terminated, truncated, info = env.step(agent.get_action(obs.float(), deterministic=True).clamp(-1, 1))
+                if bool(terminated[0]) or bool(truncated[0]):
+                    break
+            q = " ".join(f"{v:.2f}" for v in u.agent.robot.get_qpos()[0].tolist())
+            lines.append(f"| {env_id} | {seed} | {t + 1} | {'yes' if bool(info['success'][0]) else 'no'} | "
+                         f"{start[0]:.2f} / {float(info['place_dist'][0]):.2f} | {start[1]:.0f} / {float(info['place_angle_deg'][0]):.0f} | "
+                         f"{start[2]:.2f} / {float(u.carry_distance()[0]):.2f} | {q} |")
+        env.close()
+    return "\n".join(lines)
+
+
 @dataclass
 class Args:
     num_envs: Optional[int] = None
@@ -179,12 +222,24 @@ class Args:
     """ship the policy where the run stands now (its record says at which step of the plan), and exit."""
     report: bool = False
     """write its section of docs/RESULTS.md and its curve (docs/images/scratch_curve.png), and exit."""
+    diagnose: bool = False
+    """run its latest policy from near-goal starts (radius 0.2, 6 seeds per task) and write where it took the
+    elements into docs/experiments/from_scratch.md, and exit."""
 
 
 def main(args: Args) -> None:
     for run in scratch_runs(args.num_envs, args.seed):
         print(describe(run))
-        if args.report:
+        if args.diagnose:
+            ckpt = Path(run.args.log_dir) / run.args.exp_name / "checkpoint.pt"
+            progress = load_checkpoint(ckpt)["progress"]["global_step"]
+            body = (f"Command: `{COMMAND} --diagnose` (the campaign's checkpoint at {progress:,} env steps; near-goal starts "
+                    f"at radius {DIAGNOSE_RADIUS}, the policy's mean, at most {DIAGNOSE_STEPS} steps).\n\n"
+                    + near_goal_rollouts(ckpt))
+            update_section(Path("docs/experiments/from_scratch.md"), "near-goal-rollouts", body,
+                           "Learning from reward alone: the experiment")
+            print(body)
+        elif args.report:
             print(report(run))
         elif args.ship_now:
             ship(run, before_the_end=True)

@@ -37,6 +37,11 @@ def test_a_tiny_run_ships_before_its_end_with_a_record_that_says_where_it_stands
     ps.ship(longer, before_the_end=True)
     record = torch.load(run.shipped, weights_only=False)["campaign"]["record"]
     assert record["env steps"] == "80 (of the 160 planned)" and "demonstrations: none" in record["method"]
+    # the diagnosis: where its policy takes elements it starts holding near their goals, a row per task and seed
+    table = fs.near_goal_rollouts(ps.checkpoint_of(run), radius=0.0, seeds=1, steps=2)
+    rows = [line for line in table.splitlines()[2:]]
+    assert [r.split(" | ")[0] for r in rows] == ["| CeilingInstallation-v1", "| WindowInstallation-v1", "| Flooring-v1"]
+    assert all(" | yes | " in r for r in rows), "radius 0 starts installed: placed at the first step"
 
 
 def test_the_report_draws_the_curve_and_writes_the_section(tmp_path, monkeypatch):
