@@ -3,6 +3,7 @@ it ships with a record that says so, and its report writes the curve and the sec
 
 import csv
 import dataclasses
+import json
 
 import pytest
 import torch
@@ -65,3 +66,23 @@ def test_the_report_draws_the_curve_and_writes_the_section(tmp_path, monkeypatch
     assert "| 600,000 / 20,000,000 | 0.3 h | 0.2 / 0.4 / 1.0 | 0.0 / 50.0 / 25.0 | 70.0 | 80.0 |" in body
     assert (tmp_path / "images" / "scratch_curve.png").stat().st_size > 0
     assert "<!-- begin from-scratch (generated) -->" in results.read_text() and "Not shipped yet" in body
+
+
+def test_the_shipped_agent_from_reward_alone_has_no_demonstrations_in_it_and_plays(tmp_path):
+    """assets/checkpoints/scratch_general_agent.pt: its record says how far its campaign got and that it saw no
+    demonstrations, its args hold no warm start, residual base or expert states, and scripts/evaluate.py runs it."""
+    from pathlib import Path
+
+    from baselines.ppo import evaluation
+
+    path = Path(__file__).resolve().parents[1] / "assets/checkpoints/scratch_general_agent.pt"
+    assert path.is_file(), f"{path} is missing (`python -m experiments.from_scratch --ship-now` ships it)"
+    ckpt = torch.load(path, map_location="cpu", weights_only=False)
+    record = ckpt["campaign"]["record"]
+    assert "demonstrations: none" in record["method"] and "wall time" in record and "hardware" in record
+    a = ckpt["args"]
+    assert not a["demos"] and a["checkpoint"] is None and a["residual_of"] is None and a["start_states"] is None
+    assert a["near_goal_share"] > 0 and a["reward_mode"] == "normalized_dense"
+    out = tmp_path / "eval.json"
+    evaluation.main(evaluation.Args(checkpoint=path, env_id="Flooring-v1", episodes=1, workers=1, json=out))
+    assert json.loads(out.read_text())["episodes"] == 1
