@@ -169,7 +169,10 @@ def test_the_campaign_report_summarizes_each_run_and_stage_and_draws_figure_3_an
            "| - | not yet | - |" in table
     expert = next(line for line in table.splitlines() if line.startswith("| ours: planning expert"))
     assert expert.count("100.0 [96.3, 100.0] / 100.0 [96.3, 100.0]") == 3, "100 of 100 with its Wilson interval"
-    assert "| ours: from reward alone |" in table and "experiments.from_scratch --ship-now" in table
+    # the from-scratch agent: shipped, so its row waits on its evaluation, with the command that writes it
+    assert "| ours: from reward alone |" in table
+    assert ("ours: from reward alone: not yet (not evaluated yet); then `python scripts/evaluate.py --checkpoint "
+            "assets/checkpoints/scratch_general_agent.pt --all") in table
     # the README's headline: Table II's rows a reader compares first, the same cells
     headline = (tmp_path / "README.md").read_text()
     assert "| paper: general agent | 84.55 / 68.04 | 95.32 / 84.82 | 88.43 / 85.17 |" in headline
