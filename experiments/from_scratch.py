@@ -28,6 +28,7 @@ import dataclasses
 import json
 import math
 import os
+import shlex
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Optional
@@ -36,9 +37,10 @@ import numpy as np
 import tyro
 
 from baselines.ppo import ppo
+from baselines.ppo.args import command_line
 from baselines.ppo.checkpoints import load_checkpoint
 from baselines.ppo.evaluation import PAPER_TABLE_II, failures, kinds, pct
-from baselines.ppo.paper_setting import CAMPAIGN_DIR, SHIPPED_DIR, Run, describe, run_or_resume, ship, training_wall_s
+from experiments.campaign import CAMPAIGN_DIR, SHIPPED_DIR, Run, describe, run_or_resume, ship, training_wall_s
 from ms_construction.parameters import ELEMENT_KINDS
 from ms_construction.reporting import update_section
 from ms_construction.curriculum import FINAL_STAGE
@@ -230,6 +232,7 @@ class Args:
 def main(args: Args) -> None:
     for run in scratch_runs(args.num_envs, args.seed):
         print(describe(run))
+        print("as one ppo.py command: python baselines/ppo/ppo.py " + shlex.join(command_line(run.args)))
         if args.diagnose:
             ckpt = Path(run.args.log_dir) / run.args.exp_name / "checkpoint.pt"
             progress = load_checkpoint(ckpt)["progress"]["global_step"]

@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import csv
 import math
+import shlex
 from pathlib import Path
 
 from ms_construction.reporting import update_section
@@ -21,6 +22,17 @@ PROBE_DIR = Path("docs/data/from_scratch/probes")
 PAGE = Path("docs/experiments/from_scratch.md")
 COMMON = ("python baselines/ppo/ppo.py --env-id Flooring-v1 --curiosity none --curriculum cp4 --num-steps 1000 "
           "--log-dir runs/probes --eval-freq 5")
+
+
+def _recipe(**overrides) -> str:
+    """The ppo.py command of the from-scratch recipe (experiments/from_scratch.py, 2 envs) with `overrides`, as a probe."""
+    from baselines.ppo.args import command_line
+    from experiments.from_scratch import scratch_args
+
+    args = scratch_args(2, log_dir="runs/probes", eval_freq=50, total_timesteps=600_000, **overrides)
+    return "python baselines/ppo/ppo.py " + shlex.join(command_line(args))
+
+
 PROBES = {
     "probeA_floor_jointcarry": ("the new dense reward (joint-space carry), ppo.py's dense defaults (gamma 0.99, 4 x 4 "
                                 "minibatches, bootstrap with the critic at success)",
@@ -47,8 +59,18 @@ PROBES = {
                                   "git checkout dc03ca7 && python -m experiments.from_scratch (stopped at 512,000 steps)"),
     "probeH_general_progress": ("G + the dense reward's progress term (placing still paying 5)",
                                 "git checkout 9115d4e && python -m experiments.from_scratch (stopped at 514,000 steps)"),
+    "probeI_general_install_offset": ("the campaign's recipe (H, placing paying 10) + the joint move to the "
+                                      "installation configuration in the observation (`--obs-install-offset`)",
+                                      _recipe(obs_install_offset=True, exp_name="probeI_general_install_offset")
+                                      + " (stopped at 190,000 steps)"),
+    "probeJ_offset_ng_limit80": ("I + near-goal episodes cut at 80 steps (`--near-goal-max-steps 80`)",
+                                 _recipe(obs_install_offset=True, near_goal_max_steps=80, exp_name="probeJ_offset_ng_limit80")
+                                 + " (stopped at 48,000 steps, to start K)"),
+    "probeK_offset_limit80_tanh": ("J + the policy's mean bounded by tanh (`--bounded-mean`)",
+                                   _recipe(obs_install_offset=True, near_goal_max_steps=80, bounded_mean=True,
+                                           exp_name="probeK_offset_limit80_tanh") + " (stopped at 174,000 steps)"),
 }
-"""name: (what it changed, its arguments beyond COMMON), in the order they ran."""
+"""name: (what it changed, its arguments beyond COMMON or its whole command), in the order they ran."""
 
 
 def _mean(rows: list[dict], key: str) -> float:
@@ -79,7 +101,7 @@ def table() -> str:
                      f"{float(radius):.1f} | {_mean(last, 'end_place_dist'):.2f} |" if radius else
                      f"| {name.split('_')[0]} | {what} | {int(rows[-1]['global_step']):,} | {_pct(_mean(last, 'pick_success'))} | "
                      f"{_pct(ordinary)} | - | - | {_mean(last, 'end_place_dist'):.2f} |")
-    commands = "\n".join(f"- {name.split('_')[0]}: `{args if args.startswith('git ') else f'{COMMON} {args} --exp-name {name}'}`"
+    commands = "\n".join(f"- {name.split('_')[0]}: `{args if args.startswith(('git ', 'python ')) else f'{COMMON} {args} --exp-name {name}'}`"
                          for name, (_, args) in PROBES.items())
     return ("Command: `python -m experiments.probes` (from docs/data/from_scratch/probes/*.csv).\n\n"
             "Means over the last fifth of each probe's iterations, of its training episodes (stochastic policy).\n\n"

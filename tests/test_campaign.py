@@ -13,7 +13,8 @@ import pytest
 import torch
 
 from baselines.ppo import evaluation
-from baselines.ppo import paper_setting as ps
+from experiments import campaign
+from experiments import paper as ps
 from baselines.ppo import ppo
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -31,7 +32,7 @@ def test_the_general_agent_runs_the_four_table_i_stages_of_exactly_2m_steps_prom
     assert ppo.should_promote(a, ppo.Progress(global_step=2_000_000, smoothed_success=0.0)) == "steps"
     b = no_curiosity.args
     assert b.curiosity == "none" and b.curriculum == ("cp1",) and b.total_timesteps == 2_000_000 and b.seed == a.seed
-    assert general.shipped == ps.SHIPPED_DIR / "paper_general_agent.pt" and no_curiosity.shipped is None
+    assert general.shipped == campaign.SHIPPED_DIR / "paper_general_agent.pt" and no_curiosity.shipped is None
     assert dataclasses.replace(b, curiosity="icm", curriculum=a.curriculum, total_timesteps=a.total_timesteps,
                                exp_name=a.exp_name) == a, "the ablation differs from run 1 in curiosity and length only"
 
@@ -59,9 +60,9 @@ def test_an_env_count_that_does_not_divide_the_update_is_refused():
 
 
 def test_dry_runs_print_the_plans():
-    for script, names in [("train_paper_agent.py", ["paper_general_agent", "paper_cp1_no_curiosity"]),
-                          ("train_control_groups.py", ["control_ceiling", "control_window", "control_flooring"])]:
-        res = subprocess.run([sys.executable, str(ROOT / "scripts" / script), "--dry-run", "--num-envs", "2"],
+    for flags, names in [((), ["paper_general_agent", "paper_cp1_no_curiosity"]),
+                         (("--control-groups",), ["control_ceiling", "control_window", "control_flooring"])]:
+        res = subprocess.run([sys.executable, "-m", "experiments.paper", *flags, "--dry-run", "--num-envs", "2"],
                              capture_output=True, text=True, timeout=300, cwd=ROOT, env={**os.environ, "PYTHONPATH": str(ROOT)})
         assert res.returncode == 0, res.stderr
         for name in names:
@@ -76,17 +77,17 @@ def test_a_campaign_run_resumes_from_its_checkpoint_with_its_step_count_and_stag
     small = dict(num_envs=2, num_steps=20, num_minibatches=2, num_eval_envs=1, eval_freq=100, checkpoint_freq=1,
                  env_id="Flooring-v1", log_dir=str(tmp_path), exp_name="tiny", stage_timesteps=80,
                  curriculum=("cp1", "cp2"), total_timesteps=80)
-    run = ps.Run("tiny", ps.paper_args(**small), "test", "python tiny.py")
-    ps.run_or_resume(run)
-    ckpt = ps.checkpoint_of(run)
+    run = campaign.Run("tiny", ps.paper_args(**small), "test", "python tiny.py")
+    campaign.run_or_resume(run)
+    ckpt = campaign.checkpoint_of(run)
     first = torch.load(ckpt, weights_only=False)
     assert first["progress"]["global_step"] == 80
     shipped = tmp_path / "assets" / "tiny.pt"
-    planned = ps.Run("tiny", dataclasses.replace(run.args, total_timesteps=160), "test", "python tiny.py", shipped)
-    assert "resumes at step 80" in ps.describe(planned) and str(shipped) in ps.describe(planned)
+    planned = campaign.Run("tiny", dataclasses.replace(run.args, total_timesteps=160), "test", "python tiny.py", shipped)
+    assert "resumes at step 80" in campaign.describe(planned) and str(shipped) in campaign.describe(planned)
     with pytest.raises(SystemExit, match="at step 80 of 160"):
-        ps.ship(planned)
-    ps.run_or_resume(planned)
+        campaign.ship(planned)
+    campaign.run_or_resume(planned)
     last = torch.load(ckpt, weights_only=False)
     assert last["progress"]["global_step"] == 160
     assert last["progress"]["stage_changes"] == [[0, "cp1"], [80, "cp2"]] or last["progress"]["stage_changes"] == [(0, "cp1"), (80, "cp2")]
@@ -103,7 +104,7 @@ def test_a_campaign_run_resumes_from_its_checkpoint_with_its_step_count_and_stag
 
 
 def test_the_campaign_report_summarizes_each_run_and_stage_and_draws_figure_3_and_table_ii(tmp_path):
-    """scripts/paper_report.py on a small progress.csv: the run's row, its stages, Figure 3, and Table II
+    """experiments/paper_report.py on a small progress.csv: the run's row, its stages, Figure 3, and Table II
     with the paper's rows, ours where evaluated (95% intervals) and, where not yet, why and the command."""
     from baselines.ppo.checkpoints import CSV_FIELDS
 
@@ -136,7 +137,7 @@ def test_the_campaign_report_summarizes_each_run_and_stage_and_draws_figure_3_an
                             place_success=0.0, extrinsic_return=0.0, end_place_dist=2.0, end_place_angle_deg=60.0,
                             held_at_end=1.0))
     results = tmp_path / "RESULTS.md"
-    res = subprocess.run([sys.executable, str(ROOT / "scripts/paper_report.py"), "--campaign-dir", str(tmp_path / "campaign"),
+    res = subprocess.run([sys.executable, "-m", "experiments.paper_report", "--campaign-dir", str(tmp_path / "campaign"),
                           "--write-results", "--results", str(results), "--images", str(tmp_path / "images"),
                           "--eval-dir", str(tmp_path / "evaluations"), "--readme", str(tmp_path / "README.md")],
                          capture_output=True, text=True, cwd=ROOT, env={**os.environ, "PYTHONPATH": str(ROOT)})
@@ -160,7 +161,7 @@ def test_the_campaign_report_summarizes_each_run_and_stage_and_draws_figure_3_an
     assert "| 63.00 / 0.21 | 62.89 / 0.30 | 64.72 / 4.45 |" in table
     assert "| ours: paper setting, general agent |" in table and "| not yet | not yet | not yet |" in table
     assert ("ours: paper setting, general agent: not yet (its run is at step 4,000,000 of 8,000,000 "
-            "(python scripts/train_paper_agent.py)); then `python scripts/evaluate.py --checkpoint "
+            "(python -m experiments.paper)); then `python scripts/evaluate.py --checkpoint "
             "assets/checkpoints/paper_general_agent.pt --all --steps 50000") in table
     assert "ours: paper setting, end of cp3: not yet (the end of cp3 comes at step 6,000,000)" in table
     assert "--checkpoint assets/checkpoints/control_window_8m.pt --env-id WindowInstallation-v1 --steps 50000" in table

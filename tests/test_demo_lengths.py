@@ -1,19 +1,13 @@
-"""scripts/demo_lengths.py: the expert's episode lengths per task from demonstrations files, as a section of RESULTS."""
+"""experiments/demo_lengths.py: the expert's episode lengths per task from demonstrations files, as a section of RESULTS."""
 
-import importlib.util
 import json
-import sys
-from pathlib import Path
 
 import numpy as np
 import pytest
 
 from ms_construction.planning.demos import save_demos
 
-spec = importlib.util.spec_from_file_location("demo_lengths", Path(__file__).resolve().parents[1] / "scripts" / "demo_lengths.py")
-demo_lengths = importlib.util.module_from_spec(spec)
-sys.modules["demo_lengths"] = demo_lengths  # dataclasses look their module up
-spec.loader.exec_module(demo_lengths)
+from experiments import demo_lengths
 
 
 def demo(task: str, steps: int) -> dict:

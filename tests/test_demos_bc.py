@@ -194,7 +194,7 @@ def test_sparse_reward_pays_the_expert_s_placement_more_than_grasping_and_holdin
 
 
 def test_a_demonstration_worker_drives_the_expert_asked_for(monkeypatch):
-    """record_demos(expert=...) reaches the expert of every worker (scripts/train_general_agent.py
+    """record_demos(expert=...) reaches the expert of every worker (experiments/general_agent.py
     --branch-preference fixed --demo-pace fast: one way per goal slot, and joints capped at 0.08 rad per step)."""
     from ms_construction.planning import demos
 

@@ -1,16 +1,10 @@
-"""scripts/eval_table.py: agents side by side from evaluate.py's JSONs, as a generated section of RESULTS."""
+"""experiments/eval_table.py: agents side by side from evaluate.py's JSONs, as a generated section of RESULTS."""
 
-import importlib.util
 import json
-import sys
-from pathlib import Path
 
 import pytest
 
-spec = importlib.util.spec_from_file_location("eval_table", Path(__file__).resolve().parents[1] / "scripts" / "eval_table.py")
-eval_table = importlib.util.module_from_spec(spec)
-sys.modules["eval_table"] = eval_table  # dataclasses look their module up
-spec.loader.exec_module(eval_table)
+from experiments import eval_table
 
 
 def result(place: float, ci: list[float], length: float) -> dict:

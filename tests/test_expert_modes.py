@@ -1,8 +1,6 @@
-"""scripts/expert_modes.py: the expert's final arm configurations per goal slot, and an agent's failures per slot."""
+"""experiments/expert_modes.py: the expert's final arm configurations per goal slot, and an agent's failures per slot."""
 
-import importlib.util
 import json
-import sys
 from pathlib import Path
 
 import gymnasium as gym
@@ -12,10 +10,7 @@ import pytest
 
 import ms_construction  # noqa: F401
 
-spec = importlib.util.spec_from_file_location("expert_modes", Path(__file__).resolve().parents[1] / "scripts" / "expert_modes.py")
-expert_modes = importlib.util.module_from_spec(spec)
-sys.modules["expert_modes"] = expert_modes  # dataclasses look their module up
-spec.loader.exec_module(expert_modes)
+from experiments import expert_modes
 
 
 def write_trajectories(path: Path, episodes: list[tuple[int, list[float], float, bool]]) -> None:

@@ -7,9 +7,11 @@ import json
 
 import pytest
 import torch
+import tyro
 
-from baselines.ppo import paper_setting as ps
+from experiments import campaign
 from baselines.ppo import ppo
+from baselines.ppo.args import command_line
 from baselines.ppo.checkpoints import CSV_FIELDS
 from experiments import from_scratch as fs
 
@@ -24,6 +26,8 @@ def test_the_recipe_learns_from_reward_alone():
     assert a.demos == () and a.bc_coef == 0 and a.checkpoint is None and a.residual_of is None and a.start_states is None
     assert a.num_envs * a.num_steps == 2000
     assert "demonstrations: none" in run.method and run.shipped.name == "scratch_general_agent.pt"
+    # written down as one ppo.py command, it is the same run
+    assert tyro.cli(ppo.Args, args=command_line(a)) == a
 
 
 def test_a_tiny_run_ships_before_its_end_with_a_record_that_says_where_it_stands(tmp_path):
@@ -31,15 +35,15 @@ def test_a_tiny_run_ships_before_its_end_with_a_record_that_says_where_it_stands
                  checkpoint_freq=1, env_id="Flooring-v1", log_dir=str(tmp_path), exp_name="tiny", total_timesteps=80)
     [run] = fs.scratch_runs(num_envs=2)
     run = dataclasses.replace(run, args=fs.scratch_args(**small), shipped=tmp_path / "scratch.pt")
-    ps.run_or_resume(dataclasses.replace(run, shipped=None))
+    campaign.run_or_resume(dataclasses.replace(run, shipped=None))
     longer = dataclasses.replace(run, args=dataclasses.replace(run.args, total_timesteps=160))
     with pytest.raises(SystemExit, match="at step 80 of 160"):
-        ps.ship(longer)
-    ps.ship(longer, before_the_end=True)
+        campaign.ship(longer)
+    campaign.ship(longer, before_the_end=True)
     record = torch.load(run.shipped, weights_only=False)["campaign"]["record"]
     assert record["env steps"] == "80 (of the 160 planned)" and "demonstrations: none" in record["method"]
     # the diagnosis: where its policy takes elements it starts holding near their goals, a row per task and seed
-    table = fs.near_goal_rollouts(ps.checkpoint_of(run), radius=0.0, seeds=1, steps=2)
+    table = fs.near_goal_rollouts(campaign.checkpoint_of(run), radius=0.0, seeds=1, steps=2)
     rows = [line for line in table.splitlines()[2:]]
     assert [r.split(" | ")[0] for r in rows] == ["| CeilingInstallation-v1", "| WindowInstallation-v1", "| Flooring-v1"]
     assert all(" | yes | " in r for r in rows), "radius 0 starts installed: placed at the first step"

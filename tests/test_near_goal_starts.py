@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 import torch
 
-from ms_construction.goal_configurations import CONFIGS_PER_SLOT, install_configurations, lift_configurations, symmetry_period
+from ms_construction.goal_configurations import install_configurations, lift_configurations, symmetry_period
 from ms_construction.parameters import ELEMENT_KINDS
 from ms_construction.rotations import pose_inv, pose_mul, qmul, quat_z
 
@@ -151,4 +151,52 @@ def test_progress_pays_each_step_s_fall_of_the_carry_distance_and_nothing_for_go
     assert back == pytest.approx(still - min(0.25, step), abs=1e-4)
     # a round trip mid -> near -> mid earns what standing still twice earns
     assert reward_at(near) + reward_at(mid) == pytest.approx(2 * 0.25 + without_progress(near) + without_progress(mid), abs=1e-4)
+    env.close()
+
+
+def test_the_install_offset_observation_is_the_carry_distance_s_move_and_following_it_places():
+    """`obs_install_offset` appends the joint move to the nearest installation configuration (before the elapsed
+    time, so that a policy without it reads the rest unchanged); its size is the carry distance, and a
+    proportional controller that follows it from near-goal starts places the element: what the observation
+    gives a policy to learn (IK of the goal pose, no demonstrations)."""
+    plain = make_env("ConstructionPickPlace-v1", control_mode="pd_joint_delta_pos", reward_mode="dense", obs_elapsed_time=True)
+    env = make_env("ConstructionPickPlace-v1", control_mode="pd_joint_delta_pos", reward_mode="dense",
+                   obs_install_offset=True, obs_elapsed_time=True)
+    obs_p, obs = plain.reset(seed=3)[0], env.reset(seed=3)[0]
+    assert obs.shape[-1] == obs_p.shape[-1] + 6
+    assert torch.equal(obs[..., :-7], obs_p[..., :-1]) and torch.equal(obs[..., -1], obs_p[..., -1])
+    u = env.unwrapped
+    u.set_near_goal_starts(1.0, 0.5)
+    placed, kinds = 0, set()
+    for seed in range(6):
+        obs = env.reset(seed=seed)[0]
+        kinds.add(int(u.task_id[0]))
+        offset = obs[0, -7:-1]
+        assert float(offset.abs().sum()) == pytest.approx(float(u.carry_distance()[0]), abs=1e-4)
+        for _ in range(60):
+            # pd_joint_delta_pos moves a joint at most 0.1 rad per step (action 1)
+            obs, _, terminated, _, info = env.step((obs[:, -7:-1] / 0.1).clamp(-1, 1))
+            if bool(terminated[0]):
+                break
+        placed += int(info["success"][0])
+    assert len(kinds) > 1 and placed >= 5, placed
+    plain.close()
+    env.close()
+
+
+def test_near_goal_episodes_are_cut_at_their_own_limit_and_ordinary_ones_are_not():
+    from ms_construction.envs.construction_env import NearGoalTimeLimit
+
+    env = NearGoalTimeLimit(make_env("Flooring-v1", control_mode="pd_joint_delta_pos", reward_mode="dense"))
+    u = env.unwrapped
+    away = -torch.ones(1, 6)  # every joint its full step one way: no placement within a few steps from radius 0.8
+    u.set_near_goal_starts(1.0, 0.8, max_steps=5)
+    env.reset(seed=0)
+    ends = [bool(env.step(away)[3][0]) for _ in range(5)]
+    assert ends == [False] * 4 + [True] and bool(u.near_goal_start[0])
+    u.set_near_goal_starts(0.0, 0.8, max_steps=5)  # ordinary resets keep the task's step limit
+    env.reset(seed=1)
+    assert not any(bool(env.step(torch.zeros(1, 6))[3][0]) for _ in range(8))
+    with pytest.raises(ValueError, match="max_steps must be a positive"):
+        u.set_near_goal_starts(0.5, 0.5, max_steps=0)
     env.close()

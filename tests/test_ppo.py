@@ -19,6 +19,7 @@ import pytest
 import torch
 
 from baselines.ppo import evaluation, ppo, update
+from baselines.ppo.args import ControlMode
 from ms_construction.curriculum import stage_tolerances
 from ms_construction.vector_env import CPUVectorEnv
 
@@ -251,7 +252,7 @@ def test_the_command_line_refuses_an_unknown_env_or_control_mode_without_a_trace
 def test_the_control_modes_args_allow_are_the_arm_s_controllers():
     env = gym.make("Flooring-v1", num_envs=1, obs_mode="state")
     try:
-        assert set(get_args(ppo.ControlMode)) == set(env.unwrapped.agent.supported_control_modes)
+        assert set(get_args(ControlMode)) == set(env.unwrapped.agent.supported_control_modes)
     finally:
         env.close()
 
@@ -357,15 +358,22 @@ def test_one_update_on_a_fixed_batch_gives_the_losses_and_weights_of_the_origina
         assert got[key] == pytest.approx(value, rel=1e-5, abs=1e-6), key
 
 
-def test_a_checkpoint_written_before_the_split_loads_through_the_checkpoint_api():
-    """The clone (the shipped agent until PPO refined it) predates baselines/ppo/checkpoints.py and the rename of
-    finite_horizon_gae."""
+def test_a_checkpoint_of_an_earlier_version_loads_through_the_checkpoint_api(tmp_path):
+    """Checkpoints written before baselines/ppo/checkpoints.py saved their args under earlier names and meanings
+    (`finite_horizon_gae`, a boolean `norm_adv`, `icm` for the normalized variant before ML-Agents' curiosity with
+    its `icm_gamma` took the name): such args, on the shipped clone's weights, load under today's."""
     from baselines.ppo import checkpoints
 
-    path = ROOT / "assets/checkpoints/general_agent_clone.pt"
-    assert "finite_horizon_gae" in torch.load(path, map_location="cpu", weights_only=False)["args"]
+    ckpt = torch.load(ROOT / "assets/checkpoints/general_agent_clone_direct.pt", map_location="cpu", weights_only=False)
+    old = {k: v for k, v in ckpt["args"].items() if k not in ("bootstrap_at_done", "icm_gamma")}
+    old.update(finite_horizon_gae=True, norm_adv=True, curiosity="icm")
+    last = max(k for k in ckpt["agent"] if k.startswith("critic.")).rsplit(".", 1)[0]  # one value head then
+    agent = {k: v[:1] if k.startswith(last + ".") else v for k, v in ckpt["agent"].items()}
+    path = tmp_path / "old.pt"
+    torch.save({**ckpt, "args": old, "agent": agent}, path)
     ckpt = checkpoints.load_checkpoint(path, env_id="Flooring-v1", obs_dim=43, act_dim=6, control_mode="pd_joint_delta_pos")
     assert ckpt["args"]["bootstrap_at_done"] == "truncated" and "finite_horizon_gae" not in ckpt["args"]
+    assert ckpt["args"]["norm_adv"] == "minibatch"
     assert ckpt["args"]["curiosity"] == "icm_normalized", "before ML-Agents' curiosity, icm meant the normalized variant"
     args = ppo.Args(**{**ckpt["args"], "curriculum": tuple(ckpt["args"]["curriculum"])})  # what --resume builds
     assert args.bootstrap_at_done == "truncated"
@@ -426,8 +434,8 @@ def test_near_goal_starts_widen_per_task_with_success_and_a_resumed_run_goes_on_
     assert float(rows[0]["near_goal_radius_flooring"]) == 0.0 and int(rows[0]["near_goal_episodes"]) > 0
     assert float(rows[0]["near_goal_place_success"]) == 1.0
     assert progress.near_goal_radius[:2] == [0.0, 0.0] and progress.near_goal_radius[2] >= 0.05
-    assert ("set_near_goal_starts", (1.0, (0.0, 0.0, 0.0))) in calls
-    assert ("set_near_goal_starts", (1.0, (0.0, 0.0, 0.05))) in calls
+    assert ("set_near_goal_starts", (1.0, (0.0, 0.0, 0.0), None)) in calls
+    assert ("set_near_goal_starts", (1.0, (0.0, 0.0, 0.05), None)) in calls
     ckpt = torch.load(tmp_path / "near" / "checkpoint.pt", weights_only=False)
     assert ckpt["progress"]["near_goal_radius"] == progress.near_goal_radius
     assert ckpt["progress"]["near_goal_recent"] == progress.near_goal_recent and len(progress.near_goal_recent[2]) < 4
@@ -440,5 +448,5 @@ def test_near_goal_starts_widen_per_task_with_success_and_a_resumed_run_goes_on_
     resumed = ppo.main(ppo.Args(resume=str(tmp_path / "near" / "checkpoint.pt"), extend=True, total_timesteps=240,
                                 curriculum=("cp4",)))
     first = next(c for c in calls if c[0] == "set_near_goal_starts")
-    assert first == ("set_near_goal_starts", (1.0, tuple(progress.near_goal_radius))), calls
+    assert first == ("set_near_goal_starts", (1.0, tuple(progress.near_goal_radius), None)), calls
     assert resumed.global_step == 240

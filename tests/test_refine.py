@@ -1,23 +1,19 @@
-"""The refinement recipe's bookkeeping (baselines/ppo/refine.py: snapshots, validation, the best of them,
+"""The refinement recipe's bookkeeping (experiments/refine.py: snapshots, validation, the best of them,
 shipping only what beats the clone) with PPO and the evaluations stood in for, and its report
-(scripts/refine_report.py) on a small summary."""
+(experiments/refine_report.py) on a small summary."""
 
 import dataclasses
-import importlib.util
 import json
-import sys
 from pathlib import Path
 
 import pytest
 import torch
 
-from baselines.ppo import evaluation, refine
+from baselines.ppo import evaluation
+from experiments import refine
 
 ROOT = Path(__file__).resolve().parents[1]
-spec = importlib.util.spec_from_file_location("refine_report", ROOT / "scripts" / "refine_report.py")
-refine_report = importlib.util.module_from_spec(spec)
-sys.modules["refine_report"] = refine_report  # dataclasses look their module up
-spec.loader.exec_module(refine_report)
+from experiments import refine_report
 
 TASKS = ("CeilingInstallation-v1", "WindowInstallation-v1", "Flooring-v1")
 CLONE_VAL = dict(zip(TASKS, (0.96, 0.96, 0.985)))

@@ -26,7 +26,7 @@ from tqdm import tqdm
 
 from baselines.ppo.checkpoints import Progress, save_checkpoint
 from baselines.ppo.checkpoints import make_agent
-from baselines.ppo.ppo import Args as PPOArgs
+from baselines.ppo.args import Args as PPOArgs
 
 
 @dataclass

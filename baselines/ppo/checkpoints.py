@@ -20,6 +20,7 @@ from typing import Optional
 
 import numpy as np
 import torch
+import torch.nn as nn
 
 from baselines.ppo import curiosity
 from baselines.ppo.networks import Agent
@@ -48,7 +49,8 @@ def make_agent(args, obs_dim: int, act_dim: int, base_args: Optional[dict] = Non
         return ResidualAgent(base, get("hidden_size"),
                              get("residual_scale"), value_heads=value_heads(args), time_input=time_input)
     starts = STATE_QUATERNION_STARTS if get("rotation_features", False) else ()
-    return Agent(obs_dim, act_dim, get("hidden_size"), starts, value_heads(args), get("num_layers", 3))
+    return Agent(obs_dim, act_dim, get("hidden_size"), starts, value_heads(args), get("num_layers", 3),
+                 bool(get("bounded_mean", False)))
 
 
 def upgrade_args(saved: dict) -> dict:
@@ -156,8 +158,9 @@ def check_fit(ckpt: dict, path, env_id: str, obs_dim: int, act_dim: int, control
 
 def policy_env_kwargs(args: dict) -> dict:
     """The env kwargs that a checkpoint's policy (its saved `args`) acts in, beside obs_mode="state": its control
-    mode, and the elapsed-time entry of the observation if it was trained with one."""
-    return dict(control_mode=args["control_mode"], **({"obs_elapsed_time": True} if args.get("obs_elapsed_time") else {}))
+    mode, and the observation's optional entries (install offset, elapsed time) it was trained with."""
+    return dict(control_mode=args["control_mode"],
+                **{k: True for k in ("obs_install_offset", "obs_elapsed_time") if args.get(k)})
 
 
 def load_policy(path, env_id: str) -> tuple[Agent, dict]:

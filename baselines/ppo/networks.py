@@ -3,8 +3,6 @@ normalization, and the MLP they and ICM (baselines/ppo/curiosity.py) are built o
 
 from __future__ import annotations
 
-from typing import Optional
-
 import numpy as np
 import torch
 import torch.nn as nn
@@ -76,10 +74,11 @@ def _feature_layout(quat_starts: tuple[int, ...], obs_dim: int, device: torch.de
 class Agent(nn.Module):
     """Gaussian policy and value on observation features (`rotation_features` for the quaternions
     at `quat_starts`) normalized by `obs_rms` (running mean and variance, clipped to +-10 as
-    gymnasium's NormalizeObservation does; raw until it has seen data)."""
+    gymnasium's NormalizeObservation does; raw until it has seen data). With `bounded_mean` the policy's
+    mean is squashed into the action bounds [-1, 1] by tanh (the draws around it are clipped by the learner)."""
 
     def __init__(self, obs_dim: int, act_dim: int, hidden: int, quat_starts: tuple[int, ...] = (), value_heads: int = 1,
-                 layers: int = 3):
+                 layers: int = 3, bounded_mean: bool = False):
         super().__init__()
         self.quat_starts = tuple(quat_starts)
         feature_dim = obs_dim + 2 * len(self.quat_starts)
@@ -87,6 +86,8 @@ class Agent(nn.Module):
         # one value per reward signal (ML-Agents' value heads): extrinsic, and curiosity's where it has its own
         self.critic = mlp(feature_dim, value_heads, hidden, out_std=1.0, layers=layers)
         self.actor_mean = mlp(feature_dim, act_dim, hidden, out_std=0.01 * np.sqrt(2), layers=layers)
+        if bounded_mean:  # within the action bounds: a mean past them, where every draw clips alike, gets no gradient
+            self.actor_mean.append(nn.Tanh())
         self.actor_logstd = nn.Parameter(torch.ones(1, act_dim) * -0.5)
 
     def features(self, x):

@@ -1,14 +1,15 @@
 """PPO with a curiosity bonus (ICM) and the paper's tolerance curriculum, for the construction tasks.
 
-In the shape of ManiSkill's PPO baseline (CleanRL style: read top to bottom, one `Args` dataclass);
-the networks are in networks.py, the update (GAE and the clipped objective) in update.py, ICM in
-curiosity.py, checkpoints and the CSV log in checkpoints.py, the evaluation in evaluation.py. Additions: `--curiosity icm` (Pathak et al. 2017), `--curriculum
+In the shape of ManiSkill's PPO baseline (CleanRL style: read top to bottom); its one `Args` dataclass
+(the command line) is in args.py, the networks in networks.py, the update (GAE and the clipped objective) in
+update.py, ICM in curiosity.py, checkpoints and the CSV log in checkpoints.py, the evaluation in evaluation.py.
+Additions: `--curiosity icm` (Pathak et al. 2017), `--curriculum
 cp1 cp2 cp3 cp4` (Table I of the paper, each stage inheriting every parameter of the previous one),
 sparse reward by default (the paper's Algorithm 1), atomic checkpoints and exact `--resume`, a CSV
 log per run.
 Observations are normalized (running mean and variance, in the checkpoint) and their quaternions
 fed as rotation-matrix columns. Fine-tuning a warm start (our recipe for the general agent,
-scripts/train_general_agent.py): `--checkpoint` from baselines/ppo/bc.py, `--freeze-obs-norm`,
+experiments/general_agent.py): `--checkpoint` from baselines/ppo/bc.py, `--freeze-obs-norm`,
 `--critic-warmup-iterations`, and a behaviour-cloning term on demonstrations (`--demos`, `--bc-coef`).
 
     python baselines/ppo/ppo.py --env-id ConstructionPickPlace-v1 --curriculum cp1 cp2 cp3 cp4 --curiosity icm
@@ -27,7 +28,6 @@ from __future__ import annotations
 import dataclasses
 import functools
 import math
-import os
 import random
 import shutil
 import signal
@@ -36,7 +36,7 @@ import time
 from collections import defaultdict
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Literal, Optional, Union, get_args, get_origin, get_type_hints
+from typing import Optional, Union
 
 import gymnasium as gym
 import numpy as np
@@ -48,217 +48,20 @@ from tqdm import tqdm
 
 from mani_skill.vector.wrappers.gymnasium import ManiSkillVectorEnv
 
-from baselines.ppo.checkpoints import (CSVLog, Progress, check_fit, load_checkpoint, make_agent, restore_rng, save_checkpoint,
-                                       value_heads)
+from baselines.ppo.args import Args, resolve_defaults, validate
+from baselines.ppo.checkpoints import (CSVLog, Progress, check_fit, load_checkpoint, make_agent, policy_env_kwargs,
+                                       restore_rng, save_checkpoint, value_heads)
 from baselines.ppo.curiosity import ICM, make_icm
 from baselines.ppo.evaluation import evaluate_envs, finished_episodes, reset
 from baselines.ppo.networks import Agent
 from baselines.ppo.update import adam, ppo_update, signal_advantages
 from baselines.ppo.start_states import StartFromStates
-from ms_construction.curriculum import STAGE_NAMES
-from ms_construction.envs import ENV_IDS
+from ms_construction.envs.construction_env import NearGoalTimeLimit
 from ms_construction.parameters import ELEMENT_KINDS
 from ms_construction.vector_env import CPUVectorEnv
 
-ControlMode = Literal["pd_joint_delta_pos", "pd_joint_pos", "pd_joint_target_delta_pos", "pd_ee_delta_pos",
-                      "pd_ee_delta_pose", "pd_ee_target_delta_pose"]
-"""the construction arm's controllers (its `_controller_configs`)."""
-RewardMode = Literal["sparse", "dense", "normalized_dense"]
 Envs = Union[CPUVectorEnv, ManiSkillVectorEnv]
 """a batch of envs with same-step resets and torch tensors in and out, on either backend."""
-
-
-@dataclass
-class Args:
-    exp_name: Optional[str] = None
-    """name of this run (default: env id, curiosity, curriculum and seed)."""
-    seed: int = 1
-    """seed of the experiment."""
-    torch_deterministic: bool = True
-    """`torch.backends.cudnn.deterministic`."""
-    cuda: bool = True
-    """use CUDA for the networks when it is available."""
-    capture_video: bool = False
-    """save evaluation videos to `runs/<run>/videos` (offscreen, CPU or GPU)."""
-    save_model: bool = True
-    """write checkpoints (atomically) to `runs/<run>/checkpoint.pt`."""
-    evaluate: bool = False
-    """only evaluate `--checkpoint` and exit."""
-    checkpoint: Optional[str] = None
-    """initial weights (policy, value, ICM) from this checkpoint; a fresh run otherwise."""
-    resume: Optional[str] = None
-    """continue the interrupted run of this checkpoint: same run folder, stage, step count, optimizer, RNG."""
-    log_dir: str = "runs"
-    """where run folders go."""
-
-    env_id: str = "ConstructionPickPlace-v1"
-    """the environment: the general task or one of the three single tasks (ms_construction.envs.ENV_IDS)."""
-    control_mode: ControlMode = "pd_joint_delta_pos"
-    """the arm's controller."""
-    reward_mode: RewardMode = "sparse"
-    """sparse (the paper's Algorithm 1), dense or normalized_dense."""
-    sim_backend: Literal["auto", "physx_cpu", "physx_cuda"] = "auto"
-    """physx_cuda when a GPU is there (auto), else physx_cpu."""
-    total_timesteps: int = 8_000_000
-    """total env steps of training (the paper: 2M per curriculum stage)."""
-    learning_rate: float = 3e-4
-    """Adam learning rate of policy and value."""
-    num_envs: Optional[int] = None
-    """parallel training envs (default: one per CPU core on physx_cpu, 512 on physx_cuda)."""
-    num_eval_envs: Optional[int] = None
-    """parallel evaluation envs (default: 2 on physx_cpu, 16 on physx_cuda)."""
-    partial_reset: bool = True
-    """reset each env when its episode ends (success ends an episode)."""
-    eval_partial_reset: bool = False
-    """GPU evaluation: reset envs that finish early (off: each env runs one full-length episode)."""
-    num_steps: Optional[int] = None
-    """steps per env per rollout (default: 250 on physx_cpu, 50 on physx_cuda)."""
-    num_eval_steps: int = 250
-    """steps per evaluation (one episode per env)."""
-    anneal_lr: bool = False
-    """anneal the learning rate linearly to 0."""
-    gamma: float = 0.99
-    """discount (long horizon: the sparse reward comes once, up to 250 steps away)."""
-    gae_lambda: float = 0.95
-    """GAE lambda."""
-    num_minibatches: int = 8
-    """minibatches per update epoch."""
-    update_epochs: int = 4
-    """epochs per rollout."""
-    norm_adv: Literal["minibatch", "batch", "none"] = "minibatch"
-    """normalize advantages per minibatch (CleanRL's, ManiSkill's), once over the whole update batch
-    (ML-Agents'), or not at all."""
-    clip_coef: float = 0.2
-    """PPO clip coefficient."""
-    clip_vloss: bool = False
-    """clip the value loss."""
-    ent_coef: float = 0.0
-    """entropy bonus coefficient."""
-    vf_coef: float = 0.5
-    """value loss coefficient."""
-    max_grad_norm: Optional[float] = 0.5
-    """gradient clipping of policy and value (None: none, as ML-Agents)."""
-    target_kl: Optional[float] = 0.1
-    """stop an update early when the approximate KL exceeds this."""
-    reward_scale: float = 1.0
-    """scale of the extrinsic reward."""
-    eval_freq: int = 10
-    """evaluate every this many iterations (and at stage ends)."""
-    bootstrap_at_done: Optional[Literal["always", "truncated", "terminated", "never"]] = None
-    """which episode ends bootstrap with the value of their last observation. `truncated`: episodes cut
-    by the time limit (they did not end there); success is an end with nothing after it. `always`
-    (ManiSkill's PPO default, its name): every end, success included, so that a success state counts
-    as one that keeps paying what it paid; the dense rewards are made for it (see the task card).
-    `terminated`: success only; the time limit is an end like any other, which only a policy that sees
-    the time (--obs-elapsed-time) can value right: an episode cut short of its goal loses what placing
-    would have paid. `never`: no end. Default: `always` with the dense rewards, `truncated` with sparse (ML-Agents',
-    which bootstraps interrupted episodes only)."""
-    success_value: Literal["absorbing", "critic"] = "absorbing"
-    """what an episode that ends by success bootstraps with, where it does (--bootstrap-at-done always or
-    terminated): `absorbing`, the success step's reward for ever (reward / (1 - gamma)), as the task card defines
-    success; `critic`, the critic's value of the last observation (ManiSkill's PPO), a guess about a state it
-    never trains on."""
-    hidden_size: int = 256
-    """width of the policy and value networks."""
-    num_layers: int = 3
-    """hidden layers of the policy and value networks (ML-Agents' default: 2)."""
-    norm_obs: bool = True
-    """normalize observations by their running mean and variance (kept in the checkpoint), as CleanRL's
-    continuous-control PPO does (with gymnasium's NormalizeObservation)."""
-    rotation_features: bool = True
-    """feed the networks each quaternion of the state (plate, goal, element) as the first two columns
-    of its rotation matrix: a quaternion's sign can flip mid-episode, the matrix cannot."""
-    freeze_obs_norm: bool = False
-    """keep the normalization statistics as they are (those of a --checkpoint's behaviour cloning)."""
-    demos: tuple[str, ...] = ()
-    """demonstration files (scripts/collect_demos.py) for a behaviour-cloning term in the policy loss
-    (as DAPG, Rajeswaran et al. 2018): keeps a warm-started policy near the expert while PPO refines it."""
-    bc_coef: float = 0.0
-    """weight of that term: mean squared error of the policy's mean on a demonstration minibatch."""
-    critic_warmup_iterations: int = 0
-    """the first iterations of a run (counted from 1) update the value function only: with a
-    warm-started policy (--checkpoint), the critic first learns that policy's returns, so the policy's
-    first steps follow advantages that mean something."""
-    checkpoint_freq: int = 10
-    """write a checkpoint every this many iterations (and at stage changes, the end, and Ctrl-C)."""
-    extend: bool = False
-    """with --resume: continue to this command's --total-timesteps and --curriculum (which must start
-    with the run's own stages) instead of the run's own, e.g. to take a finished run further."""
-    stage_schedules: bool = False
-    """ML-Agents' linear schedules, restarted at every curriculum stage (as when each stage is a run that
-    inherits the last): over a stage's --stage-timesteps the learning rate falls to 1e-10, the clip
-    coefficient to 0.1 and the entropy coefficient to 1e-5."""
-
-    residual_of: Optional[str] = None
-    """a checkpoint (a behaviour clone, or a refined agent: a residual on a residual) that stays frozen as the base
-    policy; PPO learns a correction added to its actions (baselines/ppo/residual.py, ResiP). Its observation
-    statistics stay too."""
-    residual_scale: float = 0.1
-    """the correction's scale in action units."""
-    residual_l2_coef: float = 0.0
-    """weight of the correction's mean square (before scaling) in the policy loss: an anchor at the clone,
-    so that the residual moves only where the advantages keep asking it to."""
-    start_states: Optional[str] = None
-    """a bank of env states (baselines/ppo/start_states.py, where a policy failed) that a share of the
-    training episodes start from; evaluation always resets as usual. physx_cpu only."""
-    start_states_share: float = 0.5
-    """the share of training episodes that start from the bank."""
-    start_states_keep_clock: bool = False
-    """an episode started from the bank goes on from the elapsed steps its state was taken at (a failure that ran
-    out of time stays one) instead of getting the whole step limit again; the bank must hold them (a bank of
-    start_states.py collected since it keeps them)."""
-    obs_elapsed_time: bool = False
-    """append the episode's elapsed steps / 250 to the observation (the tasks' `obs_elapsed_time`), in training
-    and evaluation: a policy that knows how much of the step limit is left can hurry. A residual's base (trained
-    without it) does not see it."""
-    task_weights: Optional[tuple[float, float, float]] = None
-    """the general task's sampling weights of ceiling, window and flooring in the training envs (None: uniform;
-    `1 2 1`: window installation half the episodes); evaluation always samples uniformly."""
-
-    near_goal_share: float = 0.0
-    """the start-state curriculum (reverse curriculum generation, Florensa et al. 2017; no demonstrations): this
-    share of the training episodes start with the element held on a collision-free path out of its goal (the
-    tasks' `set_near_goal_starts`), at most `near_goal_radius` of the path's length out; evaluation always
-    resets as usual."""
-    near_goal_radius: float = 0.1
-    """the curriculum's first radius (fraction of a start path, 0: installed), one per task type..."""
-    near_goal_step: float = 0.1
-    """...each widened by this (up to 1) once the last `near_goal_window` near-goal episodes of its task type placed
-    at least `near_goal_promote` of the time (the window then starts again)."""
-    near_goal_promote: float = 0.6
-    """success from near-goal starts that widens a task type's radius."""
-    near_goal_window: int = 20
-    """near-goal episodes of a task type whose success decides a widening."""
-
-    curiosity: Literal["none", "icm", "icm_normalized"] = "icm"
-    """intrinsic reward (baselines/ppo/curiosity.py): `icm` as ML-Agents computes it (the forward model's
-    raw error x strength, capped at 1, with its own value head and discount, ignoring episode ends);
-    `icm_normalized`, ours: the error divided by its running std, added to the extrinsic reward;
-    or none (plain PPO)."""
-    icm_strength: float = 0.02
-    """curiosity's strength. ML-Agents documents 1.0 as its default (typical 0.001 to 0.1) and uses 0.02
-    in its example configuration with curiosity; we keep that 0.02."""
-    icm_gamma: float = 0.99
-    """discount of the curiosity reward (its own value head; ML-Agents' default)."""
-    icm_forward_weight: float = 0.2
-    """beta: ICM loss = 10 ((1 - beta) inverse loss + beta forward loss) (ML-Agents)."""
-    icm_feature_dim: int = 128
-    """size of ICM's feature space phi(s) and of its encoder's layers (ML-Agents: 128)."""
-    icm_hidden_size: int = 256
-    """width of ICM's forward and inverse models (ML-Agents: 256)."""
-    icm_learning_rate: float = 3e-4
-    """Adam learning rate of ICM."""
-
-    curriculum: tuple[str, ...] = STAGE_NAMES
-    """tolerance stages in order (Table I); one stage, e.g. `cp4`, trains without a curriculum."""
-    stage_timesteps: int = 2_000_000
-    """promote to the next stage after this many env steps in a stage (the paper: 2M)."""
-    min_stage_timesteps: int = 500_000
-    """promote early only after this many steps in the stage..."""
-    promote_success: float = 0.9
-    """...when the smoothed evaluation place success reaches this (above 1 disables it)."""
-    success_smoothing: float = 0.5
-    """weight of the newest evaluation in the smoothed success (exponential moving average)."""
 
 
 # ------------------------------------------------------------------------------------------------- #
@@ -268,19 +71,20 @@ def make_envs(args: Args, num_envs: int, device: torch.device, eval_mode: bool =
               video_dir: Optional[Path] = None) -> Envs:
     """`num_envs` envs with same-step resets and torch tensors in and out: worker processes on
     physx_cpu (one env each), ManiSkillVectorEnv on physx_cuda. With `video_dir`, evaluation videos."""
-    kwargs = dict(obs_mode="state", control_mode=args.control_mode, reward_mode=args.reward_mode,
-                  render_mode="rgb_array" if video_dir else None)
-    if args.obs_elapsed_time:
-        kwargs["obs_elapsed_time"] = True
+    kwargs = dict(obs_mode="state", reward_mode=args.reward_mode, render_mode="rgb_array" if video_dir else None)
+    kwargs.update(policy_env_kwargs(vars(args)))
     if args.task_weights is not None and not eval_mode:
         kwargs["task_weights"] = dict(zip(ELEMENT_KINDS, args.task_weights))
+    # near-goal starts are set (and left off in evaluation) by set_near_goal_starts; this applies their time limit
+    wrappers = (NearGoalTimeLimit,) if args.near_goal_max_steps is not None and not eval_mode else ()
     if args.sim_backend == "physx_cpu":
-        wrappers = ()
         if args.start_states and not eval_mode:
-            wrappers = (functools.partial(StartFromStates, bank=args.start_states, share=args.start_states_share,
-                                          keep_clock=args.start_states_keep_clock),)
+            wrappers += (functools.partial(StartFromStates, bank=args.start_states, share=args.start_states_share,
+                                           keep_clock=args.start_states_keep_clock),)
         return CPUVectorEnv(args.env_id, num_envs, kwargs, device=device, video_dir=video_dir, wrappers=wrappers)
     env = gym.make(args.env_id, num_envs=num_envs, sim_backend=args.sim_backend, **kwargs)
+    for wrap in wrappers:
+        env = wrap(env)
     if video_dir is not None:
         from mani_skill.utils.wrappers import RecordEpisode
 
@@ -321,7 +125,7 @@ def widen_near_goal(args: Args, progress: Progress, task_ids: list[int], placed:
 
 
 # ------------------------------------------------------------------------------------------------- #
-# Curriculum and arguments
+# Curriculum
 # ------------------------------------------------------------------------------------------------- #
 def should_promote(args: Args, progress: Progress) -> Optional[str]:
     """Why the current stage ends now ('steps' or 'success'), or None."""
@@ -347,63 +151,6 @@ def stage_schedule(args: Args, progress: Progress) -> Args:
     frac = 1.0 - min(1.0, (progress.global_step - progress.stage_start_step) / args.stage_timesteps)
     return dataclasses.replace(args, **{k: (getattr(args, k) - floor) * frac + floor for k, floor in SCHEDULE_FLOORS.items()})
 
-
-def validate(args: Args) -> None:
-    """Refuse, before anything starts, what the run would otherwise fail on later (often in the env
-    worker processes, with their tracebacks)."""
-    if args.env_id not in ENV_IDS:
-        raise SystemExit(f"--env-id {args.env_id}: use one of {', '.join(ENV_IDS)}")
-    hints = get_type_hints(Args)
-    for f in dataclasses.fields(Args):  # Args built in code are not checked by tyro
-        allowed = get_args(hints[f.name]) if get_origin(hints[f.name]) is Literal else ()
-        if allowed and getattr(args, f.name) not in allowed:
-            raise SystemExit(f"--{f.name.replace('_', '-')} {getattr(args, f.name)}: use one of {', '.join(allowed)}")
-    for name in ("residual_of", "start_states"):
-        if getattr(args, name) is not None and not Path(getattr(args, name)).is_file():
-            raise SystemExit(f"--{name.replace('_', '-')}: no such file: {getattr(args, name)}")
-    if args.residual_l2_coef and not args.residual_of:
-        raise SystemExit("--residual-l2-coef weighs a residual's correction: give --residual-of")
-    if args.residual_of and args.bc_coef > 0:
-        raise SystemExit("--bc-coef works on the policy's own weights; a residual agent (--residual-of) has none to pull")
-    if args.task_weights is not None and (args.env_id != "ConstructionPickPlace-v1" or min(args.task_weights) < 0
-                                          or sum(args.task_weights) <= 0):
-        raise SystemExit(f"--task-weights {args.task_weights}: three weights >= 0, not all 0 (ceiling, window, flooring), "
-                         "of the general task ConstructionPickPlace-v1 only")
-    for name in ("near_goal_share", "near_goal_radius", "near_goal_promote"):
-        if not 0 <= getattr(args, name) <= 1:
-            raise SystemExit(f"--{name.replace('_', '-')} must lie in [0, 1], got {getattr(args, name)}")
-    if not 0 <= args.start_states_share <= 1:
-        raise SystemExit(f"--start-states-share must lie in [0, 1], got {args.start_states_share}")
-    if args.start_states_keep_clock and not args.start_states:
-        raise SystemExit("--start-states-keep-clock: give the bank (--start-states)")
-    if args.start_states and args.sim_backend == "physx_cuda":
-        raise SystemExit("--start-states: physx_cpu only (the bank is restored in the env worker processes)")
-    missing = [p for p in args.demos if not Path(p).is_file()]
-    if missing:
-        raise SystemExit(f"--demos: no such file(s): {', '.join(missing)} (record them with scripts/collect_demos.py)")
-    bad = [s for s in args.curriculum if s not in STAGE_NAMES]
-    if bad or not args.curriculum:
-        raise SystemExit(f"--curriculum {' '.join(args.curriculum)}: stages must be among {', '.join(STAGE_NAMES)}")
-    for name in ("total_timesteps", "stage_timesteps", "num_minibatches", "update_epochs", "eval_freq", "checkpoint_freq"):
-        if getattr(args, name) <= 0:
-            raise SystemExit(f"--{name.replace('_', '-')} must be positive, got {getattr(args, name)}")
-
-
-def resolve_defaults(args: Args) -> None:
-    """Fill in the defaults that depend on the machine (in `args`, so that checkpoints keep them)."""
-    if args.sim_backend == "auto":
-        args.sim_backend = "physx_cuda" if torch.cuda.is_available() else "physx_cpu"
-    gpu = args.sim_backend == "physx_cuda"
-    if args.num_envs is None:
-        args.num_envs = 512 if gpu else (os.cpu_count() or 1)
-    if args.num_eval_envs is None:
-        args.num_eval_envs = 16 if gpu else 2
-    if args.num_steps is None:
-        args.num_steps = 50 if gpu else 250
-    if args.exp_name is None:
-        args.exp_name = f"{args.env_id}__{args.curiosity}__{'-'.join(args.curriculum)}__s{args.seed}"
-    if args.bootstrap_at_done is None:
-        args.bootstrap_at_done = "truncated" if args.reward_mode == "sparse" else "always"
 
 
 # ------------------------------------------------------------------------------------------------- #
@@ -533,6 +280,119 @@ def main(args: Args) -> Progress:
     return train(run)
 
 
+@dataclass
+class Rollout:
+    """One iteration's samples, [num_steps, num_envs, ...]: s_t, s_{t+1} (the final observation where an episode
+    ended there), a_t, r_t, whether the episode ended at t and whether it ended by termination (success)."""
+
+    obs: torch.Tensor
+    next_obs: torch.Tensor
+    actions: torch.Tensor
+    rewards: torch.Tensor
+    dones: torch.Tensor
+    terminated: torch.Tensor
+
+    @classmethod
+    def zeros(cls, num_steps: int, num_envs: int, obs_dim: int, act_dim: int, device: torch.device) -> "Rollout":
+        obs, steps = torch.zeros((num_steps, num_envs, obs_dim), device=device), torch.zeros((num_steps, num_envs), device=device)
+        return cls(obs, torch.zeros_like(obs), torch.zeros((num_steps, num_envs, act_dim), device=device), steps,
+                   torch.zeros_like(steps), torch.zeros_like(steps))
+
+
+def flat(x: torch.Tensor) -> torch.Tensor:
+    """[num_steps, num_envs, ...] -> [num_steps * num_envs, ...]"""
+    return x.reshape(-1, *x.shape[2:])
+
+
+def collect(agent: Agent, envs: Envs, buf: Rollout, next_obs: torch.Tensor, args: Args, progress: Progress,
+            episodes: dict) -> torch.Tensor:
+    """Fill `buf` with args.num_steps steps of every env from `next_obs` on (the policy's sampled actions), adding
+    the episodes that end to `episodes` (EPISODE_STATS' keys, near-goal start, task type); the observation after."""
+    for step in range(args.num_steps):
+        progress.global_step += args.num_envs
+        buf.obs[step] = next_obs
+        # the action alone: its log-probability and value V(s_t) come in `advantages`, for the whole
+        # rollout in one call (the weights do not change within it), not a network call per step
+        with torch.no_grad():
+            buf.actions[step] = action = agent.get_action(next_obs)
+        next_obs, reward, terminations, truncations, infos = envs.step(action.clamp(-1, 1))
+        buf.rewards[step] = reward * args.reward_scale
+        buf.dones[step], buf.terminated[step] = (terminations | truncations).float(), terminations.float()
+        buf.next_obs[step] = next_obs
+        if "final_info" in infos:
+            ep = finished_episodes(infos)
+            buf.next_obs[step, ep["ended"]] = infos["final_observation"][ep["ended"]]
+            for key in EPISODE_STATS.values():
+                episodes[key] += ep[key][ep["ended"]].float().tolist()
+            episodes["near_goal"] += ep["near_goal_start"][ep["ended"]].tolist()
+            episodes["task_id"] += ep["task_id"][ep["ended"]].tolist()
+    return next_obs
+
+
+def update_batch(run: Run, buf: Rollout, next_obs: torch.Tensor, episodes: dict, intrinsic_running: torch.Tensor) -> dict:
+    """The rollout as PPO's update batch: log-probabilities and values of the whole rollout, curiosity's reward
+    (each finished episode's intrinsic return into `episodes`, `intrinsic_running` carrying the rest across
+    rollouts), and GAE's advantages and returns, one value head per reward signal."""
+    args, agent, heads = run.args, run.agent, value_heads(run.args)
+    num_steps, num_envs = buf.rewards.shape
+    with torch.no_grad():
+        _, logprobs, _, values = agent.get_action_and_value(flat(buf.obs), flat(buf.actions))
+    values = values.view(num_steps, num_envs, heads)
+    intrinsic = torch.zeros_like(buf.rewards)
+    if run.icm is not None:
+        intrinsic = run.icm.intrinsic_reward(flat(buf.obs), flat(buf.next_obs), flat(buf.actions)).view_as(buf.rewards)
+        for step in range(num_steps):  # intrinsic return of each finished episode
+            intrinsic_running += intrinsic[step]
+            ended = buf.dones[step].bool()
+            episodes["intrinsic_return"] += intrinsic_running[ended].tolist()
+            intrinsic_running[ended] = 0
+    with torch.no_grad():
+        next_value = agent.get_value(next_obs)
+        # V(last observation) where an episode ended and bootstraps (see bootstrap_mask)
+        v_final = agent.get_value(flat(buf.next_obs)).view(num_steps, num_envs, heads)
+        advantages, returns = signal_advantages(args, buf.rewards, intrinsic, values, next_value, v_final, buf.dones,
+                                                buf.terminated)
+    return dict(obs=flat(buf.obs), next_obs=flat(buf.next_obs), actions=flat(buf.actions), logprobs=logprobs.reshape(-1),
+                advantages=advantages.reshape(-1), returns=returns.reshape(-1, heads), values=values.reshape(-1, heads))
+
+
+def episode_columns(args: Args, progress: Progress, episodes: dict, envs: Envs) -> dict:
+    """progress.csv's columns of the iteration's finished episodes: EPISODE_STATS' means, ordinary resets' place
+    success per task type, and the near-goal starts' (whose radii this widens where they placed often enough)."""
+    row = {}
+    if episodes["success"]:
+        row.update({column: float(np.mean(episodes[key])) for column, key in EPISODE_STATS.items()})
+        if episodes["intrinsic_return"]:
+            row["intrinsic_return"] = float(np.mean(episodes["intrinsic_return"]))
+    near = np.asarray(episodes["near_goal"], dtype=bool)
+    placed, task = np.asarray(episodes["success"], dtype=float), np.asarray(episodes["task_id"], dtype=int)
+    for k, kind in enumerate(ELEMENT_KINDS):
+        if ((task == k) & ~near).any():
+            row[f"ordinary_place_{kind}"] = float(placed[(task == k) & ~near].mean())
+    if args.near_goal_share > 0:
+        row.update(near_goal_radius=float(np.mean(progress.near_goal_radius)), near_goal_episodes=int(near.sum()),
+                   near_goal_place_success=float(placed[near].mean()) if near.any() else float("nan"),
+                   ordinary_place_success=float(placed[~near].mean()) if (~near).any() else float("nan"),
+                   **{f"near_goal_radius_{kind}": r for kind, r in zip(ELEMENT_KINDS, progress.near_goal_radius)})
+        if widen_near_goal(args, progress, task[near].tolist(), placed[near].tolist()):
+            call_task(envs, "set_near_goal_starts", args.near_goal_share, tuple(progress.near_goal_radius),
+                      args.near_goal_max_steps)
+    return row
+
+
+def promote(run: Run, envs: Envs) -> str:
+    """Move the run to its next curriculum stage, in the training and evaluation envs; the new stage."""
+    progress = run.progress
+    progress.stage_index += 1
+    progress.stage_start_step = progress.global_step
+    progress.smoothed_success = None
+    stage = run.args.curriculum[progress.stage_index]
+    progress.stage_changes.append((progress.global_step, stage))
+    for e in (envs, run.eval_envs):
+        set_curriculum_stage(e, stage)
+    return stage
+
+
 def train(run: Run) -> Progress:
     """The PPO loop, from where `run` is to the end of its budget; returns where the run ended.
 
@@ -540,7 +400,7 @@ def train(run: Run) -> Progress:
     envs and exits (SystemExit, status 128 + the signal's number) with one line that says how to resume.
     A second Ctrl-C (a KeyboardInterrupt) ends it at once, dropping the iteration in progress: the last
     checkpoint stands."""
-    args, agent, icm, progress = run.args, run.agent, run.icm, run.progress
+    args, agent, progress = run.args, run.agent, run.progress
     device = next(agent.parameters()).device
     run_dir = checkpoint_path(args).parent
     envs = make_envs(args, args.num_envs, device)
@@ -555,7 +415,8 @@ def train(run: Run) -> Progress:
         if progress.near_goal_radius is None:
             progress.near_goal_radius = [args.near_goal_radius] * len(ELEMENT_KINDS)
             progress.near_goal_recent = [[] for _ in ELEMENT_KINDS]
-        call_task(envs, "set_near_goal_starts", args.near_goal_share, tuple(progress.near_goal_radius))
+        call_task(envs, "set_near_goal_starts", args.near_goal_share, tuple(progress.near_goal_radius),
+                  args.near_goal_max_steps)
 
     run_dir.mkdir(parents=True, exist_ok=True)
     writer = SummaryWriter(str(run_dir))
@@ -568,14 +429,7 @@ def train(run: Run) -> Progress:
         files = [np.load(path) for path in args.demos]
         demos = tuple(torch.as_tensor(np.concatenate([f[k] for f in files]), dtype=torch.float32, device=device)
                       for k in ("obs", "actions"))
-
-    obs_buf = torch.zeros((args.num_steps, args.num_envs, run.obs_dim), device=device)
-    next_obs_buf = torch.zeros_like(obs_buf)  # s_{t+1}: the final observation where an episode ended
-    actions = torch.zeros((args.num_steps, args.num_envs, run.act_dim), device=device)
-    rewards = torch.zeros((args.num_steps, args.num_envs), device=device)
-    dones = torch.zeros_like(rewards)
-    terminated = torch.zeros_like(rewards)
-    heads = value_heads(args)
+    buf = Rollout.zeros(args.num_steps, args.num_envs, run.obs_dim, run.act_dim, device)
     intrinsic_running = torch.zeros(args.num_envs, device=device)
 
     stop: list[int] = []  # the signal that asked the run to end
@@ -600,54 +454,8 @@ def train(run: Run) -> Progress:
                 update_args = stage_schedule(args, progress)
                 run.optimizer.param_groups[0]["lr"] = update_args.learning_rate
             episodes = defaultdict(list)
-
-            # ---- rollout ----
-            for step in range(args.num_steps):
-                progress.global_step += args.num_envs
-                obs_buf[step] = next_obs
-                # the action alone: its log-probability and value V(s_t) come below, for the whole
-                # rollout in one call (the weights do not change within it), not a network call per step
-                with torch.no_grad():
-                    actions[step] = action = agent.get_action(next_obs)
-                next_obs, reward, terminations, truncations, infos = envs.step(action.clamp(-1, 1))
-                rewards[step] = reward * args.reward_scale
-                dones[step], terminated[step] = (terminations | truncations).float(), terminations.float()
-                next_obs_buf[step] = next_obs
-                if "final_info" in infos:
-                    ep = finished_episodes(infos)
-                    next_obs_buf[step, ep["ended"]] = infos["final_observation"][ep["ended"]]
-                    for key in EPISODE_STATS.values():
-                        episodes[key] += ep[key][ep["ended"]].float().tolist()
-                    episodes["near_goal"] += ep["near_goal_start"][ep["ended"]].tolist()
-                    episodes["task_id"] += ep["task_id"][ep["ended"]].tolist()
-
-            # ---- log-probabilities and values, and the intrinsic reward, on the whole rollout ----
-            flat = lambda x: x.reshape(-1, *x.shape[2:])  # noqa: E731
-            with torch.no_grad():
-                _, logprobs, _, values = agent.get_action_and_value(flat(obs_buf), flat(actions))
-            logprobs, values = logprobs.view(args.num_steps, args.num_envs), values.view(args.num_steps, args.num_envs, heads)
-            intrinsic = torch.zeros_like(rewards)
-            if icm is not None:
-                intrinsic = icm.intrinsic_reward(flat(obs_buf), flat(next_obs_buf), flat(actions)).view_as(rewards)
-                # intrinsic return of each finished episode (carried across rollouts)
-                for step in range(args.num_steps):
-                    intrinsic_running += intrinsic[step]
-                    ended = dones[step].bool()
-                    episodes["intrinsic_return"] += intrinsic_running[ended].tolist()
-                    intrinsic_running[ended] = 0
-
-            # ---- GAE, one value head per reward signal ----
-            with torch.no_grad():
-                next_value = agent.get_value(next_obs)
-                # V(last observation) where an episode ended and bootstraps (see bootstrap_mask)
-                v_final = agent.get_value(flat(next_obs_buf)).view(args.num_steps, args.num_envs, heads)
-                advantages, returns = signal_advantages(args, rewards, intrinsic, values, next_value, v_final, dones,
-                                                        terminated)
-
-            # ---- update ----
-            batch = dict(obs=flat(obs_buf), next_obs=flat(next_obs_buf), actions=flat(actions),
-                         logprobs=logprobs.reshape(-1), advantages=advantages.reshape(-1),
-                         returns=returns.reshape(-1, heads), values=values.reshape(-1, heads))
+            next_obs = collect(agent, envs, buf, next_obs, args, progress, episodes)
+            batch = update_batch(run, buf, next_obs, episodes, intrinsic_running)
             losses = ppo_update(agent, run.optimizer, batch, update_args, run.icm, run.icm_optimizer, demos,
                                 value_only=progress.iteration <= args.critic_warmup_iterations)
             # statistics change after the update, so that each update sees its rollout's normalization
@@ -660,22 +468,7 @@ def train(run: Run) -> Progress:
                        learning_rate=run.optimizer.param_groups[0]["lr"], episodes=len(episodes["success"]),
                        clip_coef=update_args.clip_coef, ent_coef=update_args.ent_coef)
             row.update(losses)
-            if episodes["success"]:
-                row.update({column: float(np.mean(episodes[key])) for column, key in EPISODE_STATS.items()})
-                if episodes["intrinsic_return"]:
-                    row["intrinsic_return"] = float(np.mean(episodes["intrinsic_return"]))
-            near = np.asarray(episodes["near_goal"], dtype=bool)
-            placed, task = np.asarray(episodes["success"], dtype=float), np.asarray(episodes["task_id"], dtype=int)
-            for k, kind in enumerate(ELEMENT_KINDS):
-                if ((task == k) & ~near).any():
-                    row[f"ordinary_place_{kind}"] = float(placed[(task == k) & ~near].mean())
-            if args.near_goal_share > 0:
-                row.update(near_goal_radius=float(np.mean(progress.near_goal_radius)), near_goal_episodes=int(near.sum()),
-                           near_goal_place_success=float(placed[near].mean()) if near.any() else float("nan"),
-                           ordinary_place_success=float(placed[~near].mean()) if (~near).any() else float("nan"),
-                           **{f"near_goal_radius_{kind}": r for kind, r in zip(ELEMENT_KINDS, progress.near_goal_radius)})
-                if widen_near_goal(args, progress, task[near].tolist(), placed[near].tolist()):
-                    call_task(envs, "set_near_goal_starts", args.near_goal_share, tuple(progress.near_goal_radius))
+            row.update(episode_columns(args, progress, episodes, envs))
             if progress.iteration % args.eval_freq == 0 or progress.iteration == num_iterations:
                 result = evaluate_envs(agent, run.eval_envs, args.num_eval_steps, seed=args.seed + 10_000 + progress.iteration)
                 s, a = result["eval_place_success"], args.success_smoothing
@@ -688,13 +481,7 @@ def train(run: Run) -> Progress:
                     writer.add_scalar(f"charts/{key}", value, progress.global_step)
             log.append(row)
             if promotion:
-                progress.stage_index += 1
-                progress.stage_start_step = progress.global_step
-                progress.smoothed_success = None
-                stage = args.curriculum[progress.stage_index]
-                progress.stage_changes.append((progress.global_step, stage))
-                for e in (envs, run.eval_envs):
-                    set_curriculum_stage(e, stage)
+                stage = promote(run, envs)
                 writer.add_text("curriculum", f"step {progress.global_step}: promoted to {stage} ({promotion})", progress.global_step)
                 tqdm.write(f"step {progress.global_step}: promoted to {stage} ({promotion})")
                 bar.set_description(f"{args.exp_name} [{stage}]")

@@ -11,7 +11,7 @@ elapsed steps), so by default the episode then has its whole time limit again; w
 on from the step the state was taken at, so that a failure that was a late arrival stays one (most failed
 windows are: docs/experiments/general_agent.md). Evaluation never uses it.
 
-    python -m baselines.ppo.start_states --checkpoint assets/checkpoints/general_agent_clone.pt --episodes 1500 \\
+    python -m baselines.ppo.start_states --checkpoint assets/checkpoints/general_agent_clone_direct.pt --episodes 1500 \\
         --out runs/failure_states.pt
 """
 
@@ -27,9 +27,11 @@ import torch
 import tyro
 from tqdm import tqdm
 
+from ms_construction.rollout import policy_episode
+
 FIRST_SEED = 430_000
 """training seeds of the bank's episodes: below the validation (500,000) and test (1,000,000) seeds, apart from
-the demonstrations' and takeovers' (scripts/train_general_agent.py)."""
+the demonstrations' and takeovers' (experiments/general_agent.py)."""
 
 
 def _to_cpu(x):
@@ -52,19 +54,11 @@ def _failure_states(job: tuple) -> dict:
         _worker.update(agent=agent, env=gym.make(env_id, obs_mode="state", reward_mode="sparse", num_envs=1,
                                                    sim_backend="physx_cpu", **env_kwargs))
     agent, env = _worker["agent"], _worker["env"]
-    obs, _ = env.reset(seed=seed)
-    actions, dists = [], []
-    while True:
-        with torch.no_grad():
-            actions.append(agent.get_action(obs.float(), deterministic=True).clamp(-1, 1))
-        obs, _, terminated, truncated, info = env.step(actions[-1])
-        dists.append(float(info["place_dist"][0]))
-        if bool(terminated[0]) or bool(truncated[0]):
-            break
-    placed, task_id = bool(info["success"][0]), int(info["task_id"][0])
+    episode = policy_episode(agent, env, seed)
+    actions, placed, task_id = episode.actions, episode.placed, int(episode.info["task_id"][0])
     kept, elapsed = [], []
     if not placed:
-        wanted = steps_before_closest(dists, offsets)
+        wanted = steps_before_closest(episode.place_dist, offsets)
         env.reset(seed=seed)
         for t in range(wanted[-1] + 1):  # the state at step t is the one after t actions
             if t in wanted:

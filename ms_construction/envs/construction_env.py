@@ -14,6 +14,7 @@ import functools
 import os
 from typing import Any, Mapping, Optional, Sequence, Union
 
+import gymnasium as gym
 import numpy as np
 import sapien
 import torch
@@ -100,6 +101,7 @@ class ConstructionTaskEnv(BaseEnv):
         tasks: Optional[Sequence[str]] = None,
         task_weights: Optional[Mapping[str, float]] = None,
         obs_elapsed_time: bool = False,
+        obs_install_offset: bool = False,
         **kwargs,
     ):
         self._tol_init = resolve_tolerances(curriculum_stage, tolerances)
@@ -114,9 +116,10 @@ class ConstructionTaskEnv(BaseEnv):
             self.TASKS = tuple(t for t in ELEMENT_KINDS if t in tasks)
         self._task_weights = self._check_task_weights(task_weights)
         self.obs_elapsed_time = bool(obs_elapsed_time)
+        self.obs_install_offset = bool(obs_install_offset)
         self.robot_init_qpos_noise = robot_init_qpos_noise
         self._step_grasp_frame, self._in_step_readout = None, False
-        self.near_goal_share, self.near_goal_radius = 0.0, None
+        self.near_goal_share, self.near_goal_radius, self.near_goal_max_steps = 0.0, None, None
         kwargs.setdefault("render_backend", default_render_backend())
         super().__init__(*args, robot_uids=robot_uids, **kwargs)
 
@@ -263,14 +266,18 @@ class ConstructionTaskEnv(BaseEnv):
     # ------------------------------------------------------------------------------------- #
     # start-state curriculum (reverse curriculum generation, Florensa et al. 2017)
     # ------------------------------------------------------------------------------------- #
-    def set_near_goal_starts(self, share: float, radius: Union[float, Sequence[float]]) -> None:
+    def set_near_goal_starts(self, share: float, radius: Union[float, Sequence[float]],
+                             max_steps: Optional[int] = None) -> None:
         """From the next reset on, a `share` of episodes start with the element already held, the arm posed a
         fraction in [0, `radius`] (one for all task types, or one per type in ELEMENT_KINDS order) of the way out
         along a start path from its installation configuration
         (`goal_configurations.StartPaths`: backed off the goal along the plate's axis, then on the joint line to
         a lift above the staging table), within the path's collision-free part. Everything comes from IK of
-        the goal and the table (no demonstrations). `info["near_goal_start"]` marks those episodes. A training
-        device: evaluations use ordinary resets (share 0, the default)."""
+        the goal and the table (no demonstrations). `info["near_goal_start"]` marks those episodes; with
+        `max_steps`, one that has not placed within that many steps is truncated where the env is wrapped in
+        `NearGoalTimeLimit` (a start close to the goal that has wandered off teaches little more for the rest of
+        the step limit). A training device: evaluations use
+        ordinary resets (share 0, the default)."""
         radii = [float(radius)] * len(ELEMENT_KINDS) if np.isscalar(radius) else [float(r) for r in radius]
         if len(radii) != len(ELEMENT_KINDS):
             raise ValueError(f"near-goal starts: give one radius or {len(ELEMENT_KINDS)} ({', '.join(ELEMENT_KINDS)}), got {radius}")
@@ -284,7 +291,10 @@ class ConstructionTaskEnv(BaseEnv):
             f32 = dict(dtype=torch.float32, device=self.device)
             self._start_paths = dict(waypoints=torch.tensor(paths.waypoints, **f32), free=torch.tensor(paths.free, **f32),
                                      usable=torch.tensor(paths.usable, device=self.device).flatten(2).float())
+        if max_steps is not None and not 0 < max_steps:
+            raise ValueError(f"near-goal starts: max_steps must be a positive step count or None, got {max_steps}")
         self.near_goal_share = float(share)
+        self.near_goal_max_steps = None if max_steps is None else int(max_steps)
         self.near_goal_radius = torch.tensor(radii, dtype=torch.float32, device=self.device)
 
     @staticmethod
@@ -495,6 +505,8 @@ class ConstructionTaskEnv(BaseEnv):
                 tcp_to_grasp_pos=self._grasp_frame()[:, :3] - tcp[:, :3],
                 obj_to_goal_pos=goal[:, :3] - el[:, :3],
             )
+        if self.obs_install_offset:  # after the rest, so that a policy without it reads them unchanged
+            obs["install_offset"] = self.install_offset()
         if self.obs_elapsed_time:  # last, so that a policy without it reads the rest unchanged
             obs["elapsed"] = (self.elapsed_steps.float() / self.MAX_EPISODE_STEPS)[:, None]
         return obs
@@ -526,13 +538,19 @@ class ConstructionTaskEnv(BaseEnv):
         on the plate and compared modulo the element's symmetry period. Falls at every step of a straight joint
         move to the goal from anywhere (the turret turning the way its limits allow), and so along any carry
         that heads there; no demonstrations involved."""
+        return self.install_offset().abs().sum(-1)
+
+    def install_offset(self) -> torch.Tensor:
+        """[n, 6] rad; the joint move from the arm's configuration to the nearest one that holds its element
+        installed (the one `carry_distance` measures to), joint 6's part taken modulo the element's symmetry."""
         if self._install_q is None:
             self._install_q = torch.tensor(install_configurations(), dtype=torch.float32, device=self.device)
         q = self.agent.robot.get_qpos()
-        diff = q[:, None, :] - self._install_q[self.task_id, self.goal_slot]  # [n, K, 6]
+        diff = self._install_q[self.task_id, self.goal_slot] - q[:, None, :]  # [n, K, 6]
         period = self._sym_period[self.task_id][:, None]
-        d6 = torch.remainder(diff[..., 5] - self.plate_turn()[:, None] + period / 2, period) - period / 2
-        return (diff[..., :5].abs().sum(-1) + d6.abs()).min(-1).values
+        diff[..., 5] = torch.remainder(diff[..., 5] + self.plate_turn()[:, None] + period / 2, period) - period / 2
+        nearest = diff.abs().sum(-1).argmin(-1)
+        return diff[torch.arange(len(q), device=q.device), nearest]
 
     def compute_dense_reward(self, obs: Any, action: torch.Tensor, info: dict):
         """Staged, as ManiSkill's tasks: reach and face the grasp surface (<= 1); held: 2 + carry (<= 1) + fit
@@ -625,3 +643,16 @@ class ConstructionTaskEnv(BaseEnv):
         super().set_state_dict(state, env_idx)
         if task is not None:
             self._place_goal_markers(torch.arange(self.num_envs, device=self.device))
+
+
+class NearGoalTimeLimit(gym.Wrapper):
+    """Truncates an episode that started near its goal (`set_near_goal_starts`) and has not placed within the
+    `max_steps` given there; other episodes keep the task's step limit. Outside ManiSkill's TimeLimitWrapper,
+    which sets `truncated` from the step limit alone."""
+
+    def step(self, action):
+        obs, reward, terminated, truncated, info = self.env.step(action)
+        u = self.env.unwrapped
+        if u.near_goal_max_steps is not None:
+            truncated = truncated | (u.near_goal_start & (u.elapsed_steps >= u.near_goal_max_steps) & ~terminated)
+        return obs, reward, terminated, truncated, info

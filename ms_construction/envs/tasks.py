@@ -60,11 +60,15 @@ used the earlier one, whose carry was 0.75 (1 - tanh d) + a bearing term and who
 
 **Start states:** `set_near_goal_starts(share, radius)` makes a share of the following resets start with the
 element held on a collision-free joint path out of its goal (reverse curriculum generation; IK, no
-demonstrations; `info["near_goal_start"]` marks them); for training only, off by default.
+demonstrations; `info["near_goal_start"]` marks them); for training only, off by default. Its `max_steps`
+truncates such an episode that has not placed by then, in an env wrapped in `NearGoalTimeLimit`.
 
 **Observation:** `obs_elapsed_time=True` appends the episode's elapsed steps / {_STEPS} (the step limit) as
 the last entry (`extra/elapsed`): the limit is part of the task (success counts within it), and a policy
 that knows how much of it is left can hurry (Pardo et al. 2018, time limits in RL). Off by default.
+`obs_install_offset=True` appends, before it, the joint move (6 numbers, rad) from the arm's configuration to
+the nearest one that holds the element installed (`extra/install_offset`: IK of the goal pose, what the dense
+reward's carry term measures; joint 6's part modulo the element's symmetry). Off by default.
 """
 
 

@@ -35,6 +35,7 @@ import torch
 from tqdm import tqdm
 
 from ms_construction.planning.expert import ExpertConfig, MotionPlanningExpert
+from ms_construction.rollout import policy_episode
 from ms_construction.parameters import ELEMENT_KINDS
 from ms_construction.curriculum import FINAL_STAGE
 
@@ -48,7 +49,7 @@ RRTConnect attempts for a quicker carry. With one way per goal slot its episodes
 episodes per task: ceiling mean 190 -> 161-166 steps, window 174 -> 146, flooring 147 -> 127), which leaves a
 clone of them slack before the 250-step limit (docs/experiments/general_agent.md, 'the quick one-way expert')."""
 DEMO_PACES = {"slow": DEMO_EXPERT_CONFIG, "fast": FAST_DEMO_EXPERT_CONFIG}
-"""--demo-pace of scripts/collect_demos.py and train_general_agent.py."""
+"""--demo-pace of scripts/collect_demos.py and experiments/general_agent.py."""
 
 
 def demo_expert_config(branch_preference: str = "nearest", pace: str = "slow", direct_first: bool = False) -> ExpertConfig:
@@ -150,20 +151,11 @@ class DemoCollector:
         carried away from its recess first), that is the start, and the takeovers are the expert's
         episode from the policy's first steps. Returns the expert's placed takeovers and the env
         steps the policy took."""
-        env, u = self.env.env, self.env.unwrapped
-        obs, _ = env.reset(seed=seed)
-        states, dists = [], []
-        while True:
-            states.append(u.get_state_dict())
-            with torch.no_grad():
-                action = policy.get_action(obs.float(), deterministic=True).clamp(-1, 1)
-            obs, _, terminated, truncated, info = env.step(action)
-            dists.append(float(info["place_dist"][0]))
-            if bool(terminated[0]) or bool(truncated[0]):
-                break
-        if bool(info["success"][0]):
+        episode = policy_episode(policy, self.env.env, seed, keep_states=True)
+        states = episode.states
+        if episode.placed:
             return [], len(states)
-        closest = int(np.argmin(dists))
+        closest = int(np.argmin(episode.place_dist))
         demos = []
         for t in sorted({min(max(0, closest + k), len(states) - 1) for k in offsets}):
             demo = self.collect(seed, noise, start_state=states[t])

@@ -1,7 +1,7 @@
 """Agents side by side from the JSONs scripts/evaluate.py wrote: a table of their place success (95% intervals)
 and mean episode length per task, printed or written as a generated section of docs/RESULTS.md.
 
-    python scripts/eval_table.py --section probe-branches \
+    python -m experiments.eval_table --section probe-branches \
         --rows 'nearest to the arm=docs/data/probe_branches/window_clone_nearest.json' \
                'one way per goal slot=docs/data/probe_branches/window_clone_fixed.json' --write-results
 
@@ -43,7 +43,7 @@ def table(rows: dict[str, dict]) -> str:
 
 
 def main(args: Args) -> str:
-    command = "python scripts/eval_table.py " + " ".join(shlex.quote(a) for a in sys.argv[1:])
+    command = "python -m experiments.eval_table " + " ".join(shlex.quote(a) for a in sys.argv[1:])
     body = f"Command: `{command}`\n\n" + table(read_labelled(args.rows, "--rows"))
     print(body)
     if args.write_results:

@@ -1,10 +1,10 @@
 """How long the expert's demonstrations are, per task: the slack a clone of them has before the 250-step limit.
 
-    python scripts/demo_lengths.py \
+    python -m experiments.demo_lengths \
         --demos 'slow=runs/general_agent_fixed/demos/general.npz' 'fast=runs/general_agent_fast/demos/general.npz' \
         --write-results
 
-Each LABEL=NPZ is a demonstrations file of scripts/collect_demos.py or scripts/train_general_agent.py (its
+Each LABEL=NPZ is a demonstrations file of scripts/collect_demos.py or experiments/general_agent.py (its
 demos/*.npz; a label given several files counts them together). Takeover files (*_takeovers<r>.npz) start
 mid-episode: leave them out. The lengths are the recorded episodes', the placed ones (the only ones kept).
 `--keep JSON` carries the rows of an earlier run of this script (its --json) into the table first, so that an
@@ -88,7 +88,7 @@ def main(args: Args) -> dict:
         args.json.parent.mkdir(parents=True, exist_ok=True)
         args.json.write_text(json.dumps(result, indent=1))
     if args.write_results:
-        command = "python scripts/demo_lengths.py " + " ".join(shlex.quote(a) for a in sys.argv[1:])
+        command = "python -m experiments.demo_lengths " + " ".join(shlex.quote(a) for a in sys.argv[1:])
         update_section(args.results, "demo-lengths", f"Command: `{command}` (step limit {STEP_LIMIT})\n\n{table}",
                        "Results")
     return result

@@ -1,7 +1,7 @@
 """Reinforcement learning that refines the behaviour clone: one command from the clone to the shipped agent.
 
-    python -m baselines.ppo.refine                  # bank -> PPO -> validation -> ship if it beats the clone
-    python -m baselines.ppo.refine --no-ship        # everything but the last step
+    python -m experiments.refine                  # bank -> PPO -> validation -> ship if it beats the clone
+    python -m experiments.refine --no-ship        # everything but the last step
 
 1. bank: the clone's deterministic episodes on training seeds; where it fails, its states before the
    element's closest approach to its goal (baselines/ppo/start_states.py);
@@ -16,7 +16,7 @@
    validation and then on fresh episodes (seeds 600,000 on, --confirmation-episodes), and on those fresh
    episodes also more than the agent shipped now where that is an earlier refinement, it becomes
    assets/checkpoints/general_agent.pt, with its campaign record (env steps, wall time, hardware);
-   the clone stays beside it as general_agent_clone.pt.
+   the clone stays beside it (general_agent_clone_direct.pt, the default --clone).
 A second round refines a refined agent the same way (--clone assets/checkpoints/general_agent.pt, or a copy of it: a
 residual on its residual, judged against it wherever the first round is judged against the clone; run 14 in
 docs/experiments/general_agent.md).
@@ -29,8 +29,6 @@ from __future__ import annotations
 import dataclasses
 import hashlib
 import json
-import os
-import platform
 import shlex
 import shutil
 import sys
@@ -44,10 +42,11 @@ import tyro
 from baselines.ppo import evaluation, ppo
 from baselines.ppo.checkpoints import load_checkpoint
 from baselines.ppo.start_states import collect_failure_states
+from experiments.campaign import hardware, ship_checkpoint
 from ms_construction.curriculum import FINAL_STAGE
 from ms_construction.reporting import WallTimes
 
-CLONE = Path("assets/checkpoints/general_agent_clone.pt")
+CLONE = Path("assets/checkpoints/general_agent_clone_direct.pt")
 SHIPPED = Path("assets/checkpoints/general_agent.pt")
 VALIDATION_SEED = 500_000
 CONFIRMATION_SEED = 600_000
@@ -226,14 +225,13 @@ def beats(refined: dict, clone: dict) -> bool:
 def ship(args: Args, ckpt_path: Path, bank: Path, record: dict, validated: tuple[dict, dict],
          confirmed: Optional[tuple[dict, dict]] = None) -> None:
     """`ckpt_path` with its campaign record to assets/checkpoints/general_agent.pt; its CSV beside it."""
-    ckpt = load_checkpoint(ckpt_path)
     clone = load_checkpoint(args.clone, "--clone")
     bank_info = torch.load(bank, map_location="cpu", weights_only=False)
-    ppo_steps = ckpt["progress"]["global_step"]
+    ppo_steps = load_checkpoint(ckpt_path)["progress"]["global_step"]
     wall = record["wall_s"]
     base_record = clone.get("campaign", {}).get("record", {})
     second_round = clone.get("base_args") is not None  # the base is itself a refinement of the clone
-    ckpt["campaign"] = dict(command="python -m baselines.ppo.refine " + " ".join(shlex.quote(a) for a in sys.argv[1:]), record={
+    ship_checkpoint(ckpt_path, SHIPPED, "python -m experiments.refine " + " ".join(shlex.quote(a) for a in sys.argv[1:]), {
         **({"the refined agent refined again": f"{args.clone} (its PPO: "
             + base_record.get("PPO (residual on the frozen clone)", "?") + "; its clone: " + base_record.get("the clone", "?") + ")"}
            if second_round else
@@ -244,11 +242,8 @@ def ship(args: Args, ckpt_path: Path, bank: Path, record: dict, validated: tuple
         **{f"{what} place success, clone -> refined": ", ".join(f"{k} {c[k]:.3f} -> {r[k]:.3f}" for k in c)
            for what, (c, r) in (("validation", validated), ("confirmation", confirmed or (None, None))) if c},
         "wall time": ", ".join(f"{k} {v / 60:.0f} min" for k, v in wall.items()) + f"; {sum(wall.values()) / 3600:.2f} h",
-        "hardware": f"{platform.machine()}, {os.cpu_count()} CPU cores, no GPU; physx_cpu",
-    })
-    torch.save(ckpt, SHIPPED)
-    shutil.copyfile(ckpt_path.parent / "progress.csv", SHIPPED.with_name("general_agent_refine_progress.csv"))
-    print(f"shipped {ckpt_path} -> {SHIPPED}")
+        "hardware": hardware(),
+    }, ckpt_path.parent / "progress.csv", SHIPPED.with_name("general_agent_refine_progress.csv"))
 
 
 if __name__ == "__main__":

@@ -2,8 +2,8 @@
 behaviour cloning -> the expert's takeovers where the clone fails -> cloning again -> (optionally)
 PPO fine-tuning on the general task at cp4 -> the shipped checkpoint.
 
-    python scripts/train_general_agent.py --ship                      # the shipped agent (docs/RESULTS.md)
-    python scripts/train_general_agent.py --ppo-timesteps 400000      # then PPO fine-tuning as well
+    python -m experiments.general_agent --ship                      # the shipped agent (docs/RESULTS.md)
+    python -m experiments.general_agent --ppo-timesteps 400000      # then PPO fine-tuning as well
 
 The shipped agent is the behaviour clone: PPO fine-tuning of it, as far as it was tried (probe 5 in
 docs/experiments/general_agent.md), lowered its success, so `--ppo-timesteps` is 0 by default.
@@ -33,20 +33,17 @@ from __future__ import annotations
 
 import csv
 import json
-import os
-import platform
 import shlex
-import shutil
 import sys
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Literal
 
-import torch
 import tyro
 
 from baselines.ppo import bc, checkpoints, evaluation, ppo
 from baselines.ppo.checkpoints import load_checkpoint
+from experiments.campaign import hardware, ship_checkpoint
 from ms_construction.curriculum import FINAL_STAGE
 from ms_construction.planning.demos import demo_expert_config, load_demos, policy_steps, record_demos, tried_episodes
 from ms_construction.reporting import WallTimes
@@ -211,11 +208,10 @@ def ship(args: Args, final: Path, demo_files: list[Path], takeover_files: list[P
     clone_steps = sum(map(policy_steps, takeover_files))
     wall = {"demonstrations": sum(w for _, _, w in demos), "takeovers": sum(w for _, _, w in takeovers),
             **record["wall_s"]}
-    ckpt = load_checkpoint(final)
-    ppo_steps = ckpt["progress"]["global_step"] if final.parent.name == "ppo" else 0
+    ppo_steps = load_checkpoint(final)["progress"]["global_step"] if final.parent.name == "ppo" else 0
     total = demo_steps + takeover_steps + clone_steps + ppo_steps
-    ckpt["campaign"] = dict(command="python scripts/train_general_agent.py " + " ".join(shlex.quote(a) for a in sys.argv[1:]),
-                            record={
+    progress = final.parent / "progress.csv" if final.parent.name == "ppo" else args.run_dir / "progress.csv"
+    ship_checkpoint(final, SHIPPED, "python -m experiments.general_agent " + " ".join(shlex.quote(a) for a in sys.argv[1:]), {
         "expert demonstrations": f"{kept} placed episodes kept of {tried} tried; {demo_steps} env steps in the kept ones",
         "expert takeovers": f"{sum(len(d) for d, _, _ in takeovers)} placed takeovers where a clone failed, in "
                             f"{sum(t for _, t, _ in takeovers)} episodes of the clones ({len(takeover_files)} "
@@ -225,14 +221,8 @@ def ship(args: Args, final: Path, demo_files: list[Path], takeover_files: list[P
         "env steps in all": f"{total}, the failed demonstration episodes not counted (budget: 8,000,000)",
         "wall time": ", ".join(f"{k} {v / 60:.0f} min" for k, v in wall.items())
         + f"; {sum(wall.values()) / 3600:.2f} h in all (budget: 6 h)",
-        "hardware": f"{platform.machine()}, {os.cpu_count()} CPU cores, no GPU; physx_cpu",
-    })
-    SHIPPED.parent.mkdir(parents=True, exist_ok=True)
-    torch.save(ckpt, SHIPPED)
-    progress = final.parent / "progress.csv" if final.parent.name == "ppo" else args.run_dir / "progress.csv"
-    if progress.exists():
-        shutil.copyfile(progress, SHIPPED.with_name("general_agent_progress.csv"))
-    print(f"shipped {final} -> {SHIPPED}")
+        "hardware": hardware(),
+    }, progress, SHIPPED.with_name("general_agent_progress.csv"))
 
 
 if __name__ == "__main__":

@@ -4,7 +4,7 @@ reach the element, from the trajectories that scripts/run_expert.py --save-traje
 the agent's failed episodes per goal slot, from JSONs of scripts/evaluate.py.
 
     python scripts/run_expert.py --env-id WindowInstallation-v1 --episodes 30 --seed 500000 --save-trajectory --out outputs/expert_modes
-    python scripts/expert_modes.py --traj outputs/expert_modes/WindowInstallation-v1.expert.h5 \
+    python -m experiments.expert_modes --traj outputs/expert_modes/WindowInstallation-v1.expert.h5 \
         --agent 'shipped agent=docs/data/general_agent_eval_50k.json' --write-results
 
 A behaviour clone of demonstrations that reach the same goal in several joint configurations learns their
@@ -125,7 +125,7 @@ def main(args: Args) -> dict:
         failed = {label: failures_by_slot(env_id, a["tasks"][env_id]["episode_results"]) for label, a in agents.items()}
         out[env_id] = dict(traj=str(path), slots=result, failed_by_slot=failed)
         tables.append(report(env_id, result, failed, args.tol))
-    command = "python scripts/expert_modes.py " + " ".join(shlex.quote(a) for a in sys.argv[1:])
+    command = "python -m experiments.expert_modes " + " ".join(shlex.quote(a) for a in sys.argv[1:])
     body = f"Command: `{command}`\n\n" + "\n\n".join(tables)
     print(body)
     if args.json:

@@ -1,4 +1,13 @@
-"""The paper's experiment as ppo.py runs it: its settings, its runs, and how a campaign of them resumes.
+"""The paper's experiment as ppo.py runs it: its settings and its runs, a campaign (experiments/campaign.py).
+
+    python -m experiments.paper --dry-run                    # the plan, and where each run stands
+    python -m experiments.paper                              # run 1 and run 3 (or resume them), one after the other
+    python -m experiments.paper --runs paper_general_agent --num-envs 16
+    python -m experiments.paper --control-groups             # the control groups, 2M steps each (Fig. 4's length)
+    python -m experiments.paper --control-groups --total-timesteps 8000000   # continued to the general agent's 8M
+    python -m experiments.paper_report --write-results       # its sections of docs/RESULTS.md, Figures 3 and 4
+
+Ctrl-C or SIGTERM stops the run in progress after its iteration, with a checkpoint; the same command resumes it.
 
 The paper (Unity ML-Agents) fixes the reward (Algorithm 1: our `sparse`), the curiosity bonus, the
 curriculum (Table I, each stage 2M steps inheriting every parameter) and the evaluation. It is silent
@@ -35,18 +44,15 @@ general agent's stages do.
 
 from __future__ import annotations
 
-import csv
 import dataclasses
 import os
-import platform
 from dataclasses import dataclass
-from pathlib import Path
 from typing import Optional
 
-import torch
+import tyro
 
-from baselines.ppo import ppo
-from baselines.ppo.checkpoints import load_checkpoint
+from baselines.ppo.args import Args as PPOArgs
+from experiments.campaign import CAMPAIGN_DIR, SHIPPED_DIR, Run, describe, run_or_resume
 from ms_construction.envs import TASK_ENV_IDS
 from ms_construction.curriculum import FINAL_STAGE, STAGE_NAMES
 
@@ -54,21 +60,17 @@ STAGE_STEPS = 2_000_000
 """the paper's steps per curriculum stage."""
 UPDATE_SAMPLES = 10_000
 """samples per PPO update (ML-Agents' buffer_size, 10240, rounded to divide a stage)."""
-CAMPAIGN_DIR = Path("campaign")
-"""where the campaign's runs live; their latest checkpoint and progress CSV are committed."""
 CONTROL_GROUPS = {"ceiling": "controlGroup4.1", "window": "controlGroup4.2", "flooring": "controlGroup4.3"}
-SHIPPED_DIR = Path("assets/checkpoints")
-"""where a finished run's final policy is shipped (`ship`)."""
 
 
-def paper_args(num_envs: Optional[int] = None, **overrides) -> ppo.Args:
-    """ppo.Args of the paper setting (see the module docstring), for `num_envs` env processes (default:
+def paper_args(num_envs: Optional[int] = None, **overrides) -> PPOArgs:
+    """ppo.py Args of the paper setting (see the module docstring), for `num_envs` env processes (default:
     one per CPU core); `overrides` replace any field afterwards."""
     num_envs = num_envs or os.cpu_count() or 1
     if UPDATE_SAMPLES % num_envs:
         raise SystemExit(f"--num-envs {num_envs}: the paper setting's {UPDATE_SAMPLES} samples per update must "
                          f"divide evenly among the envs (use 1, 2, 4, 5, 8, 10, 16, 20, 25, 40, 50, ...)")
-    args = ppo.Args(
+    args = PPOArgs(
         env_id="ConstructionPickPlace-v1", reward_mode="sparse", control_mode="pd_joint_delta_pos",
         sim_backend="physx_cpu", cuda=False,
         curriculum=STAGE_NAMES, stage_timesteps=STAGE_STEPS, total_timesteps=4 * STAGE_STEPS,
@@ -84,23 +86,9 @@ def paper_args(num_envs: Optional[int] = None, **overrides) -> ppo.Args:
     return dataclasses.replace(args, **overrides)
 
 
-@dataclass
-class Run:
-    """One run of the campaign: its name, its ppo.Args, what it is, the command that runs it, and where
-    its final policy is shipped when it has run to the end of its plan (None: not shipped)."""
-
-    name: str
-    args: ppo.Args
-    what: str
-    command: str
-    shipped: Optional[Path] = None
-    method: Optional[str] = None
-    """the campaign record's method line (default: the paper setting's)."""
-
-
 def general_runs(num_envs: Optional[int] = None, seed: int = 1) -> list[Run]:
     """Run 1 (the paper's general agent) and run 3 (its cp1 stage without curiosity)."""
-    command = "python scripts/train_paper_agent.py"
+    command = "python -m experiments.paper"
     return [
         Run("paper_general_agent", paper_args(num_envs, seed=seed, exp_name="paper_general_agent"),
             "the paper setting: general task, cp1 -> cp4, 2M steps each", command, SHIPPED_DIR / "paper_general_agent.pt"),
@@ -115,7 +103,7 @@ def control_group_runs(total_timesteps: int = STAGE_STEPS, num_envs: Optional[in
     if total_timesteps % STAGE_STEPS:
         raise SystemExit(f"--total-timesteps {total_timesteps}: use a multiple of {STAGE_STEPS} (one cp4 stage each)")
     stages = (FINAL_STAGE,) * (total_timesteps // STAGE_STEPS)
-    command = "python scripts/train_control_groups.py" + ("" if total_timesteps == STAGE_STEPS else f" --total-timesteps {total_timesteps}")
+    command = "python -m experiments.paper --control-groups" + ("" if total_timesteps == STAGE_STEPS else f" --total-timesteps {total_timesteps}")
     # the 2M point keeps its own file when the run goes on to 8M: both are published
     suffix = "" if total_timesteps == STAGE_STEPS else f"_{total_timesteps // 1_000_000}m"
     return [
@@ -126,60 +114,46 @@ def control_group_runs(total_timesteps: int = STAGE_STEPS, num_envs: Optional[in
     ]
 
 
-def checkpoint_of(run: Run) -> Path:
-    return Path(run.args.log_dir) / run.args.exp_name / "checkpoint.pt"
+@dataclass
+class Args:
+    runs: tuple[str, ...] = ("paper_general_agent", "paper_cp1_no_curiosity")
+    """which runs of the general agent, in this order (without --control-groups)."""
+    control_groups: bool = False
+    """run the control groups 4.1 / 4.2 / 4.3 instead: one agent each on CeilingInstallation-v1,
+    WindowInstallation-v1 and Flooring-v1, at cp4 from the first step."""
+    tasks: tuple[str, ...] = tuple(TASK_ENV_IDS)
+    """which control groups, in this order: ceiling (4.1), window (4.2), flooring (4.3)."""
+    total_timesteps: int = STAGE_STEPS
+    """per control group, a multiple of 2M: 2M (the general agent's cp4 stage) or 8M (its whole budget). A run is
+    a chain of 2M-step cp4 stages, each restarting the schedules as the general agent's stages do, so the first
+    2M steps are the same whatever the total."""
+    num_envs: Optional[int] = None
+    """env processes (default: one per CPU core); it must divide the 10,000 samples of an update. A run resumed
+    from a checkpoint keeps its own."""
+    seed: int = 1
+    dry_run: bool = False
+    """print the plan and where each run stands, and exit."""
 
 
-def describe(run: Run) -> str:
-    """One line: the run, its budget and stages, and where it stands."""
-    a, ckpt = run.args, checkpoint_of(run)
-    done = load_checkpoint(ckpt)["progress"]["global_step"] if ckpt.is_file() else 0
-    return (f"{run.name}: {run.what}; {a.env_id}, stages {' '.join(a.curriculum)} ({a.stage_timesteps:,} steps each), "
-            f"{a.total_timesteps:,} steps, curiosity {a.curiosity}, seed {a.seed}, {a.num_envs} envs x {a.num_steps} steps "
-            f"per update; {'resumes at step ' + format(done, ',') if done else 'starts fresh'} ({ckpt})"
-            + (f"; ships to {run.shipped}" if run.shipped else ""))
+def main(args: Args) -> None:
+    if args.control_groups:
+        unknown = [t for t in args.tasks if t not in TASK_ENV_IDS]
+        if unknown:
+            raise SystemExit(f"--tasks {' '.join(unknown)}: use among {', '.join(TASK_ENV_IDS)}")
+        plan = {r.name: r for r in control_group_runs(args.total_timesteps, args.num_envs, args.seed)}
+        runs = [plan[f"control_{t}"] for t in args.tasks]
+    else:
+        plan = {r.name: r for r in general_runs(args.num_envs, args.seed)}
+        unknown = [n for n in args.runs if n not in plan]
+        if unknown:
+            raise SystemExit(f"--runs {' '.join(unknown)}: use among {', '.join(plan)}")
+        runs = [plan[n] for n in args.runs]
+    for run in runs:
+        print(describe(run))
+    if not args.dry_run:
+        for run in runs:
+            run_or_resume(run)
 
 
-def run_or_resume(run: Run) -> None:
-    """Train `run` to the end of its budget, resuming its checkpoint if it has one, and ship its final
-    policy (`ship`). A run that was planned with a larger budget than its checkpoint's (control groups
-    from 2M to 8M) continues to it."""
-    ckpt = checkpoint_of(run)
-    ppo.main(dataclasses.replace(run.args, resume=str(ckpt), extend=True) if ckpt.is_file() else run.args)
-    if run.shipped is not None:
-        ship(run)
-
-
-def training_wall_s(progress_csv: Path, samples_per_iteration: int) -> float:
-    """The wall time of a run's training iterations (rollouts and updates), summed from its progress.csv:
-    evaluations, start-ups and the time between sessions are not in it."""
-    with open(progress_csv, newline="") as f:
-        return sum(samples_per_iteration / float(row["sps"]) for row in csv.DictReader(f) if row["sps"])
-
-
-def ship(run: Run, before_the_end: bool = False) -> Path:
-    """The final policy of a run that has reached the end of its plan to `run.shipped`, with its Args and
-    its campaign record (method, env steps, stages, wall time, hardware), for scripts/evaluate.py; the
-    optimizers and random states stay in the run's own checkpoint in campaign/, which resumes it. With
-    `before_the_end`, the policy where the run stands now (its record says at which step of its plan)."""
-    ckpt = load_checkpoint(checkpoint_of(run))
-    a, progress = ckpt["args"], ckpt["progress"]
-    if progress["global_step"] < run.args.total_timesteps and not before_the_end:
-        raise SystemExit(f"{run.name}: at step {progress['global_step']:,} of {run.args.total_timesteps:,}; "
-                         f"ship it when it has run to the end ({run.command})")
-    wall = training_wall_s(checkpoint_of(run).with_name("progress.csv"), a["num_envs"] * a["num_steps"])
-    policy = {k: v for k, v in ckpt.items() if k not in ("optimizer", "icm_optimizer", "rng")}
-    policy["campaign"] = dict(command=run.command, record={
-        "method": run.method or f"{run.what} (PPO, sparse reward, curiosity {a['curiosity']}; baselines/ppo/paper_setting.py)",
-        "env steps": f"{progress['global_step']:,}" + ("" if progress["global_step"] >= run.args.total_timesteps
-                                                       else f" (of the {run.args.total_timesteps:,} planned)"),
-        "stages": ", ".join(f"{stage} from step {step:,}" for step, stage in progress["stage_changes"]),
-        "wall time": f"{wall / 3600:.1f} h of training iterations (rollouts and updates, summed from progress.csv; "
-                     "evaluations, start-ups and pauses not counted), across sessions, with whatever else ran beside it",
-        "hardware": f"{platform.machine()}, {os.cpu_count()} CPU cores; physx_cpu with {a['num_envs']} env processes, "
-                    "the networks on the CPU",
-    })
-    run.shipped.parent.mkdir(parents=True, exist_ok=True)
-    torch.save(policy, run.shipped)
-    print(f"shipped {checkpoint_of(run)} -> {run.shipped}")
-    return run.shipped
+if __name__ == "__main__":
+    main(tyro.cli(Args))

@@ -1,13 +1,13 @@
-"""The refinement runs in docs/: what each run of `python -m baselines.ppo.refine` did on the validation
+"""The refinement runs in docs/: what each run of `python -m experiments.refine` did on the validation
 seeds, as a table and failures by kind in docs/experiments/general_agent.md and a curve as a PNG.
 
-    python scripts/refine_report.py --runs runs/refine runs/refine2 --write-results
+    python -m experiments.refine_report --runs runs/refine runs/refine2 --write-results
 
 A run folder is summarized (the settings its PPO checkpoint saved; the clone's validation and each
 snapshot's, with every failed episode) into docs/data/refine/<folder name>.json; a .json path is read as
 such a summary, so the docs regenerate from docs/data alone once the runs are gone:
 
-    python scripts/refine_report.py --runs docs/data/refine/refine.json docs/data/refine/refine2.json --write-results
+    python -m experiments.refine_report --runs docs/data/refine/refine.json docs/data/refine/refine2.json --write-results
 
 Failure kinds at cp4: baselines/ppo/evaluation.py's `failures`.
 """
@@ -27,7 +27,7 @@ import torch  # noqa: E402
 import tyro  # noqa: E402
 
 from baselines.ppo.evaluation import failures, kinds  # noqa: E402
-from baselines.ppo.refine import beats, best_snapshot  # noqa: E402
+from experiments.refine import beats, best_snapshot  # noqa: E402
 from ms_construction.reporting import update_section  # noqa: E402
 from baselines.ppo.checkpoints import load_checkpoint
 
@@ -183,10 +183,10 @@ def main(args: Args) -> str:
     plot(runs, args.out)
     print(body)
     if args.write_results:
-        command = "python scripts/refine_report.py --runs " + " ".join(str(p) for p in args.runs) + " --write-results"
+        command = "python -m experiments.refine_report --runs " + " ".join(str(p) for p in args.runs) + " --write-results"
         update_section(args.results, "refinement", "\n".join([
             "## PPO refinement of the clone: validation", "", f"Command: `{command}`", "",
-            "Each run of `python -m baselines.ppo.refine` (a residual policy on the frozen clone, PPO on the sparse "
+            "Each run of `python -m experiments.refine` (a residual policy on the frozen clone, PPO on the sparse "
             "reward at cp4): the clone and the PPO snapshots on the same validation episodes (seeds 500000 on, "
             "ordinary resets, deterministic actions).", "", body, "",
             f"![validation place success against PPO env steps]({Path(*args.out.parts[1:])})"]), "Results")

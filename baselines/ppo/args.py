@@ -1,0 +1,300 @@
+"""ppo.py's arguments: one `Args` dataclass (tyro reads it as ppo.py's command line, one flag per field), and
+the checks and machine-dependent defaults applied to it before a run starts."""
+
+from __future__ import annotations
+
+import dataclasses
+import os
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Literal, Optional, get_args, get_origin, get_type_hints
+
+import torch
+
+from ms_construction.curriculum import STAGE_NAMES
+from ms_construction.envs import ENV_IDS
+
+ControlMode = Literal["pd_joint_delta_pos", "pd_joint_pos", "pd_joint_target_delta_pos", "pd_ee_delta_pos",
+                      "pd_ee_delta_pose", "pd_ee_target_delta_pose"]
+"""the construction arm's controllers (its `_controller_configs`)."""
+RewardMode = Literal["sparse", "dense", "normalized_dense"]
+
+
+@dataclass
+class Args:
+    exp_name: Optional[str] = None
+    """name of this run (default: env id, curiosity, curriculum and seed)."""
+    seed: int = 1
+    """seed of the experiment."""
+    torch_deterministic: bool = True
+    """`torch.backends.cudnn.deterministic`."""
+    cuda: bool = True
+    """use CUDA for the networks when it is available."""
+    capture_video: bool = False
+    """save evaluation videos to `runs/<run>/videos` (offscreen, CPU or GPU)."""
+    save_model: bool = True
+    """write checkpoints (atomically) to `runs/<run>/checkpoint.pt`."""
+    evaluate: bool = False
+    """only evaluate `--checkpoint` and exit."""
+    checkpoint: Optional[str] = None
+    """initial weights (policy, value, ICM) from this checkpoint; a fresh run otherwise."""
+    resume: Optional[str] = None
+    """continue the interrupted run of this checkpoint: same run folder, stage, step count, optimizer, RNG."""
+    log_dir: str = "runs"
+    """where run folders go."""
+
+    env_id: str = "ConstructionPickPlace-v1"
+    """the environment: the general task or one of the three single tasks (ms_construction.envs.ENV_IDS)."""
+    control_mode: ControlMode = "pd_joint_delta_pos"
+    """the arm's controller."""
+    reward_mode: RewardMode = "sparse"
+    """sparse (the paper's Algorithm 1), dense or normalized_dense."""
+    sim_backend: Literal["auto", "physx_cpu", "physx_cuda"] = "auto"
+    """physx_cuda when a GPU is there (auto), else physx_cpu."""
+    total_timesteps: int = 8_000_000
+    """total env steps of training (the paper: 2M per curriculum stage)."""
+    learning_rate: float = 3e-4
+    """Adam learning rate of policy and value."""
+    num_envs: Optional[int] = None
+    """parallel training envs (default: one per CPU core on physx_cpu, 512 on physx_cuda)."""
+    num_eval_envs: Optional[int] = None
+    """parallel evaluation envs (default: 2 on physx_cpu, 16 on physx_cuda)."""
+    partial_reset: bool = True
+    """reset each env when its episode ends (success ends an episode)."""
+    eval_partial_reset: bool = False
+    """GPU evaluation: reset envs that finish early (off: each env runs one full-length episode)."""
+    num_steps: Optional[int] = None
+    """steps per env per rollout (default: 250 on physx_cpu, 50 on physx_cuda)."""
+    num_eval_steps: int = 250
+    """steps per evaluation (one episode per env)."""
+    anneal_lr: bool = False
+    """anneal the learning rate linearly to 0."""
+    gamma: float = 0.99
+    """discount (long horizon: the sparse reward comes once, up to 250 steps away)."""
+    gae_lambda: float = 0.95
+    """GAE lambda."""
+    num_minibatches: int = 8
+    """minibatches per update epoch."""
+    update_epochs: int = 4
+    """epochs per rollout."""
+    norm_adv: Literal["minibatch", "batch", "none"] = "minibatch"
+    """normalize advantages per minibatch (CleanRL's, ManiSkill's), once over the whole update batch
+    (ML-Agents'), or not at all."""
+    clip_coef: float = 0.2
+    """PPO clip coefficient."""
+    clip_vloss: bool = False
+    """clip the value loss."""
+    ent_coef: float = 0.0
+    """entropy bonus coefficient."""
+    vf_coef: float = 0.5
+    """value loss coefficient."""
+    max_grad_norm: Optional[float] = 0.5
+    """gradient clipping of policy and value (None: none, as ML-Agents)."""
+    target_kl: Optional[float] = 0.1
+    """stop an update early when the approximate KL exceeds this."""
+    reward_scale: float = 1.0
+    """scale of the extrinsic reward."""
+    eval_freq: int = 10
+    """evaluate every this many iterations (and at stage ends)."""
+    bootstrap_at_done: Optional[Literal["always", "truncated", "terminated", "never"]] = None
+    """which episode ends bootstrap with the value of their last observation. `truncated`: episodes cut
+    by the time limit (they did not end there); success is an end with nothing after it. `always`
+    (ManiSkill's PPO default, its name): every end, success included, so that a success state counts
+    as one that keeps paying what it paid; the dense rewards are made for it (see the task card).
+    `terminated`: success only; the time limit is an end like any other, which only a policy that sees
+    the time (--obs-elapsed-time) can value right: an episode cut short of its goal loses what placing
+    would have paid. `never`: no end. Default: `always` with the dense rewards, `truncated` with sparse (ML-Agents',
+    which bootstraps interrupted episodes only)."""
+    success_value: Literal["absorbing", "critic"] = "absorbing"
+    """what an episode that ends by success bootstraps with, where it does (--bootstrap-at-done always or
+    terminated): `absorbing`, the success step's reward for ever (reward / (1 - gamma)), as the task card defines
+    success; `critic`, the critic's value of the last observation (ManiSkill's PPO), a guess about a state it
+    never trains on."""
+    hidden_size: int = 256
+    """width of the policy and value networks."""
+    num_layers: int = 3
+    """hidden layers of the policy and value networks (ML-Agents' default: 2)."""
+    norm_obs: bool = True
+    """normalize observations by their running mean and variance (kept in the checkpoint), as CleanRL's
+    continuous-control PPO does (with gymnasium's NormalizeObservation)."""
+    bounded_mean: bool = False
+    """squash the policy's mean into the action bounds by tanh: an unbounded mean can drift past them, where
+    every draw clips to the same action, the advantages cannot tell draws apart and the mean stays there (the
+    from-scratch runs' joints driven to their limits)."""
+    rotation_features: bool = True
+    """feed the networks each quaternion of the state (plate, goal, element) as the first two columns
+    of its rotation matrix: a quaternion's sign can flip mid-episode, the matrix cannot."""
+    freeze_obs_norm: bool = False
+    """keep the normalization statistics as they are (those of a --checkpoint's behaviour cloning)."""
+    demos: tuple[str, ...] = ()
+    """demonstration files (scripts/collect_demos.py) for a behaviour-cloning term in the policy loss
+    (as DAPG, Rajeswaran et al. 2018): keeps a warm-started policy near the expert while PPO refines it."""
+    bc_coef: float = 0.0
+    """weight of that term: mean squared error of the policy's mean on a demonstration minibatch."""
+    critic_warmup_iterations: int = 0
+    """the first iterations of a run (counted from 1) update the value function only: with a
+    warm-started policy (--checkpoint), the critic first learns that policy's returns, so the policy's
+    first steps follow advantages that mean something."""
+    checkpoint_freq: int = 10
+    """write a checkpoint every this many iterations (and at stage changes, the end, and Ctrl-C)."""
+    extend: bool = False
+    """with --resume: continue to this command's --total-timesteps and --curriculum (which must start
+    with the run's own stages) instead of the run's own, e.g. to take a finished run further."""
+    stage_schedules: bool = False
+    """ML-Agents' linear schedules, restarted at every curriculum stage (as when each stage is a run that
+    inherits the last): over a stage's --stage-timesteps the learning rate falls to 1e-10, the clip
+    coefficient to 0.1 and the entropy coefficient to 1e-5."""
+
+    residual_of: Optional[str] = None
+    """a checkpoint (a behaviour clone, or a refined agent: a residual on a residual) that stays frozen as the base
+    policy; PPO learns a correction added to its actions (baselines/ppo/residual.py, ResiP). Its observation
+    statistics stay too."""
+    residual_scale: float = 0.1
+    """the correction's scale in action units."""
+    residual_l2_coef: float = 0.0
+    """weight of the correction's mean square (before scaling) in the policy loss: an anchor at the clone,
+    so that the residual moves only where the advantages keep asking it to."""
+    start_states: Optional[str] = None
+    """a bank of env states (baselines/ppo/start_states.py, where a policy failed) that a share of the
+    training episodes start from; evaluation always resets as usual. physx_cpu only."""
+    start_states_share: float = 0.5
+    """the share of training episodes that start from the bank."""
+    start_states_keep_clock: bool = False
+    """an episode started from the bank goes on from the elapsed steps its state was taken at (a failure that ran
+    out of time stays one) instead of getting the whole step limit again; the bank must hold them (a bank of
+    start_states.py collected since it keeps them)."""
+    obs_elapsed_time: bool = False
+    """append the episode's elapsed steps / 250 to the observation (the tasks' `obs_elapsed_time`), in training
+    and evaluation: a policy that knows how much of the step limit is left can hurry. A residual's base (trained
+    without it) does not see it."""
+    obs_install_offset: bool = False
+    """append the joint move to the nearest installation configuration (the tasks' `obs_install_offset`: IK of
+    the goal pose, what the dense reward's carry term measures) to the observation, in training and evaluation."""
+    task_weights: Optional[tuple[float, float, float]] = None
+    """the general task's sampling weights of ceiling, window and flooring in the training envs (None: uniform;
+    `1 2 1`: window installation half the episodes); evaluation always samples uniformly."""
+
+    near_goal_share: float = 0.0
+    """the start-state curriculum (reverse curriculum generation, Florensa et al. 2017; no demonstrations): this
+    share of the training episodes start with the element held on a collision-free path out of its goal (the
+    tasks' `set_near_goal_starts`), at most `near_goal_radius` of the path's length out; evaluation always
+    resets as usual."""
+    near_goal_radius: float = 0.1
+    """the curriculum's first radius (fraction of a start path, 0: installed), one per task type..."""
+    near_goal_step: float = 0.1
+    """...each widened by this (up to 1) once the last `near_goal_window` near-goal episodes of its task type placed
+    at least `near_goal_promote` of the time (the window then starts again)."""
+    near_goal_promote: float = 0.6
+    """success from near-goal starts that widens a task type's radius."""
+    near_goal_window: int = 20
+    """near-goal episodes of a task type whose success decides a widening."""
+    near_goal_max_steps: Optional[int] = None
+    """a near-goal episode that has not placed within this many steps is truncated (None: the task's step limit)."""
+
+    curiosity: Literal["none", "icm", "icm_normalized"] = "icm"
+    """intrinsic reward (baselines/ppo/curiosity.py): `icm` as ML-Agents computes it (the forward model's
+    raw error x strength, capped at 1, with its own value head and discount, ignoring episode ends);
+    `icm_normalized`, ours: the error divided by its running std, added to the extrinsic reward;
+    or none (plain PPO)."""
+    icm_strength: float = 0.02
+    """curiosity's strength. ML-Agents documents 1.0 as its default (typical 0.001 to 0.1) and uses 0.02
+    in its example configuration with curiosity; we keep that 0.02."""
+    icm_gamma: float = 0.99
+    """discount of the curiosity reward (its own value head; ML-Agents' default)."""
+    icm_forward_weight: float = 0.2
+    """beta: ICM loss = 10 ((1 - beta) inverse loss + beta forward loss) (ML-Agents)."""
+    icm_feature_dim: int = 128
+    """size of ICM's feature space phi(s) and of its encoder's layers (ML-Agents: 128)."""
+    icm_hidden_size: int = 256
+    """width of ICM's forward and inverse models (ML-Agents: 256)."""
+    icm_learning_rate: float = 3e-4
+    """Adam learning rate of ICM."""
+
+    curriculum: tuple[str, ...] = STAGE_NAMES
+    """tolerance stages in order (Table I); one stage, e.g. `cp4`, trains without a curriculum."""
+    stage_timesteps: int = 2_000_000
+    """promote to the next stage after this many env steps in a stage (the paper: 2M)."""
+    min_stage_timesteps: int = 500_000
+    """promote early only after this many steps in the stage..."""
+    promote_success: float = 0.9
+    """...when the smoothed evaluation place success reaches this (above 1 disables it)."""
+    success_smoothing: float = 0.5
+    """weight of the newest evaluation in the smoothed success (exponential moving average)."""
+
+
+def validate(args: Args) -> None:
+    """Refuse, before anything starts, what the run would otherwise fail on later (often in the env
+    worker processes, with their tracebacks)."""
+    if args.env_id not in ENV_IDS:
+        raise SystemExit(f"--env-id {args.env_id}: use one of {', '.join(ENV_IDS)}")
+    hints = get_type_hints(Args)
+    for f in dataclasses.fields(Args):  # Args built in code are not checked by tyro
+        allowed = get_args(hints[f.name]) if get_origin(hints[f.name]) is Literal else ()
+        if allowed and getattr(args, f.name) not in allowed:
+            raise SystemExit(f"--{f.name.replace('_', '-')} {getattr(args, f.name)}: use one of {', '.join(allowed)}")
+    for name in ("residual_of", "start_states"):
+        if getattr(args, name) is not None and not Path(getattr(args, name)).is_file():
+            raise SystemExit(f"--{name.replace('_', '-')}: no such file: {getattr(args, name)}")
+    if args.residual_l2_coef and not args.residual_of:
+        raise SystemExit("--residual-l2-coef weighs a residual's correction: give --residual-of")
+    if args.residual_of and args.bc_coef > 0:
+        raise SystemExit("--bc-coef works on the policy's own weights; a residual agent (--residual-of) has none to pull")
+    if args.task_weights is not None and (args.env_id != "ConstructionPickPlace-v1" or min(args.task_weights) < 0
+                                          or sum(args.task_weights) <= 0):
+        raise SystemExit(f"--task-weights {args.task_weights}: three weights >= 0, not all 0 (ceiling, window, flooring), "
+                         "of the general task ConstructionPickPlace-v1 only")
+    for name in ("near_goal_share", "near_goal_radius", "near_goal_promote"):
+        if not 0 <= getattr(args, name) <= 1:
+            raise SystemExit(f"--{name.replace('_', '-')} must lie in [0, 1], got {getattr(args, name)}")
+    if not 0 <= args.start_states_share <= 1:
+        raise SystemExit(f"--start-states-share must lie in [0, 1], got {args.start_states_share}")
+    if args.start_states_keep_clock and not args.start_states:
+        raise SystemExit("--start-states-keep-clock: give the bank (--start-states)")
+    if args.start_states and args.sim_backend == "physx_cuda":
+        raise SystemExit("--start-states: physx_cpu only (the bank is restored in the env worker processes)")
+    missing = [p for p in args.demos if not Path(p).is_file()]
+    if missing:
+        raise SystemExit(f"--demos: no such file(s): {', '.join(missing)} (record them with scripts/collect_demos.py)")
+    bad = [s for s in args.curriculum if s not in STAGE_NAMES]
+    if bad or not args.curriculum:
+        raise SystemExit(f"--curriculum {' '.join(args.curriculum)}: stages must be among {', '.join(STAGE_NAMES)}")
+    for name in ("total_timesteps", "stage_timesteps", "num_minibatches", "update_epochs", "eval_freq", "checkpoint_freq"):
+        if getattr(args, name) <= 0:
+            raise SystemExit(f"--{name.replace('_', '-')} must be positive, got {getattr(args, name)}")
+
+
+def resolve_defaults(args: Args) -> None:
+    """Fill in the defaults that depend on the machine (in `args`, so that checkpoints keep them)."""
+    if args.sim_backend == "auto":
+        args.sim_backend = "physx_cuda" if torch.cuda.is_available() else "physx_cpu"
+    gpu = args.sim_backend == "physx_cuda"
+    if args.num_envs is None:
+        args.num_envs = 512 if gpu else (os.cpu_count() or 1)
+    if args.num_eval_envs is None:
+        args.num_eval_envs = 16 if gpu else 2
+    if args.num_steps is None:
+        args.num_steps = 50 if gpu else 250
+    if args.exp_name is None:
+        args.exp_name = f"{args.env_id}__{args.curiosity}__{'-'.join(args.curriculum)}__s{args.seed}"
+    if args.bootstrap_at_done is None:
+        args.bootstrap_at_done = "truncated" if args.reward_mode == "sparse" else "always"
+
+
+def command_line(args: Args) -> list[str]:
+    """ppo.py's flags that build `args` (those that differ from the defaults), so that a run configured in code
+    (experiments/) can be written down as one `python baselines/ppo/ppo.py ...` command."""
+    flags, default = [], Args()
+    for f in dataclasses.fields(Args):
+        value = getattr(args, f.name)
+        if value == getattr(default, f.name):
+            continue
+        flag = "--" + f.name.replace("_", "-")
+        if isinstance(value, bool):
+            flags.append(flag if value else "--no-" + f.name.replace("_", "-"))
+        elif value is None:
+            flags += [flag, "None"]
+        elif isinstance(value, (tuple, list)):
+            flags += [flag, *map(str, value)]
+        else:
+            flags += [flag, str(value)]
+    return flags

@@ -1,0 +1,115 @@
+"""A campaign of training runs that spans sessions: each run resumes from its checkpoint in campaign/ (commit
+that and its progress.csv between sessions), and a run that has reached the end of its plan ships its final
+policy to assets/checkpoints/ with its campaign record. The paper's experiment (experiments/paper.py) and the
+general agent from reward alone (experiments/from_scratch.py) are campaigns."""
+
+from __future__ import annotations
+
+import csv
+import dataclasses
+import os
+import platform
+import shutil
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Optional
+
+import torch
+
+from baselines.ppo import ppo
+from baselines.ppo.args import Args
+from baselines.ppo.checkpoints import load_checkpoint
+
+CAMPAIGN_DIR = Path("campaign")
+"""where the campaign's runs live; their latest checkpoint and progress CSV are committed."""
+SHIPPED_DIR = Path("assets/checkpoints")
+"""where a finished run's final policy is shipped (`ship`)."""
+
+
+@dataclass
+class Run:
+    """One run of the campaign: its name, its ppo.py Args, what it is, the command that runs it, and where
+    its final policy is shipped when it has run to the end of its plan (None: not shipped)."""
+
+    name: str
+    args: Args
+    what: str
+    command: str
+    shipped: Optional[Path] = None
+    method: Optional[str] = None
+    """the campaign record's method line (default: the paper setting's)."""
+
+
+def checkpoint_of(run: Run) -> Path:
+    return Path(run.args.log_dir) / run.args.exp_name / "checkpoint.pt"
+
+
+def describe(run: Run) -> str:
+    """One line: the run, its budget and stages, and where it stands."""
+    a, ckpt = run.args, checkpoint_of(run)
+    done = load_checkpoint(ckpt)["progress"]["global_step"] if ckpt.is_file() else 0
+    return (f"{run.name}: {run.what}; {a.env_id}, stages {' '.join(a.curriculum)} ({a.stage_timesteps:,} steps each), "
+            f"{a.total_timesteps:,} steps, curiosity {a.curiosity}, seed {a.seed}, {a.num_envs} envs x {a.num_steps} steps "
+            f"per update; {'resumes at step ' + format(done, ',') if done else 'starts fresh'} ({ckpt})"
+            + (f"; ships to {run.shipped}" if run.shipped else ""))
+
+
+def run_or_resume(run: Run) -> None:
+    """Train `run` to the end of its budget, resuming its checkpoint if it has one, and ship its final
+    policy (`ship`). A run that was planned with a larger budget than its checkpoint's (control groups
+    from 2M to 8M) continues to it."""
+    ckpt = checkpoint_of(run)
+    ppo.main(dataclasses.replace(run.args, resume=str(ckpt), extend=True) if ckpt.is_file() else run.args)
+    if run.shipped is not None:
+        ship(run)
+
+
+def training_wall_s(progress_csv: Path, samples_per_iteration: int) -> float:
+    """The wall time of a run's training iterations (rollouts and updates), summed from its progress.csv:
+    evaluations, start-ups and the time between sessions are not in it."""
+    with open(progress_csv, newline="") as f:
+        return sum(samples_per_iteration / float(row["sps"]) for row in csv.DictReader(f) if row["sps"])
+
+
+def ship(run: Run, before_the_end: bool = False) -> Path:
+    """The final policy of a run that has reached the end of its plan to `run.shipped`, with its Args and
+    its campaign record (method, env steps, stages, wall time, hardware), for scripts/evaluate.py; the
+    optimizers and random states stay in the run's own checkpoint in campaign/, which resumes it. With
+    `before_the_end`, the policy where the run stands now (its record says at which step of its plan)."""
+    ckpt = load_checkpoint(checkpoint_of(run))
+    a, progress = ckpt["args"], ckpt["progress"]
+    if progress["global_step"] < run.args.total_timesteps and not before_the_end:
+        raise SystemExit(f"{run.name}: at step {progress['global_step']:,} of {run.args.total_timesteps:,}; "
+                         f"ship it when it has run to the end ({run.command})")
+    wall = training_wall_s(checkpoint_of(run).with_name("progress.csv"), a["num_envs"] * a["num_steps"])
+    return ship_checkpoint(checkpoint_of(run), run.shipped, run.command, {
+        "method": run.method or f"{run.what} (PPO, sparse reward, curiosity {a['curiosity']}; experiments/paper.py)",
+        "env steps": f"{progress['global_step']:,}" + ("" if progress["global_step"] >= run.args.total_timesteps
+                                                       else f" (of the {run.args.total_timesteps:,} planned)"),
+        "stages": ", ".join(f"{stage} from step {step:,}" for step, stage in progress["stage_changes"]),
+        "wall time": f"{wall / 3600:.1f} h of training iterations (rollouts and updates, summed from progress.csv; "
+                     "evaluations, start-ups and pauses not counted), across sessions, with whatever else ran beside it",
+        "hardware": hardware(f"physx_cpu with {a['num_envs']} env processes, the networks on the CPU"),
+    })
+
+
+def hardware(how: str = "physx_cpu") -> str:
+    """The campaign record's hardware line: this machine, and `how` the run used it."""
+    return f"{platform.machine()}, {os.cpu_count()} CPU cores{'' if torch.cuda.is_available() else ', no GPU'}; {how}"
+
+
+def ship_checkpoint(checkpoint: Path, out: Path, command: str, record: dict, progress_csv: Optional[Path] = None,
+                    csv_out: Optional[Path] = None) -> Path:
+    """The one way a policy ships: `checkpoint`'s policy (its weights, Args and progress; the optimizers and random
+    states stay behind with the run, which they resume) to `out` with its campaign record (the `command` that
+    made it and the `record`'s lines: method, env steps, wall time, hardware), for scripts/evaluate.py; the run's
+    `progress_csv` copied to `csv_out` beside it when given."""
+    ckpt = load_checkpoint(checkpoint)
+    policy = {k: v for k, v in ckpt.items() if k not in ("optimizer", "icm_optimizer", "rng")}
+    policy["campaign"] = dict(command=command, record=record)
+    out.parent.mkdir(parents=True, exist_ok=True)
+    torch.save(policy, out)
+    if progress_csv is not None and progress_csv.exists():
+        shutil.copyfile(progress_csv, csv_out)
+    print(f"shipped {checkpoint} -> {out}")
+    return out
