@@ -14,7 +14,9 @@ assets/checkpoints/scratch_general_agent.pt with its campaign record. The recipe
 |---|---|---|
 | reward | normalized_dense: the tasks' dense reward / 10 (placing pays 10, a held step at most 4.5) | its carry term is linear in the arm's joint-space distance from the installation configuration (IK of the goal, ms_construction/goal_configurations.py), so it pulls from the pick, the way the turret's limits allow; its progress term pays each step's fall of that distance at once (probe G) |
 | success | absorbing: bootstrapped with its reward for ever | the critic never trains on a state after success; its guess let hovering near the goal outvalue placing |
-| start states | half the training episodes start held on a collision-free joint path out of the goal (`set_near_goal_starts`), each task type's radius widening from 0.1 of the path by 0.1 once 60% of its last 20 such episodes placed | reverse curriculum generation (Florensa et al. 2017) from resets the env computes by IK: no demonstrations; evaluation always resets as usual. One radius for all three types widened on lucky iterations of the easy type (probe F) |
+| start states | 80% of the training episodes start held on a collision-free joint path out of the goal (`set_near_goal_starts`), each task type's radius widening from 0.1 of the path by 0.1 once 60% of its last 20 such episodes placed; such an episode that has not placed in 80 steps is cut | reverse curriculum generation (Florensa et al. 2017) from resets the env computes by IK: no demonstrations; evaluation always resets as usual. One radius for all three types widened on lucky iterations of the easy type (probe F); with half the episodes and no cut, a failed start wandered for 250 steps and an update held a handful of near-goal episodes (probes I-L) |
+| observation | the tasks' state + the joint move to the installation configuration (`obs_install_offset`) | what the carry term measures, from IK of the goal pose: following it places from near-goal starts (a test); without it the policy must learn IK of nine goal slots itself |
+| policy | Gaussian, its mean bounded by tanh (`bounded_mean`) | an unbounded mean drifted past the action bounds, where every draw clips alike and PPO cannot move it back (the third start's `--diagnose`) |
 | discount | gamma 0.95, GAE lambda 0.95 | values of a few dozen steps: the dense reward carries the rest, and the critic learns them quickly |
 | updates | 2,000 samples (2 envs x 1,000 steps), 8 epochs of 8 minibatches, KL stop 0.1 | more gradient steps per env step: env steps are the cost on a CPU |
 | curiosity | none | the dense reward explores |
@@ -58,7 +60,8 @@ def scratch_args(num_envs: Optional[int] = None, **overrides) -> ppo.Args:
         sim_backend="physx_cpu", cuda=False, curriculum=(FINAL_STAGE,), total_timesteps=BUDGET, curiosity="none",
         success_value="absorbing", bootstrap_at_done="always", gamma=0.95, gae_lambda=0.95,
         num_envs=num_envs, num_steps=2000 // num_envs, update_epochs=8, num_minibatches=8, target_kl=0.1,
-        near_goal_share=0.5, near_goal_radius=0.1, near_goal_step=0.1, near_goal_promote=0.6, near_goal_window=20,
+        near_goal_share=0.8, near_goal_radius=0.1, near_goal_step=0.1, near_goal_promote=0.6, near_goal_window=20,
+        near_goal_max_steps=80, obs_install_offset=True, bounded_mean=True,
         eval_freq=25, checkpoint_freq=10, log_dir=str(CAMPAIGN_DIR),
     )
     return dataclasses.replace(args, **overrides)
@@ -153,7 +156,9 @@ def report(run: Run, results: Path = Path("docs/RESULTS.md")) -> str:
              "from near-goal starts, with the start radius.*", ""]
     if EVAL_JSON.is_file():
         data = json.loads(EVAL_JSON.read_text())
-        lines += [f"Evaluated with the paper's protocol: `{data['command']}`.", "",
+        shipped = load_checkpoint(run.shipped)["campaign"]["record"] if run.shipped.is_file() else {}
+        lines += [f"The shipped policy ({run.shipped}; {shipped.get('method', '?')}; env steps: {shipped.get('env steps', '?')}), "
+                  f"evaluated with the paper's protocol: `{data['command']}`.", "",
                   "| task | pick % [95% CI] | place % [95% CI] | paper's general agent: pick / place % | failures by kind |",
                   "|---|---|---|---|---|"]
         for env_id, r in data["tasks"].items():
@@ -181,7 +186,8 @@ def near_goal_rollouts(checkpoint: Path, radius: float = DIAGNOSE_RADIUS, seeds:
                        steps: int = DIAGNOSE_STEPS) -> str:
     """Where the policy takes an element it starts holding near its goal: per task and seed (near-goal starts at
     `radius`, the policy's mean, at most `steps` steps), whether it placed, the element's distance and angle to
-    the goal and the arm's carry distance at the start and the end, and the joints at the end."""
+    the goal and the arm's carry distance at the start and the end, the joints at the end, and how often the
+    policy's mean lay past the action bounds (where every draw clips alike: PPO cannot move such a mean back)."""
     import gymnasium as gym
     import torch
 
@@ -192,7 +198,8 @@ def near_goal_rollouts(checkpoint: Path, radius: float = DIAGNOSE_RADIUS, seeds:
     agent, kwargs = load_policy(checkpoint, "ConstructionPickPlace-v1")
     kwargs = {k: v for k, v in kwargs.items() if k not in ("obs_mode", "reward_mode")}
     lines = ["| task | seed | steps | placed | distance to goal, start / end (m) | angle, start / end (deg) | "
-             "carry distance, start / end (rad) | joints at the end (rad) |", "|---|---|---|---|---|---|---|---|"]
+             "carry distance, start / end (rad) | joints at the end (rad) | mean past the bounds (share; largest) |",
+             "|---|---|---|---|---|---|---|---|---|"]
     for env_id in TASK_ENV_IDS.values():
         env = gym.make(env_id, obs_mode="state", reward_mode="normalized_dense", **kwargs)
         u = env.unwrapped
@@ -200,15 +207,19 @@ def near_goal_rollouts(checkpoint: Path, radius: float = DIAGNOSE_RADIUS, seeds:
         for seed in range(seeds):
             obs, info = env.reset(seed=seed)
             start = (float(u.evaluate()["place_dist"][0]), float(u.evaluate()["place_angle_deg"][0]), float(u.carry_distance()[0]))
+            means = []
             for t in range(steps):
                 with torch.no_grad():
-                    obs, _, terminated, truncated, info = env.step(agent.get_action(obs.float(), deterministic=True).clamp(-1, 1))
+                    means.append(agent.get_action(obs.float(), deterministic=True))
+                obs, _, terminated, truncated, info = env.step(means[-1].clamp(-1, 1))
                 if bool(terminated[0]) or bool(truncated[0]):
                     break
+            mean = torch.cat(means).abs()
             q = " ".join(f"{v:.2f}" for v in u.agent.robot.get_qpos()[0].tolist())
             lines.append(f"| {env_id} | {seed} | {t + 1} | {'yes' if bool(info['success'][0]) else 'no'} | "
                          f"{start[0]:.2f} / {float(info['place_dist'][0]):.2f} | {start[1]:.0f} / {float(info['place_angle_deg'][0]):.0f} | "
-                         f"{start[2]:.2f} / {float(u.carry_distance()[0]):.2f} | {q} |")
+                         f"{start[2]:.2f} / {float(u.carry_distance()[0]):.2f} | {q} | "
+                         f"{float((mean > 1).float().mean()):.2f}; {float(mean.max()):.2f} |")
         env.close()
     return "\n".join(lines)
 
@@ -227,13 +238,17 @@ class Args:
     diagnose: bool = False
     """run its latest policy from near-goal starts (radius 0.2, 6 seeds per task) and write where it took the
     elements into docs/experiments/from_scratch.md, and exit."""
+    checkpoint: Optional[Path] = None
+    """with --diagnose: this checkpoint's policy instead (a probe's), printed only."""
 
 
 def main(args: Args) -> None:
     for run in scratch_runs(args.num_envs, args.seed):
         print(describe(run))
         print("as one ppo.py command: python baselines/ppo/ppo.py " + shlex.join(command_line(run.args)))
-        if args.diagnose:
+        if args.diagnose and args.checkpoint is not None:
+            print(near_goal_rollouts(args.checkpoint))
+        elif args.diagnose:
             ckpt = Path(run.args.log_dir) / run.args.exp_name / "checkpoint.pt"
             progress = load_checkpoint(ckpt)["progress"]["global_step"]
             body = (f"Command: `{COMMAND} --diagnose` (the campaign's checkpoint at {progress:,} env steps; near-goal starts "

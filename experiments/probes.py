@@ -25,7 +25,8 @@ COMMON = ("python baselines/ppo/ppo.py --env-id Flooring-v1 --curiosity none --c
 
 
 def _recipe(**overrides) -> str:
-    """The ppo.py command of the from-scratch recipe (experiments/from_scratch.py, 2 envs) with `overrides`, as a probe."""
+    """The ppo.py command of the from-scratch recipe (experiments/from_scratch.py, 2 envs) with `overrides`, as a probe
+    (each probe names the recipe's settings it ran without, so that its command stays its own as the recipe moves on)."""
     from baselines.ppo.args import command_line
     from experiments.from_scratch import scratch_args
 
@@ -61,14 +62,19 @@ PROBES = {
                                 "git checkout 9115d4e && python -m experiments.from_scratch (stopped at 514,000 steps)"),
     "probeI_general_install_offset": ("the campaign's recipe (H, placing paying 10) + the joint move to the "
                                       "installation configuration in the observation (`--obs-install-offset`)",
-                                      _recipe(obs_install_offset=True, exp_name="probeI_general_install_offset")
+                                      _recipe(obs_install_offset=True, near_goal_share=0.5, near_goal_max_steps=None, bounded_mean=False,
+                                              exp_name="probeI_general_install_offset")
                                       + " (stopped at 190,000 steps)"),
     "probeJ_offset_ng_limit80": ("I + near-goal episodes cut at 80 steps (`--near-goal-max-steps 80`)",
-                                 _recipe(obs_install_offset=True, near_goal_max_steps=80, exp_name="probeJ_offset_ng_limit80")
+                                 _recipe(obs_install_offset=True, near_goal_share=0.5, near_goal_max_steps=80, bounded_mean=False,
+                                         exp_name="probeJ_offset_ng_limit80")
                                  + " (stopped at 48,000 steps, to start K)"),
     "probeK_offset_limit80_tanh": ("J + the policy's mean bounded by tanh (`--bounded-mean`)",
-                                   _recipe(obs_install_offset=True, near_goal_max_steps=80, bounded_mean=True,
+                                   _recipe(obs_install_offset=True, near_goal_share=0.5, near_goal_max_steps=80, bounded_mean=True,
                                            exp_name="probeK_offset_limit80_tanh") + " (stopped at 174,000 steps)"),
+    "probeL_share08": ("K + 80% of the episodes from near-goal starts (`--near-goal-share 0.8`): the recipe of the "
+                       "campaign's fourth start, which went on from this probe's checkpoint",
+                       _recipe(exp_name="probeL_share08") + " (then the campaign: python -m experiments.from_scratch)"),
 }
 """name: (what it changed, its arguments beyond COMMON or its whole command), in the order they ran."""
 
@@ -84,7 +90,8 @@ def _pct(x: float) -> str:
 
 def table() -> str:
     lines = ["| probe | what it changed | env steps | pick | placed, ordinary resets | placed, near-goal starts | "
-             "start radius | element ends (m from goal) |", "|---|---|---|---|---|---|---|---|"]
+             "start radius | element ends (m from goal) | episodes an update: near-goal / all |",
+             "|---|---|---|---|---|---|---|---|---|"]
     for name, (what, _) in PROBES.items():
         path = PROBE_DIR / f"{name}.csv"
         if not path.is_file():
@@ -96,11 +103,12 @@ def table() -> str:
         if math.isnan(ordinary):  # a probe without near-goal starts: every episode is an ordinary one
             ordinary = _mean(last, "place_success")
         radius = last[-1].get("near_goal_radius") or ""
+        per_update = f"{_mean(last, 'near_goal_episodes'):.1f} / {_mean(last, 'episodes'):.1f}" if radius else "-"
         lines.append(f"| {name.split('_')[0]} | {what} | {int(rows[-1]['global_step']):,} | {_pct(_mean(last, 'pick_success'))} | "
                      f"{_pct(ordinary)} | {_pct(_mean(last, 'near_goal_place_success'))} | "
-                     f"{float(radius):.1f} | {_mean(last, 'end_place_dist'):.2f} |" if radius else
+                     f"{float(radius):.1f} | {_mean(last, 'end_place_dist'):.2f} | {per_update} |" if radius else
                      f"| {name.split('_')[0]} | {what} | {int(rows[-1]['global_step']):,} | {_pct(_mean(last, 'pick_success'))} | "
-                     f"{_pct(ordinary)} | - | - | {_mean(last, 'end_place_dist'):.2f} |")
+                     f"{_pct(ordinary)} | - | - | {_mean(last, 'end_place_dist'):.2f} | - |")
     commands = "\n".join(f"- {name.split('_')[0]}: `{args if args.startswith(('git ', 'python ')) else f'{COMMON} {args} --exp-name {name}'}`"
                          for name, (_, args) in PROBES.items())
     return ("Command: `python -m experiments.probes` (from docs/data/from_scratch/probes/*.csv).\n\n"

@@ -47,6 +47,8 @@ def test_a_tiny_run_ships_before_its_end_with_a_record_that_says_where_it_stands
     rows = [line for line in table.splitlines()[2:]]
     assert [r.split(" | ")[0] for r in rows] == ["| CeilingInstallation-v1", "| WindowInstallation-v1", "| Flooring-v1"]
     assert all(" | yes | " in r for r in rows), "radius 0 starts installed: placed at the first step"
+    # a fresh policy's mean lies near 0: never past the action bounds
+    assert all(r.rstrip(" |").split(" | ")[-1].startswith("0.00; ") for r in rows), rows
 
 
 def test_the_report_draws_the_curve_and_writes_the_section(tmp_path, monkeypatch):
