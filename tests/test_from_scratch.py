@@ -30,6 +30,53 @@ def test_the_recipe_learns_from_reward_alone():
     assert tyro.cli(ppo.Args, args=command_line(a)) == a
 
 
+def test_the_recipe_changes_the_policy_and_a_stopped_run_resumes_in_the_uninterrupted_run_s_state(tmp_path, monkeypatch):
+    """The recipe as it runs (the general task, near-goal starts cut at their limit, the install-offset observation,
+    the bounded mean), tiny: run U goes 4 iterations, run I stops (Ctrl-C) after its iteration-2 checkpoint.
+    Restoring I gives U's weights, optimizer, progress (near-goal radii and windows included) and random states
+    at iteration 2; the resumed run ends where U ends."""
+    import random
+    import shutil
+
+    import numpy as np
+
+    original = ppo.save_checkpoint
+
+    def keep_copies(path, args, progress, *rest, **extra):
+        original(path, args, progress, *rest, **extra)
+        shutil.copy(path, path.with_name(f"iter{progress.iteration}.pt"))
+        if args.exp_name == "interrupted" and progress.iteration == 2 and not (tmp_path / "stopped").exists():
+            (tmp_path / "stopped").touch()
+            raise KeyboardInterrupt
+
+    monkeypatch.setattr(ppo, "save_checkpoint", keep_copies)
+    small = dict(num_envs=2, num_steps=40, num_minibatches=2, update_epochs=1, num_eval_envs=1, eval_freq=100,
+                 checkpoint_freq=1, log_dir=str(tmp_path), total_timesteps=320, near_goal_max_steps=10,
+                 near_goal_window=2, near_goal_promote=0.5)
+    u = ppo.main(fs.scratch_args(exp_name="uninterrupted", **small))
+    i = ppo.main(fs.scratch_args(exp_name="interrupted", **small))
+    assert i.iteration == 2 and u.iteration == 4
+    ref = torch.load(tmp_path / "uninterrupted" / "iter2.pt", weights_only=False)
+    first = torch.load(tmp_path / "uninterrupted" / "iter1.pt", weights_only=False)
+    assert any(not torch.equal(v, first["agent"][k]) for k, v in ref["agent"].items()), "the policy changed"
+    with open(tmp_path / "uninterrupted" / "progress.csv", newline="") as f:
+        assert any(int(r["near_goal_episodes"]) for r in csv.DictReader(f)), "near-goal episodes ended (cut at 10 steps)"
+
+    restored = ppo.setup(ppo.Args(resume=str(tmp_path / "interrupted" / "checkpoint.pt")))
+    assert restored.args.obs_install_offset and restored.args.bounded_mean and restored.args.near_goal_max_steps == 10
+    assert dataclasses.asdict(restored.progress) == ref["progress"]
+    for k, v in restored.agent.state_dict().items():
+        assert torch.equal(v, ref["agent"][k]), k
+    for pid, st in restored.optimizer.state_dict()["state"].items():
+        for key in ("exp_avg", "exp_avg_sq", "step"):
+            assert torch.equal(st[key], ref["optimizer"]["state"][pid][key]), (pid, key)
+    assert torch.equal(torch.get_rng_state(), ref["rng"]["torch"])
+    assert np.random.get_state()[1].tolist() == ref["rng"]["numpy"][1].tolist() and random.getstate() == ref["rng"]["python"]
+    restored.eval_envs.close()
+    resumed = ppo.main(ppo.Args(resume=str(tmp_path / "interrupted" / "checkpoint.pt")))
+    assert resumed.global_step == u.global_step == 320 and resumed.iteration == u.iteration
+
+
 def test_a_tiny_run_ships_before_its_end_with_a_record_that_says_where_it_stands(tmp_path):
     small = dict(num_envs=2, num_steps=20, num_minibatches=2, update_epochs=1, num_eval_envs=1, eval_freq=100,
                  checkpoint_freq=1, env_id="Flooring-v1", log_dir=str(tmp_path), exp_name="tiny", total_timesteps=80)
