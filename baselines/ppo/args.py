@@ -1,5 +1,7 @@
-"""ppo.py's arguments: one `Args` dataclass (tyro reads it as ppo.py's command line, one flag per field), and
-the checks and machine-dependent defaults applied to it before a run starts."""
+"""ppo.py's arguments: one `Args` dataclass (tyro reads it as ppo.py's command line, one flag per field), built of
+groups of fields (the run, PPO, curiosity, the curriculum, warm starts, start states; flat, so that every command
+and every saved checkpoint's args read as before), and the checks and machine-dependent defaults applied to it
+before a run starts."""
 
 from __future__ import annotations
 
@@ -21,7 +23,9 @@ RewardMode = Literal["sparse", "dense", "normalized_dense"]
 
 
 @dataclass
-class Args:
+class RunArgs:
+    """The run: its name, seed and files, the task and its envs, the budget, evaluation and checkpoints."""
+
     exp_name: Optional[str] = None
     """name of this run (default: env id, curiosity, curriculum and seed)."""
     seed: int = 1
@@ -40,9 +44,11 @@ class Args:
     """initial weights (policy, value, ICM) from this checkpoint; a fresh run otherwise."""
     resume: Optional[str] = None
     """continue the interrupted run of this checkpoint: same run folder, stage, step count, optimizer, RNG."""
+    extend: bool = False
+    """with --resume: continue to this command's --total-timesteps and --curriculum (which must start
+    with the run's own stages) instead of the run's own, e.g. to take a finished run further."""
     log_dir: str = "runs"
     """where run folders go."""
-
     env_id: str = "ConstructionPickPlace-v1"
     """the environment: the general task or one of the three single tasks (ms_construction.envs.ENV_IDS)."""
     control_mode: ControlMode = "pd_joint_delta_pos"
@@ -53,8 +59,6 @@ class Args:
     """physx_cuda when a GPU is there (auto), else physx_cpu."""
     total_timesteps: int = 8_000_000
     """total env steps of training (the paper: 2M per curriculum stage)."""
-    learning_rate: float = 3e-4
-    """Adam learning rate of policy and value."""
     num_envs: Optional[int] = None
     """parallel training envs (default: one per CPU core on physx_cpu, 512 on physx_cuda)."""
     num_eval_envs: Optional[int] = None
@@ -67,6 +71,28 @@ class Args:
     """steps per env per rollout (default: 250 on physx_cpu, 50 on physx_cuda)."""
     num_eval_steps: int = 250
     """steps per evaluation (one episode per env)."""
+    eval_freq: int = 10
+    """evaluate every this many iterations (and at stage ends)."""
+    checkpoint_freq: int = 10
+    """write a checkpoint every this many iterations (and at stage changes, the end, and Ctrl-C)."""
+    obs_elapsed_time: bool = False
+    """append the episode's elapsed steps / 250 to the observation (the tasks' `obs_elapsed_time`), in training
+    and evaluation: a policy that knows how much of the step limit is left can hurry. A residual's base (trained
+    without it) does not see it."""
+    obs_install_offset: bool = False
+    """append the joint move to the nearest installation configuration (the tasks' `obs_install_offset`: IK of
+    the goal pose, what the dense reward's carry term measures) to the observation, in training and evaluation."""
+    task_weights: Optional[tuple[float, float, float]] = None
+    """the general task's sampling weights of ceiling, window and flooring in the training envs (None: uniform;
+    `1 2 1`: window installation half the episodes); evaluation always samples uniformly."""
+
+
+@dataclass
+class PPOArgs:
+    """PPO: the update, the advantages and the networks."""
+
+    learning_rate: float = 3e-4
+    """Adam learning rate of policy and value."""
     anneal_lr: bool = False
     """anneal the learning rate linearly to 0."""
     gamma: float = 0.99
@@ -94,8 +120,6 @@ class Args:
     """stop an update early when the approximate KL exceeds this."""
     reward_scale: float = 1.0
     """scale of the extrinsic reward."""
-    eval_freq: int = 10
-    """evaluate every this many iterations (and at stage ends)."""
     bootstrap_at_done: Optional[Literal["always", "truncated", "terminated", "never"]] = None
     """which episode ends bootstrap with the value of their last observation. `truncated`: episodes cut
     by the time limit (they did not end there); success is an end with nothing after it. `always`
@@ -117,79 +141,18 @@ class Args:
     norm_obs: bool = True
     """normalize observations by their running mean and variance (kept in the checkpoint), as CleanRL's
     continuous-control PPO does (with gymnasium's NormalizeObservation)."""
+    rotation_features: bool = True
+    """feed the networks each quaternion of the state (plate, goal, element) as the first two columns
+    of its rotation matrix: a quaternion's sign can flip mid-episode, the matrix cannot."""
     bounded_mean: bool = False
     """squash the policy's mean into the action bounds by tanh: an unbounded mean can drift past them, where
     every draw clips to the same action, the advantages cannot tell draws apart and the mean stays there (the
     from-scratch runs' joints driven to their limits)."""
-    rotation_features: bool = True
-    """feed the networks each quaternion of the state (plate, goal, element) as the first two columns
-    of its rotation matrix: a quaternion's sign can flip mid-episode, the matrix cannot."""
-    freeze_obs_norm: bool = False
-    """keep the normalization statistics as they are (those of a --checkpoint's behaviour cloning)."""
-    demos: tuple[str, ...] = ()
-    """demonstration files (scripts/collect_demos.py) for a behaviour-cloning term in the policy loss
-    (as DAPG, Rajeswaran et al. 2018): keeps a warm-started policy near the expert while PPO refines it."""
-    bc_coef: float = 0.0
-    """weight of that term: mean squared error of the policy's mean on a demonstration minibatch."""
-    critic_warmup_iterations: int = 0
-    """the first iterations of a run (counted from 1) update the value function only: with a
-    warm-started policy (--checkpoint), the critic first learns that policy's returns, so the policy's
-    first steps follow advantages that mean something."""
-    checkpoint_freq: int = 10
-    """write a checkpoint every this many iterations (and at stage changes, the end, and Ctrl-C)."""
-    extend: bool = False
-    """with --resume: continue to this command's --total-timesteps and --curriculum (which must start
-    with the run's own stages) instead of the run's own, e.g. to take a finished run further."""
-    stage_schedules: bool = False
-    """ML-Agents' linear schedules, restarted at every curriculum stage (as when each stage is a run that
-    inherits the last): over a stage's --stage-timesteps the learning rate falls to 1e-10, the clip
-    coefficient to 0.1 and the entropy coefficient to 1e-5."""
 
-    residual_of: Optional[str] = None
-    """a checkpoint (a behaviour clone, or a refined agent: a residual on a residual) that stays frozen as the base
-    policy; PPO learns a correction added to its actions (baselines/ppo/residual.py, ResiP). Its observation
-    statistics stay too."""
-    residual_scale: float = 0.1
-    """the correction's scale in action units."""
-    residual_l2_coef: float = 0.0
-    """weight of the correction's mean square (before scaling) in the policy loss: an anchor at the clone,
-    so that the residual moves only where the advantages keep asking it to."""
-    start_states: Optional[str] = None
-    """a bank of env states (baselines/ppo/start_states.py, where a policy failed) that a share of the
-    training episodes start from; evaluation always resets as usual. physx_cpu only."""
-    start_states_share: float = 0.5
-    """the share of training episodes that start from the bank."""
-    start_states_keep_clock: bool = False
-    """an episode started from the bank goes on from the elapsed steps its state was taken at (a failure that ran
-    out of time stays one) instead of getting the whole step limit again; the bank must hold them (a bank of
-    start_states.py collected since it keeps them)."""
-    obs_elapsed_time: bool = False
-    """append the episode's elapsed steps / 250 to the observation (the tasks' `obs_elapsed_time`), in training
-    and evaluation: a policy that knows how much of the step limit is left can hurry. A residual's base (trained
-    without it) does not see it."""
-    obs_install_offset: bool = False
-    """append the joint move to the nearest installation configuration (the tasks' `obs_install_offset`: IK of
-    the goal pose, what the dense reward's carry term measures) to the observation, in training and evaluation."""
-    task_weights: Optional[tuple[float, float, float]] = None
-    """the general task's sampling weights of ceiling, window and flooring in the training envs (None: uniform;
-    `1 2 1`: window installation half the episodes); evaluation always samples uniformly."""
 
-    near_goal_share: float = 0.0
-    """the start-state curriculum (reverse curriculum generation, Florensa et al. 2017; no demonstrations): this
-    share of the training episodes start with the element held on a collision-free path out of its goal (the
-    tasks' `set_near_goal_starts`), at most `near_goal_radius` of the path's length out; evaluation always
-    resets as usual."""
-    near_goal_radius: float = 0.1
-    """the curriculum's first radius (fraction of a start path, 0: installed), one per task type..."""
-    near_goal_step: float = 0.1
-    """...each widened by this (up to 1) once the last `near_goal_window` near-goal episodes of its task type placed
-    at least `near_goal_promote` of the time (the window then starts again)."""
-    near_goal_promote: float = 0.6
-    """success from near-goal starts that widens a task type's radius."""
-    near_goal_window: int = 20
-    """near-goal episodes of a task type whose success decides a widening."""
-    near_goal_max_steps: Optional[int] = None
-    """a near-goal episode that has not placed within this many steps is truncated (None: the task's step limit)."""
+@dataclass
+class CuriosityArgs:
+    """The curiosity bonus (ICM, baselines/ppo/curiosity.py)."""
 
     curiosity: Literal["none", "icm", "icm_normalized"] = "icm"
     """intrinsic reward (baselines/ppo/curiosity.py): `icm` as ML-Agents computes it (the forward model's
@@ -210,6 +173,11 @@ class Args:
     icm_learning_rate: float = 3e-4
     """Adam learning rate of ICM."""
 
+
+@dataclass
+class CurriculumArgs:
+    """The tolerance curriculum (Table I): its stages and when a stage ends."""
+
     curriculum: tuple[str, ...] = STAGE_NAMES
     """tolerance stages in order (Table I); one stage, e.g. `cp4`, trains without a curriculum."""
     stage_timesteps: int = 2_000_000
@@ -220,6 +188,74 @@ class Args:
     """...when the smoothed evaluation place success reaches this (above 1 disables it)."""
     success_smoothing: float = 0.5
     """weight of the newest evaluation in the smoothed success (exponential moving average)."""
+    stage_schedules: bool = False
+    """ML-Agents' linear schedules, restarted at every curriculum stage (as when each stage is a run that
+    inherits the last): over a stage's --stage-timesteps the learning rate falls to 1e-10, the clip
+    coefficient to 0.1 and the entropy coefficient to 1e-5."""
+
+
+@dataclass
+class WarmStartArgs:
+    """A warm start (a behaviour clone's weights, a behaviour-cloning term) or a residual on a frozen base."""
+
+    freeze_obs_norm: bool = False
+    """keep the normalization statistics as they are (those of a --checkpoint's behaviour cloning)."""
+    demos: tuple[str, ...] = ()
+    """demonstration files (scripts/collect_demos.py) for a behaviour-cloning term in the policy loss
+    (as DAPG, Rajeswaran et al. 2018): keeps a warm-started policy near the expert while PPO refines it."""
+    bc_coef: float = 0.0
+    """weight of that term: mean squared error of the policy's mean on a demonstration minibatch."""
+    critic_warmup_iterations: int = 0
+    """the first iterations of a run (counted from 1) update the value function only: with a
+    warm-started policy (--checkpoint), the critic first learns that policy's returns, so the policy's
+    first steps follow advantages that mean something."""
+    residual_of: Optional[str] = None
+    """a checkpoint (a behaviour clone, or a refined agent: a residual on a residual) that stays frozen as the base
+    policy; PPO learns a correction added to its actions (baselines/ppo/residual.py, ResiP). Its observation
+    statistics stay too."""
+    residual_scale: float = 0.1
+    """the correction's scale in action units."""
+    residual_l2_coef: float = 0.0
+    """weight of the correction's mean square (before scaling) in the policy loss: an anchor at the clone,
+    so that the residual moves only where the advantages keep asking it to."""
+
+
+@dataclass
+class StartStateArgs:
+    """Where training episodes start: a bank of states where a policy failed, or near the goal (reverse curriculum)."""
+
+    start_states: Optional[str] = None
+    """a bank of env states (baselines/ppo/start_states.py, where a policy failed) that a share of the
+    training episodes start from; evaluation always resets as usual. physx_cpu only."""
+    start_states_share: float = 0.5
+    """the share of training episodes that start from the bank."""
+    start_states_keep_clock: bool = False
+    """an episode started from the bank goes on from the elapsed steps its state was taken at (a failure that ran
+    out of time stays one) instead of getting the whole step limit again; the bank must hold them (a bank of
+    start_states.py collected since it keeps them)."""
+    near_goal_share: float = 0.0
+    """the start-state curriculum (reverse curriculum generation, Florensa et al. 2017; no demonstrations): this
+    share of the training episodes start with the element held on a collision-free path out of its goal (the
+    tasks' `set_near_goal_starts`), at most `near_goal_radius` of the path's length out; evaluation always
+    resets as usual."""
+    near_goal_radius: float = 0.1
+    """the curriculum's first radius (fraction of a start path, 0: installed), one per task type..."""
+    near_goal_step: float = 0.1
+    """...each widened by this (up to 1) once the last `near_goal_window` near-goal episodes of its task type placed
+    at least `near_goal_promote` of the time (the window then starts again)."""
+    near_goal_promote: float = 0.6
+    """success from near-goal starts that widens a task type's radius."""
+    near_goal_window: int = 20
+    """near-goal episodes of a task type whose success decides a widening."""
+    near_goal_max_steps: Optional[int] = None
+    """a near-goal episode that has not placed within this many steps is truncated (None: the task's step limit)."""
+
+
+@dataclass
+class Args(StartStateArgs, WarmStartArgs, CurriculumArgs, CuriosityArgs, PPOArgs, RunArgs):
+    """ppo.py's command line, one flag per field (`--gamma`, `--icm-strength`, ...): the run's fields first, then
+    PPO's, curiosity's, the curriculum's, the warm start's and the start states'."""
+
 
 
 def validate(args: Args) -> None:
