@@ -4,6 +4,8 @@ site's poses alone (ms_construction/goal_configurations.py).
 - The carry distance is 0 with the element installed, whatever its turn on the plate, and falls at every step of
   a straight joint move from a lift above the staging table, on either turret side, to every installation
   configuration of every goal slot (the turret turning the way its limits allow: through 0, never across +-pi).
+- With `carry_along_paths` it is measured along the start paths: their length left, falling along every one,
+  and a shortcut straight from the lift to the goal pays less than the path.
 - A near-goal start is a valid state: the element held against the plate, nothing penetrating, still after a
   step; radius 0 starts it installed (placed at the first step), and evaluation-style resets are untouched.
 """
@@ -117,6 +119,47 @@ def test_the_env_s_batched_path_points_are_the_reference_s():
     got = ConstructionTaskEnv._path_points(torch.tensor(wp), frac)
     for i in range(len(wp)):
         np.testing.assert_allclose(got[i].numpy(), path_point(wp[i].astype(np.float64), float(frac[i])), atol=1e-5)
+
+
+@pytest.mark.parametrize("kind", ELEMENT_KINDS)
+def test_the_path_distance_falls_along_every_start_path_and_a_shortcut_off_it_pays_less(kind):
+    """`carry_along_paths`: along each usable start path of every goal slot (from the table end to the goal, the
+    element turned on the plate or not) the carry distance is at most the path's length left (the least over the
+    slot's paths: it falls along the one it measures) and 0 at the goal; a straight joint move from the lift above
+    the table toward the goal (the carry that runs into the barriers) pays less than the same step along the path."""
+    from ms_construction.goal_configurations import path_point, start_paths
+
+    env = make_env(TASK_ENVS[kind], control_mode="pd_joint_delta_pos", reward_mode="dense", carry_along_paths=True)
+    env.reset(seed=0)
+    u, k, paths = env.unwrapped, ELEMENT_KINDS.index(kind), start_paths()
+    u.set_held(True)
+
+    def distance_at(q: np.ndarray) -> float:
+        u.agent.robot.set_qpos(torch.tensor(q[None], dtype=torch.float32))
+        return float(u.carry_distance()[0])
+
+    checked = 0
+    for slot, c, side in zip(*np.nonzero(paths.usable[k])):
+        u.goal_slot[:] = int(slot)
+        wp = paths.waypoints[k, slot, c, side].astype(np.float64)
+        length = np.abs(np.diff(wp, axis=0)).sum()
+        for turn in (0.0, 9.0):
+            u.gripper.hold_pose_in_tcp[:] = _hold(u, turn)
+            shift = np.array([0, 0, 0, 0, 0, np.deg2rad(turn)])
+            fractions = np.linspace(1.0, 0.0, 25)
+            dists = np.array([distance_at(path_point(wp, f) + shift) for f in fractions])
+            assert dists[-1] < 1e-3, (slot, c, side, turn, dists[-1])
+            assert np.all(dists <= fractions * length + 1e-3), (slot, c, side, turn, np.round(dists, 3))
+        # from the lift, the same joint-space (L1) step straight at the goal or along the path toward it
+        lift, goal = wp[3], wp[0]
+        at_lift = np.abs(np.diff(wp[:4], axis=0)).sum() / length
+        step = 0.05 * length
+        along = path_point(wp, at_lift - step / length)
+        straight = lift + (goal - lift) * step / np.abs(goal - lift).sum()
+        assert distance_at(straight) > distance_at(along), (slot, c, side)
+        checked += 1
+    assert checked > 0
+    env.close()
 
 
 def test_progress_pays_each_step_s_fall_of_the_carry_distance_and_nothing_for_going_back_and_forth():

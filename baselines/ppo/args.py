@@ -82,6 +82,9 @@ class RunArgs:
     obs_install_offset: bool = False
     """append the joint move to the nearest installation configuration (the tasks' `obs_install_offset`: IK of
     the goal pose, what the dense reward's carry term measures) to the observation, in training and evaluation."""
+    carry_along_paths: bool = False
+    """the dense rewards' carry measured along the near-goal starts' collision-checked joint paths (the tasks'
+    `carry_along_paths`, `path_distance`) instead of straight to the installation configuration, in training."""
     task_weights: Optional[tuple[float, float, float]] = None
     """the general task's sampling weights of ceiling, window and flooring in the training envs (None: uniform;
     `1 2 1`: window installation half the episodes); evaluation always samples uniformly."""

@@ -18,13 +18,13 @@ process, and ppo.py's evaluation during training (`evaluate_envs`), on its vecto
 
 from __future__ import annotations
 
+import itertools
 import json
 import math
 import multiprocessing as mp
 import os
 import shlex
 import sys
-import time
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Optional
@@ -38,6 +38,7 @@ from ms_construction.curriculum import FINAL_STAGE, STAGE_NAMES, stage_tolerance
 from ms_construction.envs import ENV_IDS, TASK_ENV_IDS
 from ms_construction.envs.construction_env import ConstructionTaskEnv
 from ms_construction.reporting import update_section
+from ms_construction.rollout import rollout
 
 DEFAULT_CHECKPOINT = Path("assets/checkpoints/general_agent.pt")
 RESULTS_PATH = Path("docs/RESULTS.md")
@@ -124,24 +125,20 @@ def finished_episodes(infos: dict) -> dict:
                 task_id=fin["task_id"], near_goal_start=fin.get("near_goal_start", torch.zeros_like(fin["task_id"], dtype=torch.bool)))
 
 
-@torch.no_grad()
 def run_episodes(agent, envs, num_steps: int, seed: int, deterministic: bool = True) -> list[dict]:
     """The one evaluation loop, for ppo.py's evaluation during training and scripts/evaluate.py's seeded
-    episodes: every env of `envs` (a vector env of either backend, or ManiSkillVectorEnv without auto
-    reset) from a reset with seed `seed + i`, the policy's mean (or samples from its Gaussian) until
-    each env's first episode has ended or `num_steps` have passed. A record per ended episode, in env
-    order; `policy_time_s` is each episode's share of the policy's forward passes."""
-    obs = reset(envs, seed)
+    episodes: `rollout` of every env of `envs` (a vector env of either backend, or ManiSkillVectorEnv without auto
+    reset) from a reset with seed `seed + i`, the policy's mean (or samples from its Gaussian) until each env's
+    first episode has ended or `num_steps` have passed. A record per ended episode, in env order;
+    `policy_time_s` is each episode's share of the policy's forward passes."""
     n = envs.num_envs
     records: list[Optional[dict]] = [None] * n
-    policy_time = torch.zeros(n, dtype=torch.float64)
-    for _ in range(num_steps):
-        t = time.perf_counter()
-        action = agent.get_action(obs.float(), deterministic=deterministic).clamp(-1, 1)
-        policy_time += (time.perf_counter() - t) / n
-        obs, _, terminated, truncated, infos = envs.step(action)
+    policy_time = 0.0
+    for step in itertools.islice(rollout(agent, envs, seed, deterministic), num_steps):
+        policy_time += step.policy_time_s / n
+        infos = step.info
         if "final_info" not in infos:  # an env that does not reset on its own reports its end in the step's info
-            done = (terminated | truncated).cpu()
+            done = (step.terminated | step.truncated).cpu()
             if not done.any():
                 continue
             infos = dict(final_info=infos, _final_info=done)
@@ -150,7 +147,7 @@ def run_episodes(agent, envs, num_steps: int, seed: int, deterministic: bool = T
             if records[i] is None:
                 records[i] = dict(seed=seed + i, task_id=int(ep["task_id"][i]), picked=bool(ep["picked"][i]),
                                   placed=bool(ep["success"][i]), ret=float(ep["ep_return"][i]), length=int(ep["ep_length"][i]),
-                                  policy_time_s=float(policy_time[i]), final_place_dist=float(ep["end_place_dist"][i]),
+                                  policy_time_s=policy_time, final_place_dist=float(ep["end_place_dist"][i]),
                                   final_place_angle_deg=float(ep["end_place_angle_deg"][i]), held_at_end=bool(ep["held_at_end"][i]))
         if all(r is not None for r in records):
             break

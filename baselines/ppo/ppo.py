@@ -55,7 +55,7 @@ from baselines.ppo.curiosity import ICM, make_icm
 from baselines.ppo.evaluation import evaluate_envs, finished_episodes, reset
 from baselines.ppo.networks import Agent
 from baselines.ppo.update import adam, ppo_update, signal_advantages
-from baselines.ppo.start_states import StartFromStates
+from baselines.ppo.start_states import StartFromStates, widen_near_goal
 from ms_construction.envs.construction_env import NearGoalTimeLimit
 from ms_construction.parameters import ELEMENT_KINDS
 from ms_construction.vector_env import CPUVectorEnv
@@ -73,6 +73,8 @@ def make_envs(args: Args, num_envs: int, device: torch.device, eval_mode: bool =
     physx_cpu (one env each), ManiSkillVectorEnv on physx_cuda. With `video_dir`, evaluation videos."""
     kwargs = dict(obs_mode="state", reward_mode=args.reward_mode, render_mode="rgb_array" if video_dir else None)
     kwargs.update(policy_env_kwargs(vars(args)))
+    if args.carry_along_paths and not eval_mode:
+        kwargs["carry_along_paths"] = True
     if args.task_weights is not None and not eval_mode:
         kwargs["task_weights"] = dict(zip(ELEMENT_KINDS, args.task_weights))
     # near-goal starts are set (and left off in evaluation) by set_near_goal_starts; this applies their time limit
@@ -104,24 +106,6 @@ def call_task(envs: Envs, name: str, *args) -> None:
 def set_curriculum_stage(envs: Envs, stage: str) -> None:
     """Every env of `envs` to the tolerances of `stage` (Table I)."""
     call_task(envs, "set_curriculum_stage", stage)
-
-
-def widen_near_goal(args: Args, progress: Progress, task_ids: list[int], placed: list[float]) -> bool:
-    """Record the near-goal episodes that ended (their task types and whether they placed) and widen each task
-    type's radius whose last --near-goal-window episodes placed often enough (--near-goal-promote); whether any
-    radius widened. The windows are part of the progress: a resumed run goes on with them."""
-    widened = set()  # the rest of this iteration's episodes of a widened type started at the old radius
-    for k, ok in zip(task_ids, placed):
-        if k in widened:
-            continue
-        window = progress.near_goal_recent[k]
-        window.append(float(ok))
-        del window[:-args.near_goal_window]
-        if len(window) == args.near_goal_window and np.mean(window) >= args.near_goal_promote and progress.near_goal_radius[k] < 1:
-            progress.near_goal_radius[k] = round(min(1.0, progress.near_goal_radius[k] + args.near_goal_step), 6)
-            window.clear()
-            widened.add(k)
-    return bool(widened)
 
 
 # ------------------------------------------------------------------------------------------------- #

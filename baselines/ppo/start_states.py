@@ -11,6 +11,9 @@ elapsed steps), so by default the episode then has its whole time limit again; w
 on from the step the state was taken at, so that a failure that was a late arrival stays one (most failed
 windows are: docs/experiments/general_agent.md). Evaluation never uses it.
 
+The other start states need no policy: near-goal starts (the tasks' `set_near_goal_starts`, the element held on
+a path out of its goal, up to a radius per task type); `widen_near_goal` is ppo.py's rule for widening those radii.
+
     python -m baselines.ppo.start_states --checkpoint assets/checkpoints/general_agent_clone_direct.pt --episodes 1500 \\
         --out runs/failure_states.pt
 """
@@ -27,6 +30,8 @@ import torch
 import tyro
 from tqdm import tqdm
 
+from baselines.ppo.args import Args as PPOArgs
+from baselines.ppo.checkpoints import Progress
 from ms_construction.rollout import policy_episode
 
 FIRST_SEED = 430_000
@@ -127,6 +132,24 @@ class StartFromStates(gym.Wrapper):
         if self.keep_clock:  # the tensor ManiSkill's step limit and the tasks' obs_elapsed_time read
             u.elapsed_steps.fill_(int(self.elapsed[i]))
         return u.get_obs(), u.get_info()
+
+
+def widen_near_goal(args: PPOArgs, progress: Progress, task_ids: list[int], placed: list[float]) -> bool:
+    """Record the near-goal episodes that ended (their task types and whether they placed) and widen each task
+    type's radius whose last --near-goal-window episodes placed often enough (--near-goal-promote); whether any
+    radius widened. The windows are part of the progress: a resumed run goes on with them."""
+    widened = set()  # the rest of this iteration's episodes of a widened type started at the old radius
+    for k, ok in zip(task_ids, placed):
+        if k in widened:
+            continue
+        window = progress.near_goal_recent[k]
+        window.append(float(ok))
+        del window[:-args.near_goal_window]
+        if len(window) == args.near_goal_window and np.mean(window) >= args.near_goal_promote and progress.near_goal_radius[k] < 1:
+            progress.near_goal_radius[k] = round(min(1.0, progress.near_goal_radius[k] + args.near_goal_step), 6)
+            window.clear()
+            widened.add(k)
+    return bool(widened)
 
 
 @dataclass

@@ -102,6 +102,7 @@ class ConstructionTaskEnv(BaseEnv):
         task_weights: Optional[Mapping[str, float]] = None,
         obs_elapsed_time: bool = False,
         obs_install_offset: bool = False,
+        carry_along_paths: bool = False,
         **kwargs,
     ):
         self._tol_init = resolve_tolerances(curriculum_stage, tolerances)
@@ -117,6 +118,7 @@ class ConstructionTaskEnv(BaseEnv):
         self._task_weights = self._check_task_weights(task_weights)
         self.obs_elapsed_time = bool(obs_elapsed_time)
         self.obs_install_offset = bool(obs_install_offset)
+        self.carry_along_paths = bool(carry_along_paths)
         self.robot_init_qpos_noise = robot_init_qpos_noise
         self._step_grasp_frame, self._in_step_readout = None, False
         self.near_goal_share, self.near_goal_radius, self.near_goal_max_steps = 0.0, None, None
@@ -284,18 +286,24 @@ class ConstructionTaskEnv(BaseEnv):
         for name, value in [("share", share)] + [("radius", r) for r in radii]:
             if not 0 <= value <= 1:
                 raise ValueError(f"near-goal starts: {name} must lie in [0, 1], got {value}")
-        if share > 0 and self._start_paths is None:
+        if share > 0:
+            self._load_start_paths()
+        if max_steps is not None and not 0 < max_steps:
+            raise ValueError(f"near-goal starts: max_steps must be a positive step count or None, got {max_steps}")
+        self.near_goal_share = float(share)
+        self.near_goal_max_steps = None if max_steps is None else int(max_steps)
+        self.near_goal_radius = torch.tensor(radii, dtype=torch.float32, device=self.device)
+
+    def _load_start_paths(self) -> dict:
+        """The start paths (`goal_configurations.start_paths`, a few seconds once per process) as tensors."""
+        if self._start_paths is None:
             from ms_construction.goal_configurations import start_paths
 
             paths = start_paths()
             f32 = dict(dtype=torch.float32, device=self.device)
             self._start_paths = dict(waypoints=torch.tensor(paths.waypoints, **f32), free=torch.tensor(paths.free, **f32),
                                      usable=torch.tensor(paths.usable, device=self.device).flatten(2).float())
-        if max_steps is not None and not 0 < max_steps:
-            raise ValueError(f"near-goal starts: max_steps must be a positive step count or None, got {max_steps}")
-        self.near_goal_share = float(share)
-        self.near_goal_max_steps = None if max_steps is None else int(max_steps)
-        self.near_goal_radius = torch.tensor(radii, dtype=torch.float32, device=self.device)
+        return self._start_paths
 
     @staticmethod
     def _path_points(waypoints: torch.Tensor, fraction: torch.Tensor) -> torch.Tensor:
@@ -525,6 +533,11 @@ class ConstructionTaskEnv(BaseEnv):
     """rad; the carry term falls linearly from 1 at an installation configuration to 0 this far (summed over the
     joints) from the nearest one: a lift above the staging table leaves the arm 2.6-10.3 rad from its goal."""
 
+    PATH_DEVIATION_WEIGHT = 3.0
+    """`path_distance` counts each radian off the path this many times: cutting across to the goal (or to a later
+    point of the path) costs more than going along the path, whose length from a lift above the table to the goal is
+    up to about twice the straight joint move's."""
+
     def plate_turn(self) -> torch.Tensor:
         """[n] rad; how far the held element is turned on the plate about the plate's axis (the grasp keeps the
         element's yaw relative to the plate); 0 when it lies as in `install_configurations`."""
@@ -537,8 +550,38 @@ class ConstructionTaskEnv(BaseEnv):
         to the nearest installation configuration of the env's goal slot, joint 6 shifted by the element's turn
         on the plate and compared modulo the element's symmetry period. Falls at every step of a straight joint
         move to the goal from anywhere (the turret turning the way its limits allow), and so along any carry
-        that heads there; no demonstrations involved."""
+        that heads there; no demonstrations involved. With `carry_along_paths`, `path_distance` instead."""
+        if self.carry_along_paths:
+            return self.path_distance()
         return self.install_offset().abs().sum(-1)
+
+    def path_distance(self) -> torch.Tensor:
+        """[n] rad; how far the arm is from holding its element installed along the nearest start path of its goal
+        slot (`goal_configurations.StartPaths`, the near-goal starts' collision-checked joint paths: in from the
+        goal along the plate's axis, up to a lift above the staging table and down to it): the least, over the
+        points of the path, of PATH_DEVIATION_WEIGHT times the joint-space (L1) distance to the point plus the
+        path's length from there to the installation, joint 6 compared as in `carry_distance`. A straight joint move to the goal from the staging table pushes the element
+        into the site's barriers and the table (the fourth start's stuck carries); this distance falls only on
+        the way round them, up and over. No demonstrations: the paths come from IK of the goal and the table."""
+        sp = self._load_start_paths()
+        n = len(self.task_id)
+        w = sp["waypoints"][self.task_id, self.goal_slot].flatten(1, 2)  # [n, M, P, 6], M paths of P waypoints
+        a, seg = w[:, :, :-1], w[:, :, 1:] - w[:, :, :-1]  # [n, M, P - 1, 6]
+        rel = self.agent.robot.get_qpos()[:, None, None, :] - a
+        rel[..., 5] -= self.plate_turn()[:, None, None]
+        period = self._sym_period[self.task_id][:, None, None]
+        # each segment's nearest point by joints 1-5 (joint 6, the plate's roll, is compared modulo the element's
+        # symmetry, which a projection cannot take), and its ends
+        t_near = ((rel[..., :5] * seg[..., :5]).sum(-1) / (seg[..., :5] ** 2).sum(-1).clamp(min=1e-9)).clamp(0, 1)
+        length = seg.abs().sum(-1)
+        before = torch.cumsum(length, -1) - length  # the path's length from the installation to each segment
+        total = torch.full(rel.shape[:2], torch.inf, device=rel.device)
+        for t in (t_near, torch.zeros_like(t_near), torch.ones_like(t_near)):
+            diff = rel - t[..., None] * seg
+            off_path = diff[..., :5].abs().sum(-1) + (torch.remainder(diff[..., 5] + period / 2, period) - period / 2).abs()
+            total = torch.minimum(total, (self.PATH_DEVIATION_WEIGHT * off_path + before + t * length).amin(-1))  # [n, M]
+        total = torch.where(sp["usable"][self.task_id, self.goal_slot] > 0, total, torch.full_like(total, torch.inf))
+        return total.amin(-1).reshape(n)
 
     def install_offset(self) -> torch.Tensor:
         """[n, 6] rad; the joint move from the arm's configuration to the nearest one that holds its element

@@ -57,6 +57,9 @@ as a state that keeps paying the most (ppo.py's `--success-value absorbing`, its
 exactly that); a learner that values success as an end with nothing after it finds holding the element near
 its goal worth more than placing it. Results trained before 2026-11-25 on a dense reward (refinement run 8)
 used the earlier one, whose carry was 0.75 (1 - tanh d) + a bearing term and whose orient term was separate.
+`carry_along_paths=True` measures the carry along the start paths below instead (`path_distance`: the path's
+length left, each radian off it counted {ConstructionTaskEnv.PATH_DEVIATION_WEIGHT:g} times), so that it falls on the way up and over the
+site's barriers, not on the straight joint move that runs the element into them. Off by default.
 
 **Start states:** `set_near_goal_starts(share, radius)` makes a share of the following resets start with the
 element held on a collision-free joint path out of its goal (reverse curriculum generation; IK, no
