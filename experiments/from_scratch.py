@@ -13,6 +13,7 @@ assets/checkpoints/scratch_general_agent.pt with its campaign record. The recipe
 | setting | value | why |
 |---|---|---|
 | reward | normalized_dense: the tasks' dense reward / 10 (placing pays 10, a held step at most 4.5) | its carry term is linear in the arm's joint-space distance from the installation configuration (IK of the goal, ms_construction/goal_configurations.py), so it pulls from the pick, the way the turret's limits allow; its progress term pays each step's fall of that distance at once (probe G) |
+| reward options | the carry measured along the start paths (`carry_along_paths`), the reach toward the element half in joint space (`reach_in_joint_space`) | the fourth start's policy carried elements straight into the barriers beside the staging table and stopped there, and turned the turret the wrong way to its limit on the way to the table (its `--diagnose`); probe N (both) placed the most of the continuations from its 1,682,000-step checkpoint |
 | success | absorbing: bootstrapped with its reward for ever | the critic never trains on a state after success; its guess let hovering near the goal outvalue placing |
 | start states | 80% of the training episodes start held on a collision-free joint path out of the goal (`set_near_goal_starts`), each task type's radius widening from 0.1 of the path by 0.1 once 60% of its last 20 such episodes placed; such an episode that has not placed in 80 steps is cut | reverse curriculum generation (Florensa et al. 2017) from resets the env computes by IK: no demonstrations; evaluation always resets as usual. One radius for all three types widened on lucky iterations of the easy type (probe F); with half the episodes and no cut, a failed start wandered for 250 steps and an update held a handful of near-goal episodes (probes I-L) |
 | observation | the tasks' state + the joint move to the installation configuration (`obs_install_offset`) | what the carry term measures, from IK of the goal pose: following it places from near-goal starts (a test); without it the policy must learn IK of nine goal slots itself |
@@ -61,7 +62,7 @@ def scratch_args(num_envs: Optional[int] = None, **overrides) -> ppo.Args:
         success_value="absorbing", bootstrap_at_done="always", gamma=0.95, gae_lambda=0.95,
         num_envs=num_envs, num_steps=2000 // num_envs, update_epochs=8, num_minibatches=8, target_kl=0.1,
         near_goal_share=0.8, near_goal_radius=0.1, near_goal_step=0.1, near_goal_promote=0.6, near_goal_window=20,
-        near_goal_max_steps=80, obs_install_offset=True, bounded_mean=True,
+        near_goal_max_steps=80, obs_install_offset=True, bounded_mean=True, carry_along_paths=True, reach_in_joint_space=True,
         eval_freq=25, checkpoint_freq=10, log_dir=str(CAMPAIGN_DIR),
     )
     return dataclasses.replace(args, **overrides)
@@ -224,6 +225,62 @@ def near_goal_rollouts(checkpoint: Path, radius: float = DIAGNOSE_RADIUS, seeds:
     return "\n".join(lines)
 
 
+def _touching(u) -> str:
+    """What the element presses against (contacts with an impulse), the plate holding it aside."""
+    names = set()
+    for contact in u.scene.get_contacts():
+        bodies = [b.entity.name.removeprefix("scene-0_") for b in contact.bodies]
+        element = [n for n in bodies if n.endswith("_element")]
+        if element and sum(float(abs(p.impulse).sum()) for p in contact.points) > 1e-2:
+            names |= {n for n in bodies if not n.endswith("_element") and n not in ("flange", "plate")}
+    return ", ".join(sorted(names)) or "-"
+
+
+def ordinary_rollouts(checkpoint: Path, seeds: int = DIAGNOSE_SEEDS) -> str:
+    """What the policy does from ordinary resets (the test seeds evaluation starts with, the policy's mean, the task's
+    step limit): per task and seed, when it grasped, whether it placed, the carry distance at the grasp, the least
+    after it and at the end, the same measured along the start paths (`path_distance`), the element's distance to
+    its goal at the end, what the element touched at the end (the plate aside) and whether the arm had stopped (its joints
+    moved less than 0.02 rad over the last 20 steps) while the policy's mean still asked for motion."""
+    import gymnasium as gym
+    import torch
+
+    import ms_construction  # noqa: F401  (registration)
+    from baselines.ppo.checkpoints import load_policy
+    from baselines.ppo.evaluation import Args as EvalArgs
+    from ms_construction.envs import TASK_ENV_IDS
+    from ms_construction.rollout import rollout
+
+    agent, kwargs = load_policy(checkpoint, "ConstructionPickPlace-v1")
+    kwargs = {k: v for k, v in kwargs.items() if k not in ("obs_mode", "reward_mode")}
+    lines = ["| task | seed | grasped at step | placed | carry distance at the grasp / least / end (rad) | "
+             "along the start paths, at the grasp / end (rad) | element to goal at the end (m) | element touching at the end | "
+             "arm stopped, still pushing |", "|---|---|---|---|---|---|---|---|---|"]
+    for env_id in TASK_ENV_IDS.values():
+        env = gym.make(env_id, obs_mode="state", reward_mode="normalized_dense", **kwargs)
+        u = env.unwrapped
+        for seed in range(EvalArgs.seed, EvalArgs.seed + seeds):
+            grasped, carry, path, qs, actions = None, [], [], [], []
+            for t, step in enumerate(rollout(agent, env, seed)):
+                qs.append(u.agent.robot.get_qpos()[0].clone())
+                actions.append(step.action[0])
+                if bool(step.info["is_grasped"][0]):
+                    grasped = t if grasped is None else grasped
+                    carry.append(float(u.install_offset().abs().sum()))
+                    path.append(float(u.path_distance()[0]))
+                if bool(step.terminated[0]) or bool(step.truncated[0]):
+                    break
+            moved = float(sum((a - b).abs().sum() for a, b in zip(qs[-20:], qs[-19:])))
+            pushing = float(torch.stack(actions[-20:]).abs().mean()) > 0.3
+            fmt = lambda xs: f"{xs[0]:.1f} / {min(xs):.1f} / {xs[-1]:.1f}" if xs else "-"  # noqa: E731
+            lines.append(f"| {env_id} | {seed} | {'-' if grasped is None else grasped + 1} | "
+                         f"{'yes' if bool(step.info['success'][0]) else 'no'} | {fmt(carry)} | "
+                         f"{f'{path[0]:.1f} / {path[-1]:.1f}' if path else '-'} | {float(step.info['place_dist'][0]):.2f} | "
+                         f"{_touching(u)} | {'yes' if moved < 0.02 and pushing else 'no'} |")
+        env.close()
+    return "\n".join(lines)
+
+
 @dataclass
 class Args:
     num_envs: Optional[int] = None
@@ -236,8 +293,8 @@ class Args:
     report: bool = False
     """write its section of docs/RESULTS.md and its curve (docs/images/scratch_curve.png), and exit."""
     diagnose: bool = False
-    """run its latest policy from near-goal starts (radius 0.2, 6 seeds per task) and write where it took the
-    elements into docs/experiments/from_scratch.md, and exit."""
+    """run its latest policy from near-goal starts (radius 0.2, 6 seeds per task) and from ordinary resets (the first
+    6 test seeds per task) and write where it took the elements into docs/experiments/from_scratch.md, and exit."""
     checkpoint: Optional[Path] = None
     """with --diagnose: this checkpoint's policy instead (a probe's), printed only."""
 
@@ -248,15 +305,18 @@ def main(args: Args) -> None:
         print("as one ppo.py command: python baselines/ppo/ppo.py " + shlex.join(command_line(run.args)))
         if args.diagnose and args.checkpoint is not None:
             print(near_goal_rollouts(args.checkpoint))
+            print(ordinary_rollouts(args.checkpoint))
         elif args.diagnose:
             ckpt = Path(run.args.log_dir) / run.args.exp_name / "checkpoint.pt"
             progress = load_checkpoint(ckpt)["progress"]["global_step"]
-            body = (f"Command: `{COMMAND} --diagnose` (the campaign's checkpoint at {progress:,} env steps; near-goal starts "
+            near = (f"Command: `{COMMAND} --diagnose` (the campaign's checkpoint at {progress:,} env steps; near-goal starts "
                     f"at radius {DIAGNOSE_RADIUS}, the policy's mean, at most {DIAGNOSE_STEPS} steps).\n\n"
                     + near_goal_rollouts(ckpt))
-            update_section(Path("docs/experiments/from_scratch.md"), "near-goal-rollouts", body,
-                           "Learning from reward alone: the experiment")
-            print(body)
+            ordinary = (f"Command: `{COMMAND} --diagnose` (the campaign's checkpoint at {progress:,} env steps; ordinary "
+                        f"resets on the first {DIAGNOSE_SEEDS} test seeds, the policy's mean).\n\n" + ordinary_rollouts(ckpt))
+            for name, body in (("near-goal-rollouts", near), ("ordinary-rollouts", ordinary)):
+                update_section(Path("docs/experiments/from_scratch.md"), name, body, "Learning from reward alone: the experiment")
+                print(body)
         elif args.report:
             print(report(run))
         elif args.ship_now:

@@ -1,12 +1,16 @@
 """The from-scratch work's short probes (Flooring-v1 first): what each changed, and what its curve showed.
 
-    python -m experiments.probes            # the table into docs/experiments/from_scratch.md, from the CSVs
+    python -m experiments.probes            # the tables into docs/experiments/from_scratch.md, from the CSVs and JSONs
 
 Each probe is a ppo.py run of a few hundred thousand env steps; its progress.csv is kept in
 docs/data/from_scratch/probes/<name>.csv (copy it there from runs/probes/<name>/ when it ends). The table
 reports, over the last fifth of each probe's iterations, the means of its training episodes: pick success,
 place success of ordinary resets and of near-goal starts, the start radius reached, and where the element
 ended (m from its goal).
+
+Probes that go on from a campaign checkpoint (`CONTINUATIONS`) are compared where the campaign is judged: each
+policy evaluated with the paper's protocol on the same test seeds (scripts/evaluate.py --all, deterministic), its
+JSON kept beside the CSVs as <name>_eval.json; the campaign itself, run on for as many steps, is the control.
 """
 
 from __future__ import annotations
@@ -30,7 +34,7 @@ def _recipe(**overrides) -> str:
     from baselines.ppo.args import command_line
     from experiments.from_scratch import scratch_args
 
-    args = scratch_args(2, log_dir="runs/probes", eval_freq=50, total_timesteps=600_000, **overrides)
+    args = scratch_args(2, **{"log_dir": "runs/probes", "eval_freq": 50, "total_timesteps": 600_000, **overrides})
     return "python baselines/ppo/ppo.py " + shlex.join(command_line(args))
 
 
@@ -63,20 +67,85 @@ PROBES = {
     "probeI_general_install_offset": ("the campaign's recipe (H, placing paying 10) + the joint move to the "
                                       "installation configuration in the observation (`--obs-install-offset`)",
                                       _recipe(obs_install_offset=True, near_goal_share=0.5, near_goal_max_steps=None, bounded_mean=False,
-                                              exp_name="probeI_general_install_offset")
+                                              exp_name="probeI_general_install_offset", carry_along_paths=False, reach_in_joint_space=False)
                                       + " (stopped at 190,000 steps)"),
     "probeJ_offset_ng_limit80": ("I + near-goal episodes cut at 80 steps (`--near-goal-max-steps 80`)",
                                  _recipe(obs_install_offset=True, near_goal_share=0.5, near_goal_max_steps=80, bounded_mean=False,
-                                         exp_name="probeJ_offset_ng_limit80")
+                                         exp_name="probeJ_offset_ng_limit80", carry_along_paths=False, reach_in_joint_space=False)
                                  + " (stopped at 48,000 steps, to start K)"),
     "probeK_offset_limit80_tanh": ("J + the policy's mean bounded by tanh (`--bounded-mean`)",
                                    _recipe(obs_install_offset=True, near_goal_share=0.5, near_goal_max_steps=80, bounded_mean=True,
-                                           exp_name="probeK_offset_limit80_tanh") + " (stopped at 174,000 steps)"),
+                                           exp_name="probeK_offset_limit80_tanh", carry_along_paths=False, reach_in_joint_space=False) + " (stopped at 174,000 steps)"),
     "probeL_share08": ("K + 80% of the episodes from near-goal starts (`--near-goal-share 0.8`): the recipe of the "
                        "campaign's fourth start, which went on from this probe's checkpoint",
-                       _recipe(exp_name="probeL_share08") + " (then the campaign: python -m experiments.from_scratch)"),
+                       _recipe(exp_name="probeL_share08", carry_along_paths=False, reach_in_joint_space=False) + " (then the campaign: python -m experiments.from_scratch)"),
 }
 """name: (what it changed, its arguments beyond COMMON or its whole command), in the order they ran."""
+
+
+START_1682K = "git show 9688cdd:campaign/scratch_general_agent/checkpoint.pt > runs/campaign_1682k.pt"
+"""the campaign's fourth start at 1,682,000 env steps, where the continuation probes start."""
+EVAL = "python scripts/evaluate.py --all --episodes 50"
+
+CONTINUATIONS = {
+    "start_1682k": ("where they start: the campaign's fourth start at 1,682,000 env steps", START_1682K),
+    "control_campaign": ("the campaign run on (the recipe unchanged, its optimizer and start radii kept)",
+                         "python -m experiments.from_scratch (resumed at 1,682,000 steps, stopped at 2,022,000)"),
+    "probeM_paths": ("the dense reward's carry measured along the start paths (`--carry-along-paths`)",
+                     _recipe(exp_name="probeM_paths", checkpoint="runs/campaign_1682k.pt", near_goal_radius=0.8,
+                             eval_freq=1000, carry_along_paths=True, reach_in_joint_space=False)
+                     + " (stopped at 330,000 steps)"),
+    "probeN_paths_joint_reach": ("M + the reach toward the element in joint space (`--reach-in-joint-space`)",
+                                 _recipe(exp_name="probeN_paths_joint_reach", checkpoint="runs/campaign_1682k.pt",
+                                         near_goal_radius=0.8, eval_freq=1000, carry_along_paths=True,
+                                         reach_in_joint_space=True) + " (stopped at 344,000 steps)"),
+}
+"""name: (what it changed, how its policy came to be); each evaluated with `python -m experiments.probes --evaluate
+<name> --checkpoint <its checkpoint>` (EVAL into PROBE_DIR/<name>_eval.json; the start's and the control's
+checkpoints as their commands say, the probes' their runs/probes/<name>/checkpoint.pt)."""
+
+
+def continuation_table() -> str:
+    import json
+
+    from baselines.ppo.evaluation import pct
+
+    lines = ["| policy | what it changed | env steps in all | pick: ceiling / window / flooring | "
+             "placed: ceiling / window / flooring |", "|---|---|---|---|---|"]
+    for name, (what, _) in CONTINUATIONS.items():
+        path = PROBE_DIR / f"{name}_eval.json"
+        if not path.is_file():
+            continue
+        result = json.loads(path.read_text())
+        tasks = result["tasks"].values()
+        steps = result.get("global_step")
+        lines.append(f"| {name} | {what} | {'-' if steps is None else f'{steps:,}'} | "
+                     + " / ".join(f"{100 * t['pick_success']:.0f}%" for t in tasks) + " | "
+                     + " / ".join(pct(t["place_success"], t["place_success_ci95"]) for t in tasks) + " |")
+    commands = "\n".join(f"- {name}: `{how}`, then `python -m experiments.probes --evaluate {name} --checkpoint <its checkpoint>` "
+                         f"(`{EVAL}`)" for name, (_, how) in CONTINUATIONS.items())
+    return (f"Command: `python -m experiments.probes` (from {PROBE_DIR}/*_eval.json).\n\n"
+            "Each policy evaluated with the paper's protocol on the first 50 test seeds of each task (deterministic); "
+            "placed with its Wilson 95% interval.\n\n" + "\n".join(lines) + "\n\nHow each came to be:\n\n" + commands)
+
+
+def evaluate_continuation(name: str, checkpoint: Path) -> None:
+    """`EVAL` of `checkpoint` into PROBE_DIR/<name>_eval.json, with the env steps it trained since the start."""
+    import json
+    import subprocess
+    import sys
+
+    from baselines.ppo.checkpoints import load_checkpoint
+
+    if name not in CONTINUATIONS:
+        raise SystemExit(f"--evaluate {name}: one of {', '.join(CONTINUATIONS)}")
+    out = PROBE_DIR / f"{name}_eval.json"
+    subprocess.run([sys.executable, *shlex.split(EVAL)[1:], "--checkpoint", str(checkpoint), "--json", str(out)], check=True)
+    result = json.loads(out.read_text())
+    result["global_step"] = int(load_checkpoint(checkpoint)["progress"]["global_step"])
+    if name.startswith("probe"):  # a probe counts from 0 again: after the start's steps
+        result["global_step"] += int(load_checkpoint(Path("runs/campaign_1682k.pt"))["progress"]["global_step"])
+    out.write_text(json.dumps(result, indent=1))
 
 
 def _mean(rows: list[dict], key: str) -> float:
@@ -117,5 +186,17 @@ def table() -> str:
 
 
 if __name__ == "__main__":
+    import argparse
+
+    parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    parser.add_argument("--evaluate", metavar="NAME", help=f"evaluate a continuation ({', '.join(CONTINUATIONS)}) and exit")
+    parser.add_argument("--checkpoint", type=Path, help="with --evaluate: its checkpoint")
+    cli = parser.parse_args()
+    if cli.evaluate:
+        if cli.checkpoint is None:
+            raise SystemExit("--evaluate: give its --checkpoint")
+        evaluate_continuation(cli.evaluate, cli.checkpoint)
+        raise SystemExit(0)
     update_section(PAGE, "from-scratch-probes", table(), "Learning from reward alone: the experiment")
+    update_section(PAGE, "from-scratch-continuations", continuation_table(), "Learning from reward alone: the experiment")
     print(f"wrote the probe table to {PAGE}")

@@ -96,6 +96,12 @@ def test_a_tiny_run_ships_before_its_end_with_a_record_that_says_where_it_stands
     assert all(" | yes | " in r for r in rows), "radius 0 starts installed: placed at the first step"
     # a fresh policy's mean lies near 0: never past the action bounds
     assert all(r.rstrip(" |").split(" | ")[-1].startswith("0.00; ") for r in rows), rows
+    # and from ordinary resets (test seeds): a fresh policy grasps nothing and leaves the element on the table
+    table = fs.ordinary_rollouts(campaign.checkpoint_of(run), seeds=1)
+    rows = [line.strip("| ").split(" | ") for line in table.splitlines()[2:]]
+    assert [r[0] for r in rows] == ["CeilingInstallation-v1", "WindowInstallation-v1", "Flooring-v1"]
+    assert all(r[1] == "1000000" and r[2] == "-" and r[3] == "no" and r[4] == "-" for r in rows), rows
+    assert all("staging_table" in r[7] for r in rows), rows
 
 
 def test_the_report_draws_the_curve_and_writes_the_section(tmp_path, monkeypatch):
@@ -139,3 +145,18 @@ def test_the_shipped_agent_from_reward_alone_has_no_demonstrations_in_it_and_pla
     out = tmp_path / "eval.json"
     evaluation.main(evaluation.Args(checkpoint=path, env_id="Flooring-v1", episodes=1, workers=1, json=out))
     assert json.loads(out.read_text())["episodes"] == 1
+
+
+def test_the_continuation_table_compares_each_probe_s_evaluation_with_the_control_s(tmp_path, monkeypatch):
+    from experiments import probes
+
+    monkeypatch.setattr(probes, "PROBE_DIR", tmp_path)
+    task = lambda pick, place: dict(pick_success=pick, place_success=place, place_success_ci95=[0.0, 0.5])  # noqa: E731
+    for name, placed in (("control_campaign", 0.1), ("probeM_paths", 0.2)):
+        (tmp_path / f"{name}_eval.json").write_text(json.dumps(dict(global_step=2_012_000, tasks={
+            "CeilingInstallation-v1": task(1.0, 0.0), "WindowInstallation-v1": task(0.5, 0.0), "Flooring-v1": task(0.9, placed)})))
+    table = probes.continuation_table()
+    rows = [line for line in table.splitlines() if line.startswith("| control") or line.startswith("| probe")]
+    assert [r.split(" | ")[0] for r in rows] == ["| control_campaign", "| probeM_paths"], "in CONTINUATIONS' order, evaluated ones only"
+    assert "| 2,012,000 | 100% / 50% / 90% | 0.0 [0.0, 50.0] / 0.0 [0.0, 50.0] / 20.0 [0.0, 50.0] |" in rows[1]
+    assert "--carry-along-paths" in table and "python -m experiments.probes --evaluate probeM_paths" in table

@@ -6,6 +6,8 @@ site's poses alone (ms_construction/goal_configurations.py).
   configuration of every goal slot (the turret turning the way its limits allow: through 0, never across +-pi).
 - With `carry_along_paths` it is measured along the start paths: their length left, falling along every one,
   and a shortcut straight from the lift to the goal pays less than the path.
+- With `reach_in_joint_space` the reach toward the element is measured in joint space to the configurations that
+  grasp it on the staging table: it falls on the way there and they grasp.
 - A near-goal start is a valid state: the element held against the plate, nothing penetrating, still after a
   step; radius 0 starts it installed (placed at the first step), and evaluation-style resets are untouched.
 """
@@ -159,6 +161,34 @@ def test_the_path_distance_falls_along_every_start_path_and_a_shortcut_off_it_pa
         assert distance_at(straight) > distance_at(along), (slot, c, side)
         checked += 1
     assert checked > 0
+    env.close()
+
+
+@pytest.mark.parametrize("kind", ELEMENT_KINDS)
+def test_the_joint_space_reach_leads_to_configurations_that_grasp_and_pays_on_the_way(kind):
+    """`reach_in_joint_space`: from the rest pose a straight joint move to either table grasp configuration (turret at
+    about +pi or -pi) lowers the reach distance at every step when it heads for the nearer one, raises the dense
+    reward over the move, and ends grasping the element."""
+    env = make_env(TASK_ENVS[kind], control_mode="pd_joint_delta_pos", reward_mode="dense", reach_in_joint_space=True)
+    u, k = env.unwrapped, ELEMENT_KINDS.index(kind)
+    env.reset(seed=0)
+    rest = u.agent.robot.get_qpos()[0].numpy().astype(np.float64)
+    table = lift_configurations(0.0)[k].astype(np.float64)
+    nearer = int(np.argmin(np.abs(table[:, :5] - rest[:5]).sum(-1)))
+    for side in (nearer, 1 - nearer):
+        env.reset(seed=0)
+        dists, rewards = [], []
+        for f in np.linspace(0.0, 1.0, 20):
+            u.agent.robot.set_qpos(torch.tensor((rest + f * (table[side] - rest))[None], dtype=torch.float32))
+            dists.append(float(u.reach_distance()[0]))
+            info = u.evaluate()
+            rewards.append(float(u.compute_dense_reward(None, torch.zeros(1, 6), info)[0]))
+        assert dists[-1] < 1e-4 and dists[-1] < dists[0]
+        if side == nearer:
+            assert np.all(np.diff(dists) < 0), np.round(dists, 3)
+        assert rewards[-1] > rewards[0], np.round(rewards, 3)
+        _, _, _, _, info = env.step(torch.zeros(1, 6))
+        assert bool(info["is_grasped"][0]), "a table grasp configuration grasps"
     env.close()
 
 

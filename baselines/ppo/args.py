@@ -85,6 +85,9 @@ class RunArgs:
     carry_along_paths: bool = False
     """the dense rewards' carry measured along the near-goal starts' collision-checked joint paths (the tasks'
     `carry_along_paths`, `path_distance`) instead of straight to the installation configuration, in training."""
+    reach_in_joint_space: bool = False
+    """the dense rewards' reach toward the element's grasp half measured in joint space to the configurations that
+    grasp it on the staging table (the tasks' `reach_in_joint_space`, `reach_distance`), in training."""
     task_weights: Optional[tuple[float, float, float]] = None
     """the general task's sampling weights of ceiling, window and flooring in the training envs (None: uniform;
     `1 2 1`: window installation half the episodes); evaluation always samples uniformly."""

@@ -28,7 +28,7 @@ from mani_skill.utils.structs.types import GPUMemoryConfig, SimConfig
 from ms_construction.agents.construction_arm import ConstructionArm
 from ms_construction.agents.suction_gripper import PLATE_ELEMENT_COLLISION_BIT, SuctionGripper, grasp_ray
 from ms_construction.curriculum import FINAL_STAGE, TOLERANCE_KEYS, resolve_tolerances, stage_tolerances, validate_tolerances
-from ms_construction.goal_configurations import install_configurations, symmetry_period
+from ms_construction.goal_configurations import install_configurations, lift_configurations, symmetry_period
 from ms_construction.parameters import (
     DROP_CLEARANCE,
     ELEMENT_KINDS,
@@ -103,6 +103,7 @@ class ConstructionTaskEnv(BaseEnv):
         obs_elapsed_time: bool = False,
         obs_install_offset: bool = False,
         carry_along_paths: bool = False,
+        reach_in_joint_space: bool = False,
         **kwargs,
     ):
         self._tol_init = resolve_tolerances(curriculum_stage, tolerances)
@@ -119,6 +120,7 @@ class ConstructionTaskEnv(BaseEnv):
         self.obs_elapsed_time = bool(obs_elapsed_time)
         self.obs_install_offset = bool(obs_install_offset)
         self.carry_along_paths = bool(carry_along_paths)
+        self.reach_in_joint_space = bool(reach_in_joint_space)
         self.robot_init_qpos_noise = robot_init_qpos_noise
         self._step_grasp_frame, self._in_step_readout = None, False
         self.near_goal_share, self.near_goal_radius, self.near_goal_max_steps = 0.0, None, None
@@ -214,6 +216,7 @@ class ConstructionTaskEnv(BaseEnv):
         # the dense reward's carry: installation configurations [3, slots, K, 6] (IK, a few seconds: made when
         # first needed) and joint 6's period per kind
         self._install_q: Optional[torch.Tensor] = None
+        self._table_q: Optional[torch.Tensor] = None
         self._sym_period = torch.tensor([symmetry_period(k) for k in kinds], **f32)
 
     def _build_goal_marker(self, kind: str, manifest: dict) -> Actor:
@@ -583,6 +586,21 @@ class ConstructionTaskEnv(BaseEnv):
         total = torch.where(sp["usable"][self.task_id, self.goal_slot] > 0, total, torch.full_like(total, torch.inf))
         return total.amin(-1).reshape(n)
 
+    REACH_RANGE = 6.0
+    """rad; with `reach_in_joint_space`, the joint-space reach falls linearly from 1 at a grasp configuration to 0
+    this far (joints 1-5 summed) from the nearest one: the rest pose is 3-4 rad from them."""
+
+    def reach_distance(self) -> torch.Tensor:
+        """[n] rad; how far the arm is, in joint space (joints 1-5 summed: the plate's roll does not matter to the
+        suction grasp, which keeps the element's turn), from the nearest configuration that grasps the element where
+        it lies on the staging table (its centre: `goal_configurations.lift_configurations(0)`, with the turret at
+        about +pi or -pi). Falls along a joint move to the table the way the turret's limits allow, where the
+        bearing around the pedestal turns the turret either way."""
+        if self._table_q is None:
+            self._table_q = torch.tensor(lift_configurations(0.0), dtype=torch.float32, device=self.device)
+        q = self.agent.robot.get_qpos()
+        return (self._table_q[self.task_id][..., :5] - q[:, None, :5]).abs().sum(-1).amin(-1)
+
     def install_offset(self) -> torch.Tensor:
         """[n, 6] rad; the joint move from the arm's configuration to the nearest one that holds its element
         installed (the one `carry_distance` measures to), joint 6's part taken modulo the element's symmetry."""
@@ -614,6 +632,8 @@ class ConstructionTaskEnv(BaseEnv):
         # bearing around the pedestal: straight-line distance alone pulls the plate over the
         # pedestal (a dead end) when the target is behind the arm; turning the turret must pay
         approach = 0.25 * _bearing(tcp[:, :2], grasp[:, :2]) + 0.75 * reach * (0.5 + 0.5 * face)
+        if self.reach_in_joint_space:  # the turret's way round to the table as its limits allow, as the carry's
+            approach = 0.5 * (1 - (self.reach_distance() / self.REACH_RANGE).clamp(max=1)) + 0.5 * reach * (0.5 + 0.5 * face)
         held = info["is_grasped"]
         distance = self.carry_distance()
         fell = torch.where(held & (self.carry_prev >= 0), self.carry_prev - distance, torch.zeros_like(distance))

@@ -59,7 +59,10 @@ its goal worth more than placing it. Results trained before 2026-11-25 on a dens
 used the earlier one, whose carry was 0.75 (1 - tanh d) + a bearing term and whose orient term was separate.
 `carry_along_paths=True` measures the carry along the start paths below instead (`path_distance`: the path's
 length left, each radian off it counted {ConstructionTaskEnv.PATH_DEVIATION_WEIGHT:g} times), so that it falls on the way up and over the
-site's barriers, not on the straight joint move that runs the element into them. Off by default.
+site's barriers, not on the straight joint move that runs the element into them. `reach_in_joint_space=True`
+makes half the reach term joint-space too: 1 - d / {ConstructionTaskEnv.REACH_RANGE:g} rad of the arm's distance (joints 1-5) from the nearest
+configuration that grasps the element on the staging table (`reach_distance`), so that the turret turns the way
+its limits allow (the bearing term turns it either way). Both off by default.
 
 **Start states:** `set_near_goal_starts(share, radius)` makes a share of the following resets start with the
 element held on a collision-free joint path out of its goal (reverse curriculum generation; IK, no
