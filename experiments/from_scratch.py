@@ -13,7 +13,7 @@ assets/checkpoints/scratch_general_agent.pt with its campaign record. The recipe
 | setting | value | why |
 |---|---|---|
 | reward | normalized_dense: the tasks' dense reward / 10 (placing pays 10, a held step at most 4.5) | its carry term is linear in the arm's joint-space distance from the installation configuration (IK of the goal, ms_construction/goal_configurations.py), so it pulls from the pick, the way the turret's limits allow; its progress term pays each step's fall of that distance at once (probe G) |
-| reward options | the carry measured along the start paths (`carry_along_paths`), the reach toward the element half in joint space (`reach_in_joint_space`) | the fourth start's policy carried elements straight into the barriers beside the staging table and stopped there, and turned the turret the wrong way to its limit on the way to the table (its `--diagnose`); probe N (both) placed the most of the continuations from its 1,682,000-step checkpoint |
+| reward options | the carry measured along the start paths (`carry_along_paths`), the reach toward the element half in joint space (`reach_in_joint_space`) | the fourth start's policy carried elements straight into the slab, the wall and the barriers beside the staging table and stopped there, and turned the turret the wrong way to its limit on the way to the table (its `--diagnose`); probe N (both) placed the most of the continuations from its 1,682,000-step checkpoint |
 | success | absorbing: bootstrapped with its reward for ever | the critic never trains on a state after success; its guess let hovering near the goal outvalue placing |
 | start states | 80% of the training episodes start held on a collision-free joint path out of the goal (`set_near_goal_starts`), each task type's radius widening from 0.1 of the path by 0.1 once 60% of its last 20 such episodes placed; such an episode that has not placed in 80 steps is cut | reverse curriculum generation (Florensa et al. 2017) from resets the env computes by IK: no demonstrations; evaluation always resets as usual. One radius for all three types widened on lucky iterations of the easy type (probe F); with half the episodes and no cut, a failed start wandered for 250 steps and an update held a handful of near-goal episodes (probes I-L) |
 | observation | the tasks' state + the joint move to the installation configuration (`obs_install_offset`) | what the carry term measures, from IK of the goal pose: following it places from near-goal starts (a test); without it the policy must learn IK of nine goal slots itself |
@@ -51,6 +51,9 @@ from ms_construction.curriculum import FINAL_STAGE
 BUDGET = 20_000_000
 """env steps at most (the issue's budget on this CPU)."""
 COMMAND = "python -m experiments.from_scratch"
+STARTS = {1_682_000: "fifth start: carry along the start paths, reach in joint space"}
+"""env step: the recipe change the campaign went on with there (the fourth start's steps before it; the experiment page
+says how each start came to be)."""
 
 
 def scratch_args(num_envs: Optional[int] = None, **overrides) -> ppo.Args:
@@ -116,6 +119,9 @@ def draw_curve(rows: list[dict], out: Path) -> None:
     for kind, color in zip(ELEMENT_KINDS, ("tab:blue", "tab:orange", "tab:green")):
         ax2.plot(steps, _column(rows, f"near_goal_radius_{kind}"), color=color, lw=0.8, ls=":",
                  label=f"start radius: {kind} (right axis)")
+    for step, what in STARTS.items():
+        ax.axvline(step / 1e6, color="black", lw=0.8, ls="-.")
+        ax.text(step / 1e6, 97, " " + what, fontsize=7, va="top")
     ax2.set_ylim(0, 1.05)
     ax2.set_ylabel("near-goal start radius (fraction of the path)")
     ax.set_xlabel("env steps (millions)")
@@ -154,7 +160,9 @@ def report(run: Run, results: Path = Path("docs/RESULTS.md")) -> str:
              + f" | {fmt(mean('near_goal_place_success'))} | {fmt(mean('pick_success'))} |", "",
              f"![from-scratch curve]({Path(*CURVE.parts[1:])})", "",
              f"*Made by `{COMMAND} --report`: the training episodes' place success per task (ordinary resets) and "
-             "from near-goal starts, with the start radius.*", ""]
+             "from near-goal starts, with the start radius; "
+             + "; ".join(f"from {step:,} steps the {what}" for step, what in STARTS.items())
+             + " ([the experiment](experiments/from_scratch.md)).*", ""]
     if EVAL_JSON.is_file():
         data = json.loads(EVAL_JSON.read_text())
         shipped = load_checkpoint(run.shipped)["campaign"]["record"] if run.shipped.is_file() else {}
