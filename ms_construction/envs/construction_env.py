@@ -563,9 +563,11 @@ class ConstructionTaskEnv(BaseEnv):
         slot (`goal_configurations.StartPaths`, the near-goal starts' collision-checked joint paths: in from the
         goal along the plate's axis, up to a lift above the staging table and down to it): the least, over the
         points of the path, of PATH_DEVIATION_WEIGHT times the joint-space (L1) distance to the point plus the
-        path's length from there to the installation, joint 6 compared as in `carry_distance`. A straight joint move to the goal from the staging table pushes the element
-        into the site's barriers and the table (the fourth start's stuck carries); this distance falls only on
-        the way round them, up and over. No demonstrations: the paths come from IK of the goal and the table."""
+        path's length from there to the installation, joint 6 compared as in `carry_distance`. A straight joint
+        move to the goal runs the element into the slab, the wall and the barriers beside the staging table (the
+        fourth start's carries, docs/experiments/from_scratch.md); this distance falls on the way up and over them
+        and into the opening along the plate's axis. No demonstrations: the paths come from IK of the goal and
+        the table."""
         sp = self._load_start_paths()
         n = len(self.task_id)
         w = sp["waypoints"][self.task_id, self.goal_slot].flatten(1, 2)  # [n, M, P, 6], M paths of P waypoints
