@@ -83,7 +83,8 @@ PROBES = {
 """name: (what it changed, its arguments beyond COMMON or its whole command), in the order they ran."""
 
 
-START_1682K = "git show 9688cdd:campaign/scratch_general_agent/checkpoint.pt > runs/campaign_1682k.pt"
+START_CHECKPOINT = "runs/campaign_1682k.pt"
+START_1682K = f"git show 9688cdd:campaign/scratch_general_agent/checkpoint.pt > {START_CHECKPOINT}"
 """the campaign's fourth start at 1,682,000 env steps, where the continuation probes start."""
 EVAL = "python scripts/evaluate.py --all --episodes 50"
 
@@ -92,11 +93,11 @@ CONTINUATIONS = {
     "control_campaign": ("the campaign run on (the recipe unchanged, its optimizer and start radii kept)",
                          "python -m experiments.from_scratch (resumed at 1,682,000 steps, stopped at 2,022,000)"),
     "probeM_paths": ("the dense reward's carry measured along the start paths (`--carry-along-paths`)",
-                     _recipe(exp_name="probeM_paths", checkpoint="runs/campaign_1682k.pt", near_goal_radius=0.8,
+                     _recipe(exp_name="probeM_paths", checkpoint=START_CHECKPOINT, near_goal_radius=0.8,
                              eval_freq=1000, carry_along_paths=True, reach_in_joint_space=False)
                      + " (stopped at 330,000 steps)"),
     "probeN_paths_joint_reach": ("M + the reach toward the element in joint space (`--reach-in-joint-space`)",
-                                 _recipe(exp_name="probeN_paths_joint_reach", checkpoint="runs/campaign_1682k.pt",
+                                 _recipe(exp_name="probeN_paths_joint_reach", checkpoint=START_CHECKPOINT,
                                          near_goal_radius=0.8, eval_freq=1000, carry_along_paths=True,
                                          reach_in_joint_space=True) + " (stopped at 344,000 steps)"),
 }
@@ -144,7 +145,7 @@ def evaluate_continuation(name: str, checkpoint: Path) -> None:
     result = json.loads(out.read_text())
     result["global_step"] = int(load_checkpoint(checkpoint)["progress"]["global_step"])
     if name.startswith("probe"):  # a probe counts from 0 again: after the start's steps
-        result["global_step"] += int(load_checkpoint(Path("runs/campaign_1682k.pt"))["progress"]["global_step"])
+        result["global_step"] += int(load_checkpoint(Path(START_CHECKPOINT))["progress"]["global_step"])
     out.write_text(json.dumps(result, indent=1))
 
 

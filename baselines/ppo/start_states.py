@@ -31,7 +31,7 @@ import tyro
 from tqdm import tqdm
 
 from baselines.ppo.args import Args as PPOArgs
-from baselines.ppo.checkpoints import Progress
+from baselines.ppo.checkpoints import Progress, load_policy
 from ms_construction.rollout import policy_episode
 
 FIRST_SEED = 430_000
@@ -50,8 +50,6 @@ def _failure_states(job: tuple) -> dict:
     """One deterministic episode of the policy; the states `offsets` steps before the element's
     closest approach to its goal if it did not place (found by replaying the episode's actions from
     its seeded reset, which physx_cpu reproduces: cheaper than saving every step's state)."""
-    from baselines.ppo.checkpoints import load_policy
-
     checkpoint, env_id, seed, offsets = job
     torch.set_num_threads(1)
     if "env" not in _worker:
