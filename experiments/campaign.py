@@ -6,7 +6,6 @@ general agent from reward alone (experiments/from_scratch.py) are campaigns."""
 from __future__ import annotations
 
 import csv
-import dataclasses
 import os
 import platform
 import shutil
@@ -48,8 +47,8 @@ def describe(run: Run) -> str:
     """One line: the run, its budget and stages, and where it stands."""
     a, ckpt = run.args, checkpoint_of(run)
     done = load_checkpoint(ckpt)["progress"]["global_step"] if ckpt.is_file() else 0
-    return (f"{run.name}: {run.what}; {a.env_id}, stages {' '.join(a.curriculum)} ({a.stage_timesteps:,} steps each), "
-            f"{a.total_timesteps:,} steps, curiosity {a.curiosity}, seed {a.seed}, {a.num_envs} envs x {a.num_steps} steps "
+    return (f"{run.name}: {run.what}; {a.env_id}, stages {' '.join(a.stages.curriculum)} ({a.stages.stage_timesteps:,} steps each), "
+            f"{a.total_timesteps:,} steps, curiosity {a.icm.curiosity}, seed {a.seed}, {a.num_envs} envs x {a.num_steps} steps "
             f"per update; {'resumes at step ' + format(done, ',') if done else 'starts fresh'} ({ckpt})"
             + (f"; ships to {run.shipped}" if run.shipped else ""))
 
@@ -59,7 +58,7 @@ def run_or_resume(run: Run) -> None:
     policy (`ship`). A run that was planned with a larger budget than its checkpoint's (control groups
     from 2M to 8M) continues to it."""
     ckpt = checkpoint_of(run)
-    ppo.main(dataclasses.replace(run.args, resume=str(ckpt), extend=True) if ckpt.is_file() else run.args)
+    ppo.main(run.args.replace(resume=str(ckpt), extend=True) if ckpt.is_file() else run.args)
     if run.shipped is not None:
         ship(run)
 

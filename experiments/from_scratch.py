@@ -27,7 +27,6 @@ assets/checkpoints/scratch_general_agent.pt with its campaign record. The recipe
 from __future__ import annotations
 
 import csv
-import dataclasses
 import json
 import math
 import os
@@ -59,7 +58,7 @@ says how each start came to be)."""
 def scratch_args(num_envs: Optional[int] = None, **overrides) -> ppo.Args:
     """ppo.Args of the from-scratch recipe (see the module docstring); `overrides` replace any field afterwards."""
     num_envs = num_envs or os.cpu_count() or 1
-    args = ppo.Args(
+    args = ppo.Args.of(
         env_id="ConstructionPickPlace-v1", reward_mode="normalized_dense", control_mode="pd_joint_delta_pos",
         sim_backend="physx_cpu", cuda=False, curriculum=(FINAL_STAGE,), total_timesteps=BUDGET, curiosity="none",
         success_value="absorbing", bootstrap_at_done="always", gamma=0.95, gae_lambda=0.95,
@@ -68,7 +67,7 @@ def scratch_args(num_envs: Optional[int] = None, **overrides) -> ppo.Args:
         near_goal_max_steps=80, obs_install_offset=True, bounded_mean=True, carry_along_paths=True, reach_in_joint_space=True,
         eval_freq=25, checkpoint_freq=10, log_dir=str(CAMPAIGN_DIR),
     )
-    return dataclasses.replace(args, **overrides)
+    return args.replace(**overrides)
 
 
 def scratch_runs(num_envs: Optional[int] = None, seed: int = 1) -> list[Run]:

@@ -184,9 +184,9 @@ def main(args: Args) -> Path:
     final = bc_ckpt
     if args.ppo_timesteps > 0:
         if ppo_ckpt.exists():
-            timed("PPO", lambda: ppo.main(ppo.Args(resume=str(ppo_ckpt))))
+            timed("PPO", lambda: ppo.main(ppo.Args.of(resume=str(ppo_ckpt))))
         else:
-            timed("PPO", lambda: ppo.main(ppo.Args(
+            timed("PPO", lambda: ppo.main(ppo.Args.of(
                 checkpoint=str(bc_ckpt), env_id="ConstructionPickPlace-v1", reward_mode="sparse", curriculum=(FINAL_STAGE,),
                 curiosity="none", freeze_obs_norm=True, critic_warmup_iterations=args.critic_warmup_iterations,
                 demos=tuple(map(str, demo_files + takeover_files)), bc_coef=args.bc_coef, total_timesteps=args.ppo_timesteps,

@@ -44,7 +44,6 @@ general agent's stages do.
 
 from __future__ import annotations
 
-import dataclasses
 import os
 from dataclasses import dataclass
 from typing import Optional
@@ -70,7 +69,7 @@ def paper_args(num_envs: Optional[int] = None, **overrides) -> PPOArgs:
     if UPDATE_SAMPLES % num_envs:
         raise SystemExit(f"--num-envs {num_envs}: the paper setting's {UPDATE_SAMPLES} samples per update must "
                          f"divide evenly among the envs (use 1, 2, 4, 5, 8, 10, 16, 20, 25, 40, 50, ...)")
-    args = PPOArgs(
+    args = PPOArgs.of(
         env_id="ConstructionPickPlace-v1", reward_mode="sparse", control_mode="pd_joint_delta_pos",
         sim_backend="physx_cpu", cuda=False,
         curriculum=STAGE_NAMES, stage_timesteps=STAGE_STEPS, total_timesteps=4 * STAGE_STEPS,
@@ -83,7 +82,7 @@ def paper_args(num_envs: Optional[int] = None, **overrides) -> PPOArgs:
         norm_adv="batch", clip_vloss=True, vf_coef=0.5, max_grad_norm=None, target_kl=None,
         bootstrap_at_done="truncated", eval_freq=10, checkpoint_freq=5, log_dir=str(CAMPAIGN_DIR),
     )
-    return dataclasses.replace(args, **overrides)
+    return args.replace(**overrides)
 
 
 def general_runs(num_envs: Optional[int] = None, seed: int = 1) -> list[Run]:

@@ -160,7 +160,7 @@ def table_ii_rows(campaign_dir: Path, eval_dir: Path = EVAL_DIR) -> list[TableRo
                      paper=PAPER_CONTROL_GROUPS),
             _evaluation_row("ours: paper setting, general agent", f"{general.what}; 8M env steps", general.shipped,
                             general.name, tuple(TASK_ENV_IDS.values()), done(general), eval_dir)]
-    for k, stage in enumerate(general.args.curriculum[:-1], start=1):
+    for k, stage in enumerate(general.args.stages.curriculum[:-1], start=1):
         snapshot = campaign_dir / general.name / f"checkpoint_stage{k}_{stage}.pt"
         reached = (f"the end of {stage} comes at step {k * STAGE_STEPS:,}" if not k * STAGE_STEPS <= last_step(
             campaign_dir / general.name / "progress.csv") else "that stage's final policy was not kept (ppo.py keeps them since 3.42M)")

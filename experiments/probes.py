@@ -83,27 +83,45 @@ PROBES = {
 """name: (what it changed, its arguments beyond COMMON or its whole command), in the order they ran."""
 
 
-START_CHECKPOINT = "runs/campaign_1682k.pt"
-START_1682K = f"git show 9688cdd:campaign/scratch_general_agent/checkpoint.pt > {START_CHECKPOINT}"
-"""the campaign's fourth start at 1,682,000 env steps, where the continuation probes start."""
+STARTS = {
+    "start_1682k": ("runs/campaign_1682k.pt", "9688cdd", "the campaign's fourth start at 1,682,000 env steps"),
+    "start_4092k": ("runs/campaign_4092k.pt", "51f96b5", "the campaign's fifth start at 4,092,000 env steps"),
+}
+"""name: (where its checkpoint is put, the commit whose campaign/scratch_general_agent/checkpoint.pt it is, what it
+is): the campaign checkpoints the continuation probes of a round start from."""
 EVAL = "python scripts/evaluate.py --all --episodes 50"
 
+
+def _start(name: str) -> tuple[str, str]:
+    """A start's (what, how) row: its checkpoint taken out of the commit that holds it."""
+    path, commit, what = STARTS[name]
+    return f"where round {list(STARTS).index(name) + 1} starts: {what}", \
+        f"git show {commit}:campaign/scratch_general_agent/checkpoint.pt > {path}"
+
+
 CONTINUATIONS = {
-    "start_1682k": ("where they start: the campaign's fourth start at 1,682,000 env steps", START_1682K),
+    "start_1682k": (*_start("start_1682k"), None),
     "control_campaign": ("the campaign run on (the recipe unchanged, its optimizer and start radii kept)",
-                         "python -m experiments.from_scratch (resumed at 1,682,000 steps, stopped at 2,022,000)"),
+                         "python -m experiments.from_scratch (resumed at 1,682,000 steps, stopped at 2,022,000)", None),
     "probeM_paths": ("the dense reward's carry measured along the start paths (`--carry-along-paths`)",
-                     _recipe(exp_name="probeM_paths", checkpoint=START_CHECKPOINT, near_goal_radius=0.8,
+                     _recipe(exp_name="probeM_paths", checkpoint=STARTS["start_1682k"][0], near_goal_radius=0.8,
                              eval_freq=1000, carry_along_paths=True, reach_in_joint_space=False)
-                     + " (stopped at 330,000 steps)"),
+                     + " (stopped at 330,000 steps)", "start_1682k"),
     "probeN_paths_joint_reach": ("M + the reach toward the element in joint space (`--reach-in-joint-space`)",
-                                 _recipe(exp_name="probeN_paths_joint_reach", checkpoint=START_CHECKPOINT,
+                                 _recipe(exp_name="probeN_paths_joint_reach", checkpoint=STARTS["start_1682k"][0],
                                          near_goal_radius=0.8, eval_freq=1000, carry_along_paths=True,
-                                         reach_in_joint_space=True) + " (stopped at 344,000 steps)"),
+                                         reach_in_joint_space=True) + " (stopped at 344,000 steps)", "start_1682k"),
+    "start_4092k": (*_start("start_4092k"), None),
+    "probeO_share05_weights": ("half the episodes from near-goal starts instead of 80% (`--near-goal-share 0.5`) and "
+                               "ceiling panels and windows sampled twice as often as floor panels (`--task-weights 2 2 1`)",
+                               _recipe(exp_name="probeO_share05_weights", checkpoint=STARTS["start_4092k"][0],
+                                       near_goal_radius=1.0, eval_freq=1000, near_goal_share=0.5,
+                                       task_weights=(2.0, 2.0, 1.0)) + " (ran its 600,000 steps)", "start_4092k"),
 }
-"""name: (what it changed, how its policy came to be); each evaluated with `python -m experiments.probes --evaluate
-<name> --checkpoint <its checkpoint>` (EVAL into PROBE_DIR/<name>_eval.json; the start's and the control's
-checkpoints as their commands say, the probes' their runs/probes/<name>/checkpoint.pt)."""
+"""name: (what it changed, how its policy came to be, the start it went on from: its steps count after that start's);
+each evaluated with `python -m experiments.probes --evaluate <name> --checkpoint <its checkpoint>` (EVAL into
+PROBE_DIR/<name>_eval.json; a start's and a control's checkpoints as their commands say, the probes' their
+runs/probes/<name>/checkpoint.pt). The campaign run on from each start is that round's control."""
 
 
 def continuation_table() -> str:
@@ -113,7 +131,7 @@ def continuation_table() -> str:
 
     lines = ["| policy | what it changed | env steps in all | pick: ceiling / window / flooring | "
              "placed: ceiling / window / flooring |", "|---|---|---|---|---|"]
-    for name, (what, _) in CONTINUATIONS.items():
+    for name, (what, _, _) in CONTINUATIONS.items():
         path = PROBE_DIR / f"{name}_eval.json"
         if not path.is_file():
             continue
@@ -124,7 +142,7 @@ def continuation_table() -> str:
                      + " / ".join(f"{100 * t['pick_success']:.0f}%" for t in tasks) + " | "
                      + " / ".join(pct(t["place_success"], t["place_success_ci95"]) for t in tasks) + " |")
     commands = "\n".join(f"- {name}: `{how}`, then `python -m experiments.probes --evaluate {name} --checkpoint <its checkpoint>` "
-                         f"(`{EVAL}`)" for name, (_, how) in CONTINUATIONS.items())
+                         f"(`{EVAL}`)" for name, (_, how, _) in CONTINUATIONS.items())
     return (f"Command: `python -m experiments.probes` (from {PROBE_DIR}/*_eval.json).\n\n"
             "Each policy evaluated with the paper's protocol on the first 50 test seeds of each task (deterministic); "
             "placed with its Wilson 95% interval.\n\n" + "\n".join(lines) + "\n\nHow each came to be:\n\n" + commands)
@@ -144,8 +162,9 @@ def evaluate_continuation(name: str, checkpoint: Path) -> None:
     subprocess.run([sys.executable, *shlex.split(EVAL)[1:], "--checkpoint", str(checkpoint), "--json", str(out)], check=True)
     result = json.loads(out.read_text())
     result["global_step"] = int(load_checkpoint(checkpoint)["progress"]["global_step"])
-    if name.startswith("probe"):  # a probe counts from 0 again: after the start's steps
-        result["global_step"] += int(load_checkpoint(Path(START_CHECKPOINT))["progress"]["global_step"])
+    start = CONTINUATIONS[name][2]
+    if start is not None:  # a probe counts from 0 again: after its start's steps
+        result["global_step"] += int(load_checkpoint(Path(STARTS[start][0]))["progress"]["global_step"])
     out.write_text(json.dumps(result, indent=1))
 
 

@@ -26,7 +26,6 @@ same command continues an interrupted refinement.
 
 from __future__ import annotations
 
-import dataclasses
 import hashlib
 import json
 import shlex
@@ -128,7 +127,7 @@ class Args:
 
 
 def ppo_args(args: Args, bank: Path) -> ppo.Args:
-    return ppo.Args(
+    return ppo.Args.of(
         residual_of=str(args.clone), residual_scale=args.residual_scale, residual_l2_coef=args.residual_l2_coef, start_states=str(bank),
         start_states_share=args.start_states_share, start_states_keep_clock=args.bank_keeps_clock, task_weights=args.task_weights, env_id="ConstructionPickPlace-v1", reward_mode=args.reward_mode,
         curiosity="none", curriculum=(FINAL_STAGE,), total_timesteps=args.total_timesteps, num_envs=args.num_envs,
@@ -169,8 +168,8 @@ def main(args: Args) -> Path:
     for step in [*range(every, args.total_timesteps, every), args.total_timesteps]:
         snapshot = ckpt.with_name(f"checkpoint_{step}.pt")
         if not snapshot.exists():
-            part = dataclasses.replace(run, total_timesteps=step)
-            timed("PPO", lambda: ppo.main(dataclasses.replace(part, resume=str(ckpt), extend=True) if ckpt.exists() else part))
+            part = run.replace(total_timesteps=step)
+            timed("PPO", lambda: ppo.main(part.replace(resume=str(ckpt), extend=True) if ckpt.exists() else part))
             shutil.copyfile(ckpt, snapshot)
         validated[step] = timed("validation", lambda: validate(snapshot, args.run_dir / f"val{n}_{step}.json", n))
         print(f"validation place success at {step} env steps: "

@@ -236,7 +236,7 @@ def ppo_steps_per_second(iterations: int, backend: str, num_envs: Optional[int] 
     from baselines.ppo import ppo
 
     with tempfile.TemporaryDirectory() as log_dir:
-        run_args = ppo.Args(env_id=GENERAL, sim_backend=backend, num_envs=num_envs, num_eval_envs=1, num_eval_steps=1,
+        run_args = ppo.Args.of(env_id=GENERAL, sim_backend=backend, num_envs=num_envs, num_eval_envs=1, num_eval_steps=1,
                             eval_freq=10**9, save_model=False, log_dir=log_dir, exp_name="benchmark",
                             **({} if curiosity is None else dict(curiosity=curiosity)))
         run = ppo.setup(run_args)
@@ -246,7 +246,7 @@ def ppo_steps_per_second(iterations: int, backend: str, num_envs: Optional[int] 
         with open(Path(log_dir) / "benchmark" / "progress.csv") as f:
             sps = [float(row["sps"]) for row in csv.DictReader(f)][1:-1]
     return dict(sps=statistics.median(sps), num_envs=run.args.num_envs, num_steps=run.args.num_steps,
-                curiosity=run.args.curiosity, reward_mode=run.args.reward_mode)
+                curiosity=run.args.icm.curiosity, reward_mode=run.args.reward_mode)
 
 
 def worker_peak_rss_mib(envs: CPUVectorEnv) -> float:

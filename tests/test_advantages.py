@@ -13,11 +13,11 @@ gamma 0.5 (extrinsic), 0.8 (curiosity), lambda 1 (advantage = discounted return 
 is a short sum.
 """
 
-import types
 
 import pytest
 import torch
 
+from baselines.ppo.args import Args
 from baselines.ppo.update import signal_advantages
 
 
@@ -32,7 +32,7 @@ def rollout():
 
 def args(**kw):
     base = dict(curiosity="icm", gamma=0.5, icm_gamma=0.8, gae_lambda=1.0, bootstrap_at_done="truncated", success_value="critic")
-    return types.SimpleNamespace(**{**base, **kw})
+    return Args.of(**{**base, **kw})
 
 
 def test_curiosity_has_its_own_head_discount_and_bootstraps_at_every_episode_end():

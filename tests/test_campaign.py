@@ -2,7 +2,6 @@
 a campaign run from its checkpoint."""
 
 import csv
-import dataclasses
 import json
 import os
 import subprocess
@@ -23,18 +22,18 @@ ROOT = Path(__file__).resolve().parents[1]
 def test_the_general_agent_runs_the_four_table_i_stages_of_exactly_2m_steps_promoted_by_steps_only():
     general, no_curiosity = ps.general_runs(num_envs=2)
     a = general.args
-    assert a.env_id == "ConstructionPickPlace-v1" and a.reward_mode == "sparse" and a.curiosity == "icm"
-    assert a.curriculum == ("cp1", "cp2", "cp3", "cp4") and a.stage_timesteps == 2_000_000 and a.total_timesteps == 8_000_000
-    assert a.icm_strength == 0.02 and a.stage_schedules
-    assert a.num_envs * a.num_steps == ps.UPDATE_SAMPLES and a.stage_timesteps % ps.UPDATE_SAMPLES == 0
+    assert a.env_id == "ConstructionPickPlace-v1" and a.reward_mode == "sparse" and a.icm.curiosity == "icm"
+    assert a.stages.curriculum == ("cp1", "cp2", "cp3", "cp4") and a.stages.stage_timesteps == 2_000_000 and a.total_timesteps == 8_000_000
+    assert a.icm.icm_strength == 0.02 and a.stages.stage_schedules
+    assert a.num_envs * a.num_steps == ps.UPDATE_SAMPLES and a.stages.stage_timesteps % ps.UPDATE_SAMPLES == 0
     # promotion at exactly 2M steps whatever the success, never before
     assert ppo.should_promote(a, ppo.Progress(global_step=1_990_000, smoothed_success=1.0)) is None
     assert ppo.should_promote(a, ppo.Progress(global_step=2_000_000, smoothed_success=0.0)) == "steps"
     b = no_curiosity.args
-    assert b.curiosity == "none" and b.curriculum == ("cp1",) and b.total_timesteps == 2_000_000 and b.seed == a.seed
+    assert b.icm.curiosity == "none" and b.stages.curriculum == ("cp1",) and b.total_timesteps == 2_000_000 and b.seed == a.seed
     assert general.shipped == campaign.SHIPPED_DIR / "paper_general_agent.pt" and no_curiosity.shipped is None
-    assert dataclasses.replace(b, curiosity="icm", curriculum=a.curriculum, total_timesteps=a.total_timesteps,
-                               exp_name=a.exp_name) == a, "the ablation differs from run 1 in curiosity and length only"
+    assert b.replace(curiosity="icm", curriculum=a.stages.curriculum, total_timesteps=a.total_timesteps,
+                     exp_name=a.exp_name) == a, "the ablation differs from run 1 in curiosity and length only"
 
 
 @pytest.mark.parametrize("total, stages", [(2_000_000, 1), (8_000_000, 4)])
@@ -44,9 +43,9 @@ def test_control_groups_are_single_task_cp4_runs_in_2m_step_stages(total, stages
     assert [r.what.split(":")[0] for r in runs] == ["controlGroup4.1", "controlGroup4.2", "controlGroup4.3"]
     general = ps.general_runs(num_envs=2)[0].args
     for r in runs:
-        assert r.args.curriculum == ("cp4",) * stages and r.args.total_timesteps == total
-        same = {f.name for f in dataclasses.fields(ppo.Args)} - {"env_id", "curriculum", "total_timesteps", "exp_name"}
-        assert all(getattr(r.args, k) == getattr(general, k) for k in same), "otherwise the paper setting"
+        assert r.args.stages.curriculum == ("cp4",) * stages and r.args.total_timesteps == total
+        same = set(ppo.Args().flat()) - {"env_id", "curriculum", "total_timesteps", "exp_name"}
+        assert all(r.args.flat()[k] == general.flat()[k] for k in same), "otherwise the paper setting"
     # the 2M point and the 8M point are published both, each in its own file
     suffix = "" if total == 2_000_000 else "_8m"
     assert [r.shipped.name for r in runs] == [f"control_{k}{suffix}.pt" for k in ("ceiling", "window", "flooring")]
@@ -83,7 +82,7 @@ def test_a_campaign_run_resumes_from_its_checkpoint_with_its_step_count_and_stag
     first = torch.load(ckpt, weights_only=False)
     assert first["progress"]["global_step"] == 80
     shipped = tmp_path / "assets" / "tiny.pt"
-    planned = campaign.Run("tiny", dataclasses.replace(run.args, total_timesteps=160), "test", "python tiny.py", shipped)
+    planned = campaign.Run("tiny", run.args.replace(total_timesteps=160), "test", "python tiny.py", shipped)
     assert "resumes at step 80" in campaign.describe(planned) and str(shipped) in campaign.describe(planned)
     with pytest.raises(SystemExit, match="at step 80 of 160"):
         campaign.ship(planned)

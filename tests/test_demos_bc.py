@@ -140,7 +140,7 @@ def test_running_mean_std_matches_the_data_it_has_seen():
 
 
 def test_critic_warmup_moves_the_value_only_and_obs_norm_is_kept_in_the_checkpoint(tmp_path):
-    args = ppo.Args(num_envs=2, num_eval_envs=1, num_steps=40, num_minibatches=2, update_epochs=2, eval_freq=100,
+    args = ppo.Args.of(num_envs=2, num_eval_envs=1, num_steps=40, num_minibatches=2, update_epochs=2, eval_freq=100,
                     checkpoint_freq=1, env_id="Flooring-v1", sim_backend="physx_cpu", log_dir=str(tmp_path),
                     exp_name="warm", total_timesteps=80, curriculum=("cp4",), curiosity="none",
                     critic_warmup_iterations=1)

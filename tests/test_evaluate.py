@@ -92,7 +92,7 @@ def test_the_recorded_episode_is_one_video_named_by_task_and_seed(tmp_path):
 def test_a_checkpoint_of_the_wrong_shape_is_a_clear_error(tmp_path):
     path = tmp_path / "wrong.pt"
     agent = Agent(40, 6, 32)
-    save_checkpoint(path, PPOArgs(hidden_size=32, control_mode="pd_joint_delta_pos"), Progress(), agent,
+    save_checkpoint(path, PPOArgs.of(hidden_size=32, control_mode="pd_joint_delta_pos"), Progress(), agent,
                     torch.optim.Adam(agent.parameters()), None, None, 40, 6)
     with pytest.raises(SystemExit, match=r"does not fit Flooring-v1.*observations of size 40.*has 43"):
         evaluation.main(evaluation.Args(checkpoint=path, env_id="Flooring-v1", episodes=1))

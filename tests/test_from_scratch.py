@@ -20,10 +20,10 @@ def test_the_recipe_learns_from_reward_alone():
     [run] = fs.scratch_runs(num_envs=2)
     a = run.args
     ppo.validate(a)
-    assert a.env_id == "ConstructionPickPlace-v1" and a.curriculum == ("cp4",) and a.total_timesteps <= 20_000_000
-    assert a.reward_mode == "normalized_dense" and a.near_goal_share > 0 and a.success_value == "absorbing"
+    assert a.env_id == "ConstructionPickPlace-v1" and a.stages.curriculum == ("cp4",) and a.total_timesteps <= 20_000_000
+    assert a.reward_mode == "normalized_dense" and a.starts.near_goal_share > 0 and a.ppo.success_value == "absorbing"
     # nothing from the expert: no demonstrations, no warm start, no residual base, no bank of expert states
-    assert a.demos == () and a.bc_coef == 0 and a.checkpoint is None and a.residual_of is None and a.start_states is None
+    assert a.warm.demos == () and a.warm.bc_coef == 0 and a.checkpoint is None and a.warm.residual_of is None and a.starts.start_states is None
     assert a.num_envs * a.num_steps == 2000
     assert "demonstrations: none" in run.method and run.shipped.name == "scratch_general_agent.pt"
     # written down as one ppo.py command, it is the same run
@@ -62,8 +62,8 @@ def test_the_recipe_changes_the_policy_and_a_stopped_run_resumes_in_the_uninterr
     with open(tmp_path / "uninterrupted" / "progress.csv", newline="") as f:
         assert any(int(r["near_goal_episodes"]) for r in csv.DictReader(f)), "near-goal episodes ended (cut at 10 steps)"
 
-    restored = ppo.setup(ppo.Args(resume=str(tmp_path / "interrupted" / "checkpoint.pt")))
-    assert restored.args.obs_install_offset and restored.args.bounded_mean and restored.args.near_goal_max_steps == 10
+    restored = ppo.setup(ppo.Args.of(resume=str(tmp_path / "interrupted" / "checkpoint.pt")))
+    assert restored.args.obs_install_offset and restored.args.ppo.bounded_mean and restored.args.starts.near_goal_max_steps == 10
     assert dataclasses.asdict(restored.progress) == ref["progress"]
     for k, v in restored.agent.state_dict().items():
         assert torch.equal(v, ref["agent"][k]), k
@@ -73,7 +73,7 @@ def test_the_recipe_changes_the_policy_and_a_stopped_run_resumes_in_the_uninterr
     assert torch.equal(torch.get_rng_state(), ref["rng"]["torch"])
     assert np.random.get_state()[1].tolist() == ref["rng"]["numpy"][1].tolist() and random.getstate() == ref["rng"]["python"]
     restored.eval_envs.close()
-    resumed = ppo.main(ppo.Args(resume=str(tmp_path / "interrupted" / "checkpoint.pt")))
+    resumed = ppo.main(ppo.Args.of(resume=str(tmp_path / "interrupted" / "checkpoint.pt")))
     assert resumed.global_step == u.global_step == 320 and resumed.iteration == u.iteration
 
 
@@ -83,7 +83,7 @@ def test_a_tiny_run_ships_before_its_end_with_a_record_that_says_where_it_stands
     [run] = fs.scratch_runs(num_envs=2)
     run = dataclasses.replace(run, args=fs.scratch_args(**small), shipped=tmp_path / "scratch.pt")
     campaign.run_or_resume(dataclasses.replace(run, shipped=None))
-    longer = dataclasses.replace(run, args=dataclasses.replace(run.args, total_timesteps=160))
+    longer = dataclasses.replace(run, args=run.args.replace(total_timesteps=160))
     with pytest.raises(SystemExit, match="at step 80 of 160"):
         campaign.ship(longer)
     campaign.ship(longer, before_the_end=True)
@@ -119,7 +119,7 @@ def test_the_report_draws_the_curve_and_writes_the_section(tmp_path, monkeypatch
     monkeypatch.setattr(fs, "CURVE", tmp_path / "images" / "scratch_curve.png")
     monkeypatch.setattr(fs, "EVAL_JSON", tmp_path / "none.json")
     [run] = fs.scratch_runs(num_envs=2)
-    run = dataclasses.replace(run, args=dataclasses.replace(run.args, log_dir=str(tmp_path / "campaign")))
+    run = dataclasses.replace(run, args=run.args.replace(log_dir=str(tmp_path / "campaign")))
     results = tmp_path / "RESULTS.md"
     body = fs.report(run, results)
     assert "| 600,000 / 20,000,000 | 0.3 h | 0.2 / 0.4 / 1.0 | 0.0 / 50.0 / 25.0 | 70.0 | 80.0 |" in body

@@ -19,7 +19,7 @@ import pytest
 import torch
 
 from baselines.ppo import evaluation, ppo, update
-from baselines.ppo.args import ControlMode
+from baselines.ppo.args import GROUPS, Args, ControlMode, command_line
 from ms_construction.curriculum import stage_tolerances
 from ms_construction.vector_env import CPUVectorEnv
 
@@ -33,7 +33,7 @@ TINY = dict(num_envs=2, num_eval_envs=1, num_steps=40, num_minibatches=2, update
 
 
 def tiny_args(tmp_path, **kw) -> ppo.Args:
-    return ppo.Args(**{**TINY, "log_dir": str(tmp_path), **kw})
+    return ppo.Args.of(**{**TINY, "log_dir": str(tmp_path), **kw})
 
 
 def read_csv(path):
@@ -44,6 +44,25 @@ def read_csv(path):
 def worker_tolerances(envs: CPUVectorEnv) -> list[list[float]]:
     """(tau_pick, tau_place, tau_angle_deg) in force in each worker's env."""
     return [t[0].tolist() for t in envs.call("tolerances")]
+
+
+def test_args_nest_their_groups_yet_keep_flat_flags_and_flat_checkpoint_args():
+    import tyro
+
+    parsed = tyro.cli(Args, args=["--seed", "3", "--gamma", "0.5", "--curiosity", "none", "--curriculum", "cp4",
+                                  "--residual-scale", "0.2", "--near-goal-share", "0.3"])
+    assert (parsed.seed, parsed.ppo.gamma, parsed.icm.curiosity, parsed.stages.curriculum, parsed.warm.residual_scale,
+            parsed.starts.near_goal_share) == (3, 0.5, "none", ("cp4",), 0.2, 0.3), "each flag lands in its group"
+    assert set(GROUPS) == {"ppo", "icm", "stages", "warm", "starts"}
+    flat = parsed.flat()
+    assert "gamma" in flat and "ppo" not in flat and Args.of(**flat) == parsed, "a checkpoint's flat args build the same Args"
+    assert tyro.cli(Args, args=command_line(parsed)) == parsed, "command_line writes the flags that build it"
+    other = parsed.replace(gamma=0.9, seed=4)
+    assert (other.ppo.gamma, other.seed, parsed.ppo.gamma, parsed.seed) == (0.9, 4, 0.5, 3)
+    other.ppo.learning_rate = 1.0
+    assert parsed.ppo.learning_rate == 3e-4, "a replaced copy shares no group with its original"
+    with pytest.raises(TypeError, match="no field"):
+        Args.of(gama=0.9)
 
 
 @pytest.mark.parametrize("curiosity", ["none", "icm"])
@@ -72,7 +91,7 @@ def test_a_few_iterations_give_finite_losses_and_change_parameters(tmp_path, cur
 
 
 def test_promotion_rules():
-    args = ppo.Args(curriculum=("cp1", "cp2"), stage_timesteps=1000, min_stage_timesteps=300, promote_success=0.8)
+    args = ppo.Args.of(curriculum=("cp1", "cp2"), stage_timesteps=1000, min_stage_timesteps=300, promote_success=0.8)
     p = ppo.Progress(global_step=999)
     assert ppo.should_promote(args, p) is None
     p.global_step = 1000
@@ -90,7 +109,7 @@ def test_promotion_rules():
 
 
 def test_stage_change_sets_every_worker_s_tolerances():
-    envs = ppo.make_envs(ppo.Args(**TINY), 2, torch.device("cpu"))
+    envs = ppo.make_envs(ppo.Args.of(**TINY), 2, torch.device("cpu"))
     ppo.reset(envs, seed=0)
     try:
         for stage in ("cp2", "cp3"):
@@ -156,7 +175,7 @@ def test_interrupted_run_resumes_with_the_uninterrupted_run_s_state(tmp_path, mo
     assert i.iteration == 2 and u.iteration == 4
 
     ckpt_i = tmp_path / "interrupted" / "checkpoint.pt"
-    restored = ppo.setup(ppo.Args(resume=str(ckpt_i)))
+    restored = ppo.setup(ppo.Args.of(resume=str(ckpt_i)))
     ref = torch.load(tmp_path / "uninterrupted" / "iter2.pt", weights_only=False)
     assert dataclasses.asdict(restored.progress) == ref["progress"]
     assert restored.progress.global_step == 160 and restored.progress.stage_index == 1
@@ -178,7 +197,7 @@ def test_interrupted_run_resumes_with_the_uninterrupted_run_s_state(tmp_path, mo
     assert random.getstate() == ref["rng"]["python"], "Python's random state is restored too"
     restored.eval_envs.close()
 
-    resumed = ppo.main(ppo.Args(resume=str(ckpt_i)))
+    resumed = ppo.main(ppo.Args.of(resume=str(ckpt_i)))
     assert resumed.global_step == u.global_step and resumed.iteration == u.iteration
     assert resumed.stage_changes == u.stage_changes
     rows = read_csv(tmp_path / "interrupted" / "progress.csv")
@@ -289,7 +308,7 @@ def test_a_stopped_run_saves_its_checkpoint_and_exits_with_one_line(tmp_path, ho
     assert last.startswith(f"stopped by {sig.name} after iteration ") and "--resume" in last, stderr
     rows = read_csv(csv_path)
     ckpt = tmp_path / "stopped" / "checkpoint.pt"
-    run = ppo.setup(ppo.Args(resume=str(ckpt)))
+    run = ppo.setup(ppo.Args.of(resume=str(ckpt)))
     try:
         assert run.progress.iteration == len(rows) and run.progress.global_step == int(rows[-1]["global_step"])
     finally:
@@ -335,11 +354,11 @@ def test_one_update_on_a_fixed_batch_gives_the_losses_and_weights_of_the_origina
     try:
         torch.manual_seed(0)
         np.random.seed(0)
-        args = ppo.Args(hidden_size=64, num_minibatches=8, update_epochs=4, curiosity=setting["curiosity"],
+        args = ppo.Args.of(hidden_size=64, num_minibatches=8, update_epochs=4, curiosity=setting["curiosity"],
                         bc_coef=0.1 if setting["bc"] else 0.0, clip_vloss=setting["clip_vloss"],
                         target_kl=setting["target_kl"], icm_feature_dim=16)
         agent = ppo.make_agent(args, 43, 6)
-        optimizer = update.adam(agent.parameters(), lr=args.learning_rate, eps=1e-5)
+        optimizer = update.adam(agent.parameters(), lr=args.ppo.learning_rate, eps=1e-5)
         batch = fixed_batch()
         agent.obs_rms.update(agent.features(batch["obs"]))
         g = torch.Generator().manual_seed(1)
@@ -375,8 +394,8 @@ def test_a_checkpoint_of_an_earlier_version_loads_through_the_checkpoint_api(tmp
     assert ckpt["args"]["bootstrap_at_done"] == "truncated" and "finite_horizon_gae" not in ckpt["args"]
     assert ckpt["args"]["norm_adv"] == "minibatch"
     assert ckpt["args"]["curiosity"] == "icm_normalized", "before ML-Agents' curiosity, icm meant the normalized variant"
-    args = ppo.Args(**{**ckpt["args"], "curriculum": tuple(ckpt["args"]["curriculum"])})  # what --resume builds
-    assert args.bootstrap_at_done == "truncated"
+    args = ppo.Args.of(**{**ckpt["args"], "curriculum": tuple(ckpt["args"]["curriculum"])})  # what --resume builds
+    assert args.ppo.bootstrap_at_done == "truncated"
     agent, env_kwargs = checkpoints.load_policy(path, "Flooring-v1")
     assert env_kwargs == {"control_mode": "pd_joint_delta_pos"}
     for k, v in agent.state_dict().items():
@@ -403,7 +422,7 @@ def test_a_file_that_is_not_a_checkpoint_is_refused_in_one_line_naming_it(tmp_pa
         assert message.startswith(f"{option}: {path} is not a checkpoint") and "\n" not in message
         assert "a checkpoint is the .pt file that baselines/ppo/ppo.py" in message
     with pytest.raises(SystemExit, match="is not a checkpoint"):
-        ppo.setup(ppo.Args(resume=str(path)))
+        ppo.setup(ppo.Args.of(resume=str(path)))
 
 
 @pytest.mark.parametrize("script", [["scripts/evaluate.py"], ["baselines/ppo/ppo.py", "--evaluate"]])
@@ -441,11 +460,11 @@ def test_near_goal_starts_widen_per_task_with_success_and_a_resumed_run_goes_on_
     assert ckpt["progress"]["near_goal_recent"] == progress.near_goal_recent and len(progress.near_goal_recent[2]) < 4
     assert any(not torch.equal(v, ckpt["agent"][k]) for k, v in initial.items()), "the policy changed"
 
-    restored = ppo.setup(ppo.Args(resume=str(tmp_path / "near" / "checkpoint.pt")))
+    restored = ppo.setup(ppo.Args.of(resume=str(tmp_path / "near" / "checkpoint.pt")))
     assert restored.progress.near_goal_recent == progress.near_goal_recent
     restored.eval_envs.close()
     calls.clear()
-    resumed = ppo.main(ppo.Args(resume=str(tmp_path / "near" / "checkpoint.pt"), extend=True, total_timesteps=240,
+    resumed = ppo.main(ppo.Args.of(resume=str(tmp_path / "near" / "checkpoint.pt"), extend=True, total_timesteps=240,
                                 curriculum=("cp4",)))
     first = next(c for c in calls if c[0] == "set_near_goal_starts")
     assert first == ("set_near_goal_starts", (1.0, tuple(progress.near_goal_radius), None)), calls

@@ -148,7 +148,7 @@ def test_a_run_folder_s_confirmation_names_the_snapshot_and_the_agent_shipped_th
 def test_the_reward_reaches_ppo_and_a_dense_run_is_labelled_so(tmp_path):
     args = refine.Args(run_dir=tmp_path, reward_mode="normalized_dense", reward_scale=0.02, gamma=0.99)
     run = refine.ppo_args(args, tmp_path / "failure_states.pt")
-    assert (run.reward_mode, run.reward_scale, run.gamma, run.bootstrap_at_done) == ("normalized_dense", 0.02, 0.99, "always")
+    assert (run.reward_mode, run.ppo.reward_scale, run.ppo.gamma, run.ppo.bootstrap_at_done) == ("normalized_dense", 0.02, 0.99, "always")
     dense, sparse = (summary(name, {100_000: (0.97, 0.95, 0.99)}) for name in ("dense", "sparse"))
     dense["settings"].update(reward_mode="normalized_dense", reward_scale=0.02)
     paths = [tmp_path / "dense.json", tmp_path / "sparse.json"]
@@ -163,9 +163,9 @@ def test_task_weights_reach_the_training_envs_only_and_label_the_run(tmp_path):
     from baselines.ppo import ppo
 
     run = refine.ppo_args(refine.Args(run_dir=tmp_path, task_weights=(0.0, 1.0, 0.0)), tmp_path / "bank.pt")
-    run.start_states = None
+    run.starts.start_states = None
     with pytest.raises(SystemExit, match="task-weights"):
-        ppo.validate(dataclasses.replace(run, task_weights=(0.0, 0.0, 0.0)))
+        ppo.validate(run.replace(task_weights=(0.0, 0.0, 0.0)))
     seen = {}
     for mode in (False, True):  # training, then evaluation
         envs = ppo.make_envs(run, 1, torch.device("cpu"), eval_mode=mode)
@@ -182,7 +182,7 @@ def test_task_weights_reach_the_training_envs_only_and_label_the_run(tmp_path):
 def test_the_elapsed_time_reaches_ppo_and_labels_the_run(tmp_path):
     run = refine.ppo_args(refine.Args(run_dir=tmp_path, obs_elapsed_time=True, bootstrap_at_done="terminated"),
                           tmp_path / "bank.pt")
-    assert run.obs_elapsed_time and run.bootstrap_at_done == "terminated"
+    assert run.obs_elapsed_time and run.ppo.bootstrap_at_done == "terminated"
     timed = summary("timed", {100_000: (0.97, 0.95, 0.99)})
     timed["settings"].update(obs_elapsed_time=True, bootstrap_at_done="terminated")
     (tmp_path / "timed.json").write_text(json.dumps(timed))
@@ -193,7 +193,7 @@ def test_the_elapsed_time_reaches_ppo_and_labels_the_run(tmp_path):
 def test_a_bank_that_keeps_its_clock_reaches_ppo_and_one_of_other_offsets_is_refused(stand_ins):
     args, runs, *_ = stand_ins
     run = refine.ppo_args(dataclasses.replace(args, bank_keeps_clock=True), args.run_dir / "failure_states.pt")
-    assert run.start_states_keep_clock
+    assert run.starts.start_states_keep_clock
     with pytest.raises(SystemExit, match="other offsets"):
         refine.main(dataclasses.replace(args, bank_offsets=(-90, -50, -20)))
     with pytest.raises(SystemExit, match="without elapsed steps"):  # the stand-in bank predates them

@@ -1,7 +1,6 @@
 """PPO on the clone: the residual policy (baselines/ppo/residual.py) and the failure-state starts
 (baselines/ppo/start_states.py)."""
 
-import dataclasses
 from pathlib import Path
 
 import gymnasium as gym
@@ -20,7 +19,7 @@ REFINED = ROOT / "assets/checkpoints/general_agent.pt"
 
 
 def residual_args(tmp_path, **kw) -> ppo.Args:
-    return ppo.Args(**{**dict(residual_of=str(CLONE), env_id="Flooring-v1", reward_mode="sparse", curiosity="none",
+    return ppo.Args.of(**{**dict(residual_of=str(CLONE), env_id="Flooring-v1", reward_mode="sparse", curiosity="none",
                               curriculum=("cp4",), num_envs=2, num_eval_envs=1, num_steps=40, num_minibatches=2,
                               update_epochs=2, eval_freq=100, checkpoint_freq=1, total_timesteps=80,
                               sim_backend="physx_cpu", log_dir=str(tmp_path), exp_name="residual"), **kw})
@@ -82,7 +81,7 @@ def test_the_l2_anchor_pulls_the_correction_back_to_the_clone():
     batch = dict(obs=obs, next_obs=obs, actions=actions, logprobs=logprobs, advantages=torch.zeros(256),
                  returns=values, values=values)
     before = agent.correction(obs).pow(2).sum(-1).mean().item()
-    args = ppo.Args(residual_of=str(CLONE), residual_l2_coef=1.0, num_minibatches=1, update_epochs=5, target_kl=None,
+    args = ppo.Args.of(residual_of=str(CLONE), residual_l2_coef=1.0, num_minibatches=1, update_epochs=5, target_kl=None,
                     norm_adv="none")
     losses = update.ppo_update(agent, update.adam([p for p in agent.parameters() if p.requires_grad], lr=1e-3), batch, args)
     after = agent.correction(obs).pow(2).sum(-1).mean().item()
@@ -136,8 +135,7 @@ def test_a_short_residual_run_changes_the_policy_resumes_and_evaluates(tmp_path,
         assert torch.equal(ckpt["agent"][f"base.{k}"], v), f"the base stays as it was: {k}"
     assert ckpt["agent"]["residual_mean.6.weight"].abs().sum() > 0, "the correction has learnt"
     assert ckpt["obs_dim"] == 43 + timed
-    progress = ppo.main(dataclasses.replace(residual_args(tmp_path, total_timesteps=160, **kw), resume=str(ckpt_path),
-                                            extend=True))
+    progress = ppo.main(residual_args(tmp_path, total_timesteps=160, **kw).replace(resume=str(ckpt_path), extend=True))
     assert progress.global_step == 160
     _, env_kwargs = load_policy(ckpt_path, "Flooring-v1")  # what scripts/evaluate.py loads
     assert env_kwargs.get("obs_elapsed_time", False) == timed

@@ -1,17 +1,21 @@
-"""ppo.py's arguments: one `Args` dataclass (tyro reads it as ppo.py's command line, one flag per field), built of
-groups of fields (the run, PPO, curiosity, the curriculum, warm starts, start states; flat, so that every command
-and every saved checkpoint's args read as before), and the checks and machine-dependent defaults applied to it
+"""ppo.py's arguments: one `Args` dataclass, the run's fields at its top level (as ManiSkill's and CleanRL's) and
+the rest in nested groups: `args.ppo` (the update, advantages and networks), `args.icm` (curiosity),
+`args.stages` (the tolerance curriculum), `args.warm` (warm starts and residuals) and `args.starts` (start
+states). tyro reads it as ppo.py's command line with one flag per field and no group prefix (`--gamma`,
+`--near-goal-share`), as before the groups; a checkpoint keeps the args as one flat dict (`Args.flat`,
+`Args.of`), so every checkpoint reads as before. Also the checks and machine-dependent defaults applied to it
 before a run starts."""
 
 from __future__ import annotations
 
 import dataclasses
 import os
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Literal, Optional, get_args, get_origin, get_type_hints
+from typing import Annotated, Any, Iterator, Literal, Optional, get_args, get_origin, get_type_hints
 
 import torch
+import tyro
 
 from ms_construction.curriculum import STAGE_NAMES
 from ms_construction.envs import ENV_IDS
@@ -257,11 +261,60 @@ class StartStateArgs:
     """a near-goal episode that has not placed within this many steps is truncated (None: the task's step limit)."""
 
 
-@dataclass
-class Args(StartStateArgs, WarmStartArgs, CurriculumArgs, CuriosityArgs, PPOArgs, RunArgs):
-    """ppo.py's command line, one flag per field (`--gamma`, `--icm-strength`, ...): the run's fields first, then
-    PPO's, curiosity's, the curriculum's, the warm start's and the start states'."""
+_GROUP = tyro.conf.OmitArgPrefixes  # a group's fields keep their flat flags: --gamma, not --ppo.gamma
 
+
+@dataclass
+class Args(RunArgs):
+    """ppo.py's command line, one flag per field (`--seed`, `--gamma`, `--icm-strength`, ...): the run's fields, then
+    PPO's, curiosity's, the curriculum's, the warm start's and the start states', each group a nested dataclass."""
+
+    ppo: Annotated[PPOArgs, _GROUP] = field(default_factory=PPOArgs)
+    """PPO: the update, the advantages and the networks."""
+    icm: Annotated[CuriosityArgs, _GROUP] = field(default_factory=CuriosityArgs)
+    """the curiosity bonus (ICM)."""
+    stages: Annotated[CurriculumArgs, _GROUP] = field(default_factory=CurriculumArgs)
+    """the tolerance curriculum (Table I)."""
+    warm: Annotated[WarmStartArgs, _GROUP] = field(default_factory=WarmStartArgs)
+    """a warm start or a residual on a frozen base."""
+    starts: Annotated[StartStateArgs, _GROUP] = field(default_factory=StartStateArgs)
+    """where training episodes start."""
+
+    @classmethod
+    def of(cls, **values: Any) -> "Args":
+        """Args from flat field names (`Args.of(gamma=0.95, near_goal_share=0.8)`, a checkpoint's saved dict): each
+        goes to its group; the rest keep their defaults. An unknown name is refused as a dataclass would."""
+        return cls().replace(**values)
+
+    def replace(self, **values: Any) -> "Args":
+        """A copy with these fields (flat names) replaced, as `dataclasses.replace` but across the groups."""
+        unknown = sorted(set(values) - set(GROUP_OF))
+        if unknown:
+            raise TypeError(f"Args has no field(s) {', '.join(unknown)}")
+        groups = {g: dataclasses.replace(getattr(self, g), **{k: v for k, v in values.items() if GROUP_OF[k] == g})
+                  for g in GROUPS}
+        return dataclasses.replace(self, **{k: v for k, v in values.items() if GROUP_OF[k] is None}, **groups)
+
+    def flat(self) -> dict:
+        """Every field by its flat name (what a checkpoint saves as its args)."""
+        return {f.name: getattr(self if g is None else getattr(self, g), f.name) for g, f in flat_fields()}
+
+
+GROUPS = {"ppo": PPOArgs, "icm": CuriosityArgs, "stages": CurriculumArgs, "warm": WarmStartArgs, "starts": StartStateArgs}
+"""Args' nested groups: attribute name and dataclass."""
+
+
+def flat_fields() -> Iterator[tuple[Optional[str], dataclasses.Field]]:
+    """(group or None for the run's own, field) of every field of Args, in the command line's order."""
+    for f in dataclasses.fields(RunArgs):
+        yield None, f
+    for g, cls in GROUPS.items():
+        for f in dataclasses.fields(cls):
+            yield g, f
+
+
+GROUP_OF = {f.name: g for g, f in flat_fields()}
+"""flat field name: its group (None: the run's own)."""
 
 
 def validate(args: Args) -> None:
@@ -269,40 +322,41 @@ def validate(args: Args) -> None:
     worker processes, with their tracebacks)."""
     if args.env_id not in ENV_IDS:
         raise SystemExit(f"--env-id {args.env_id}: use one of {', '.join(ENV_IDS)}")
-    hints = get_type_hints(Args)
-    for f in dataclasses.fields(Args):  # Args built in code are not checked by tyro
-        allowed = get_args(hints[f.name]) if get_origin(hints[f.name]) is Literal else ()
-        if allowed and getattr(args, f.name) not in allowed:
-            raise SystemExit(f"--{f.name.replace('_', '-')} {getattr(args, f.name)}: use one of {', '.join(allowed)}")
+    values = args.flat()
+    for g, f in flat_fields():  # Args built in code are not checked by tyro
+        hint = get_type_hints(RunArgs if g is None else GROUPS[g])[f.name]
+        allowed = get_args(hint) if get_origin(hint) is Literal else ()
+        if allowed and values[f.name] not in allowed:
+            raise SystemExit(f"--{f.name.replace('_', '-')} {values[f.name]}: use one of {', '.join(allowed)}")
     for name in ("residual_of", "start_states"):
-        if getattr(args, name) is not None and not Path(getattr(args, name)).is_file():
-            raise SystemExit(f"--{name.replace('_', '-')}: no such file: {getattr(args, name)}")
-    if args.residual_l2_coef and not args.residual_of:
+        if values[name] is not None and not Path(values[name]).is_file():
+            raise SystemExit(f"--{name.replace('_', '-')}: no such file: {values[name]}")
+    if args.warm.residual_l2_coef and not args.warm.residual_of:
         raise SystemExit("--residual-l2-coef weighs a residual's correction: give --residual-of")
-    if args.residual_of and args.bc_coef > 0:
+    if args.warm.residual_of and args.warm.bc_coef > 0:
         raise SystemExit("--bc-coef works on the policy's own weights; a residual agent (--residual-of) has none to pull")
     if args.task_weights is not None and (args.env_id != "ConstructionPickPlace-v1" or min(args.task_weights) < 0
                                           or sum(args.task_weights) <= 0):
         raise SystemExit(f"--task-weights {args.task_weights}: three weights >= 0, not all 0 (ceiling, window, flooring), "
                          "of the general task ConstructionPickPlace-v1 only")
     for name in ("near_goal_share", "near_goal_radius", "near_goal_promote"):
-        if not 0 <= getattr(args, name) <= 1:
-            raise SystemExit(f"--{name.replace('_', '-')} must lie in [0, 1], got {getattr(args, name)}")
-    if not 0 <= args.start_states_share <= 1:
-        raise SystemExit(f"--start-states-share must lie in [0, 1], got {args.start_states_share}")
-    if args.start_states_keep_clock and not args.start_states:
+        if not 0 <= values[name] <= 1:
+            raise SystemExit(f"--{name.replace('_', '-')} must lie in [0, 1], got {values[name]}")
+    if not 0 <= args.starts.start_states_share <= 1:
+        raise SystemExit(f"--start-states-share must lie in [0, 1], got {args.starts.start_states_share}")
+    if args.starts.start_states_keep_clock and not args.starts.start_states:
         raise SystemExit("--start-states-keep-clock: give the bank (--start-states)")
-    if args.start_states and args.sim_backend == "physx_cuda":
+    if args.starts.start_states and args.sim_backend == "physx_cuda":
         raise SystemExit("--start-states: physx_cpu only (the bank is restored in the env worker processes)")
-    missing = [p for p in args.demos if not Path(p).is_file()]
+    missing = [p for p in args.warm.demos if not Path(p).is_file()]
     if missing:
         raise SystemExit(f"--demos: no such file(s): {', '.join(missing)} (record them with scripts/collect_demos.py)")
-    bad = [s for s in args.curriculum if s not in STAGE_NAMES]
-    if bad or not args.curriculum:
-        raise SystemExit(f"--curriculum {' '.join(args.curriculum)}: stages must be among {', '.join(STAGE_NAMES)}")
+    bad = [s for s in args.stages.curriculum if s not in STAGE_NAMES]
+    if bad or not args.stages.curriculum:
+        raise SystemExit(f"--curriculum {' '.join(args.stages.curriculum)}: stages must be among {', '.join(STAGE_NAMES)}")
     for name in ("total_timesteps", "stage_timesteps", "num_minibatches", "update_epochs", "eval_freq", "checkpoint_freq"):
-        if getattr(args, name) <= 0:
-            raise SystemExit(f"--{name.replace('_', '-')} must be positive, got {getattr(args, name)}")
+        if values[name] <= 0:
+            raise SystemExit(f"--{name.replace('_', '-')} must be positive, got {values[name]}")
 
 
 def resolve_defaults(args: Args) -> None:
@@ -317,22 +371,21 @@ def resolve_defaults(args: Args) -> None:
     if args.num_steps is None:
         args.num_steps = 50 if gpu else 250
     if args.exp_name is None:
-        args.exp_name = f"{args.env_id}__{args.curiosity}__{'-'.join(args.curriculum)}__s{args.seed}"
-    if args.bootstrap_at_done is None:
-        args.bootstrap_at_done = "truncated" if args.reward_mode == "sparse" else "always"
+        args.exp_name = f"{args.env_id}__{args.icm.curiosity}__{'-'.join(args.stages.curriculum)}__s{args.seed}"
+    if args.ppo.bootstrap_at_done is None:
+        args.ppo.bootstrap_at_done = "truncated" if args.reward_mode == "sparse" else "always"
 
 
 def command_line(args: Args) -> list[str]:
     """ppo.py's flags that build `args` (those that differ from the defaults), so that a run configured in code
     (experiments/) can be written down as one `python baselines/ppo/ppo.py ...` command."""
-    flags, default = [], Args()
-    for f in dataclasses.fields(Args):
-        value = getattr(args, f.name)
-        if value == getattr(default, f.name):
+    flags, default = [], Args().flat()
+    for name, value in args.flat().items():
+        if value == default[name]:
             continue
-        flag = "--" + f.name.replace("_", "-")
+        flag = "--" + name.replace("_", "-")
         if isinstance(value, bool):
-            flags.append(flag if value else "--no-" + f.name.replace("_", "-"))
+            flags.append(flag if value else "--no-" + name.replace("_", "-"))
         elif value is None:
             flags += [flag, "None"]
         elif isinstance(value, (tuple, list)):

@@ -98,7 +98,7 @@ def main(args: Args) -> Path:
     obs_t, act_t, ret_t = (torch.as_tensor(x, dtype=torch.float32) for x in (obs, act, ret))
     print(f"{len(episodes)} demonstrations, {len(obs)} steps ({int((~val).sum())} train, {int(val.sum())} validation)")
 
-    ppo_args = PPOArgs(env_id=args.env_id, control_mode="pd_joint_delta_pos", hidden_size=args.hidden_size,
+    ppo_args = PPOArgs.of(env_id=args.env_id, control_mode="pd_joint_delta_pos", hidden_size=args.hidden_size,
                        rotation_features=args.rotation_features, seed=args.seed, exp_name=args.out.parent.name)
     agent = make_agent(ppo_args, obs.shape[1], act.shape[1])
     agent.obs_rms.update(agent.features(obs_t[torch.as_tensor(~val)]))

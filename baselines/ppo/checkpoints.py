@@ -30,17 +30,17 @@ from ms_construction.envs.construction_env import STATE_QUATERNION_STARTS
 WHAT_A_CHECKPOINT_IS = ("a checkpoint is the .pt file that baselines/ppo/ppo.py or baselines/ppo/bc.py writes "
                         "(torch.save of a dict with args, obs_dim, act_dim and the agent's weights)")
 def value_heads(args) -> int:
-    """Value heads of the agent `args` describes: two (extrinsic, curiosity) with ML-Agents' curiosity,
-    which has its own discount and ignores episode ends; one otherwise."""
-    get = args.get if isinstance(args, dict) else lambda k, d=None: getattr(args, k, d)
-    return curiosity.value_heads(get("curiosity"))
+    """Value heads of the agent `args` (ppo.py's Args or a checkpoint's saved dict of them) describes: two
+    (extrinsic, curiosity) with ML-Agents' curiosity, which has its own discount and ignores episode ends; one
+    otherwise."""
+    return curiosity.value_heads((args if isinstance(args, dict) else args.flat())["curiosity"])
 
 
 def make_agent(args, obs_dim: int, act_dim: int, base_args: Optional[dict] = None) -> nn.Module:
     """The Agent that `args` (ppo.py's Args or a checkpoint's saved dict of them) describes; with
     `residual_of`, a ResidualAgent on a base that `base_args` (the base checkpoint's args) describes; a base that is
     itself a residual carries its own base's args under `base_args["base_args"]`."""
-    get = args.get if isinstance(args, dict) else lambda k, d=None: getattr(args, k, d)
+    get = (args if isinstance(args, dict) else args.flat()).get
     if get("residual_of"):
         if base_args is None:
             raise ValueError("a residual agent needs its base's args (the checkpoint's base_args)")
@@ -95,7 +95,7 @@ def save_checkpoint(path: Path, args, progress: Progress, agent: Agent, optimize
     """Write atomically (a temporary file in the same folder, then a rename); `extra` entries (e.g.
     bc.py's record of its demonstrations) are stored beside the run's state."""
     state = dict(
-        args=dataclasses.asdict(args), progress=dataclasses.asdict(progress), obs_dim=obs_dim, act_dim=act_dim,
+        args=args.flat(), progress=dataclasses.asdict(progress), obs_dim=obs_dim, act_dim=act_dim,
         agent=agent.state_dict(), optimizer=None if optimizer is None else optimizer.state_dict(),
         icm=None if icm is None else icm.state_dict(),
         icm_optimizer=None if icm_optimizer is None else icm_optimizer.state_dict(),

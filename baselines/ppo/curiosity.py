@@ -45,7 +45,7 @@ def make_icm(mode: str, obs_dim: int, act_dim: int, args) -> "ICM | None":
         return None
     if mode not in MODES:
         raise ValueError(f"curiosity {mode!r}: use one of {', '.join(MODES)}")
-    return ICM(obs_dim, act_dim, args.icm_strength, args.icm_feature_dim, args.icm_hidden_size, args.icm_forward_weight,
+    return ICM(obs_dim, act_dim, args.icm.icm_strength, args.icm.icm_feature_dim, args.icm.icm_hidden_size, args.icm.icm_forward_weight,
                normalize=joins_extrinsic_reward(mode))
 
 

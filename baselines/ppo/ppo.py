@@ -1,7 +1,8 @@
 """PPO with a curiosity bonus (ICM) and the paper's tolerance curriculum, for the construction tasks.
 
 In the shape of ManiSkill's PPO baseline (CleanRL style: read top to bottom); its one `Args` dataclass
-(the command line) is in args.py, the networks in networks.py, the update (GAE and the clipped objective) in
+(the command line; the run's fields at the top, PPO's in `args.ppo`, curiosity's in `args.icm`, the curriculum's
+in `args.stages`, warm starts' in `args.warm`, start states' in `args.starts`) is in args.py, the networks in networks.py, the update (GAE and the clipped objective) in
 update.py, ICM in curiosity.py, checkpoints and the CSV log in checkpoints.py, the evaluation in evaluation.py.
 Additions: `--curiosity icm` (Pathak et al. 2017), `--curriculum
 cp1 cp2 cp3 cp4` (Table I of the paper, each stage inheriting every parameter of the previous one),
@@ -25,7 +26,6 @@ SIGTERM ends a run after the iteration in progress, with a checkpoint (a second 
 
 from __future__ import annotations
 
-import dataclasses
 import functools
 import math
 import random
@@ -72,18 +72,18 @@ def make_envs(args: Args, num_envs: int, device: torch.device, eval_mode: bool =
     """`num_envs` envs with same-step resets and torch tensors in and out: worker processes on
     physx_cpu (one env each), ManiSkillVectorEnv on physx_cuda. With `video_dir`, evaluation videos."""
     kwargs = dict(obs_mode="state", reward_mode=args.reward_mode, render_mode="rgb_array" if video_dir else None)
-    kwargs.update(policy_env_kwargs(vars(args)))
+    kwargs.update(policy_env_kwargs(args.flat()))
     for reward_option in ("carry_along_paths", "reach_in_joint_space"):  # the training envs' dense reward
         if getattr(args, reward_option) and not eval_mode:
             kwargs[reward_option] = True
     if args.task_weights is not None and not eval_mode:
         kwargs["task_weights"] = dict(zip(ELEMENT_KINDS, args.task_weights))
     # near-goal starts are set (and left off in evaluation) by set_near_goal_starts; this applies their time limit
-    wrappers = (NearGoalTimeLimit,) if args.near_goal_max_steps is not None and not eval_mode else ()
+    wrappers = (NearGoalTimeLimit,) if args.starts.near_goal_max_steps is not None and not eval_mode else ()
     if args.sim_backend == "physx_cpu":
-        if args.start_states and not eval_mode:
-            wrappers += (functools.partial(StartFromStates, bank=args.start_states, share=args.start_states_share,
-                                           keep_clock=args.start_states_keep_clock),)
+        if args.starts.start_states and not eval_mode:
+            wrappers += (functools.partial(StartFromStates, bank=args.starts.start_states, share=args.starts.start_states_share,
+                                           keep_clock=args.starts.start_states_keep_clock),)
         return CPUVectorEnv(args.env_id, num_envs, kwargs, device=device, video_dir=video_dir, wrappers=wrappers)
     env = gym.make(args.env_id, num_envs=num_envs, sim_backend=args.sim_backend, **kwargs)
     for wrap in wrappers:
@@ -114,13 +114,13 @@ def set_curriculum_stage(envs: Envs, stage: str) -> None:
 # ------------------------------------------------------------------------------------------------- #
 def should_promote(args: Args, progress: Progress) -> Optional[str]:
     """Why the current stage ends now ('steps' or 'success'), or None."""
-    if progress.stage_index >= len(args.curriculum) - 1:
+    if progress.stage_index >= len(args.stages.curriculum) - 1:
         return None
     in_stage = progress.global_step - progress.stage_start_step
-    if in_stage >= args.stage_timesteps:
+    if in_stage >= args.stages.stage_timesteps:
         return "steps"
-    if (in_stage >= args.min_stage_timesteps and progress.smoothed_success is not None
-            and progress.smoothed_success >= args.promote_success):
+    if (in_stage >= args.stages.min_stage_timesteps and progress.smoothed_success is not None
+            and progress.smoothed_success >= args.stages.promote_success):
         return "success"
     return None
 
@@ -133,8 +133,8 @@ def stage_schedule(args: Args, progress: Progress) -> Args:
     """`args` with the learning rate, clip and entropy coefficients of ML-Agents' linear schedules at
     this point of the current stage (--stage-schedules): from their values to SCHEDULE_FLOORS over
     --stage-timesteps, restarting at every stage."""
-    frac = 1.0 - min(1.0, (progress.global_step - progress.stage_start_step) / args.stage_timesteps)
-    return dataclasses.replace(args, **{k: (getattr(args, k) - floor) * frac + floor for k, floor in SCHEDULE_FLOORS.items()})
+    frac = 1.0 - min(1.0, (progress.global_step - progress.stage_start_step) / args.stages.stage_timesteps)
+    return args.replace(**{k: (getattr(args.ppo, k) - floor) * frac + floor for k, floor in SCHEDULE_FLOORS.items()})
 
 
 
@@ -188,11 +188,11 @@ def setup(args: Args) -> Run:
     if resume is not None:
         saved, extended = resume["args"], {}
         if args.extend:
-            if tuple(args.curriculum[:len(saved["curriculum"])]) != tuple(saved["curriculum"]):
-                raise SystemExit(f"--extend: --curriculum {' '.join(args.curriculum)} must start with the run's own stages "
+            if tuple(args.stages.curriculum[:len(saved["curriculum"])]) != tuple(saved["curriculum"]):
+                raise SystemExit(f"--extend: --curriculum {' '.join(args.stages.curriculum)} must start with the run's own stages "
                                  f"({' '.join(saved['curriculum'])})")
-            extended = dict(total_timesteps=args.total_timesteps, curriculum=tuple(args.curriculum))
-        args = Args(**{**saved, "resume": args.resume, "curriculum": tuple(saved["curriculum"]), **extended})
+            extended = dict(total_timesteps=args.total_timesteps, curriculum=tuple(args.stages.curriculum))
+        args = Args.of(**{**saved, "resume": args.resume, "curriculum": tuple(saved["curriculum"]), **extended})
     validate(args)
     resolve_defaults(args)
 
@@ -213,25 +213,25 @@ def setup(args: Args) -> Run:
     base = None  # a residual run's base policy: its checkpoint when the run starts, its args since
     if resume is not None or init is not None:
         base_args = (resume or init).get("base_args")
-    elif args.residual_of:
-        base = load_checkpoint(args.residual_of, "--residual-of")
+    elif args.warm.residual_of:
+        base = load_checkpoint(args.warm.residual_of, "--residual-of")
         base_args = base["args"]
         if base.get("base_args") is not None:  # a refined agent as the base: its own base's args go with it
             if base_args.get("obs_elapsed_time"):
-                raise SystemExit(f"--residual-of {args.residual_of}: a residual that sees the elapsed time cannot be "
+                raise SystemExit(f"--residual-of {args.warm.residual_of}: a residual that sees the elapsed time cannot be "
                                  "another residual's base; give one trained without --obs-elapsed-time")
             base_args = {**base_args, "base_args": base["base_args"]}
-        check_fit(base, args.residual_of, args.env_id, obs_dim - int(args.obs_elapsed_time), act_dim, args.control_mode)
+        check_fit(base, args.warm.residual_of, args.env_id, obs_dim - int(args.obs_elapsed_time), act_dim, args.control_mode)
     else:
         base_args = None
     agent = make_agent(args, obs_dim, act_dim, base_args).to(device)
     if base is not None:
         agent.base.load_state_dict(base["agent"])
-    optimizer = adam([p for p in agent.parameters() if p.requires_grad], lr=args.learning_rate, eps=1e-5)
-    icm, icm_optimizer = make_icm(args.curiosity, obs_dim, act_dim, args), None
+    optimizer = adam([p for p in agent.parameters() if p.requires_grad], lr=args.ppo.learning_rate, eps=1e-5)
+    icm, icm_optimizer = make_icm(args.icm.curiosity, obs_dim, act_dim, args), None
     if icm is not None:
         icm = icm.to(device)
-        icm_optimizer = adam(icm.parameters(), lr=args.icm_learning_rate)
+        icm_optimizer = adam(icm.parameters(), lr=args.icm.icm_learning_rate)
 
     progress = Progress()
     for ckpt, path in ((resume, args.resume), (init, args.checkpoint)):
@@ -257,7 +257,7 @@ def setup(args: Args) -> Run:
 def main(args: Args) -> Progress:
     run = setup(args)
     if run.args.evaluate:
-        stage = run.args.curriculum[min(run.progress.stage_index, len(run.args.curriculum) - 1)]
+        stage = run.args.stages.curriculum[min(run.progress.stage_index, len(run.args.stages.curriculum) - 1)]
         set_curriculum_stage(run.eval_envs, stage)
         print({"stage": stage, **evaluate_envs(run.agent, run.eval_envs, run.args.num_eval_steps, seed=run.args.seed)})
         run.eval_envs.close()
@@ -301,7 +301,7 @@ def collect(agent: Agent, envs: Envs, buf: Rollout, next_obs: torch.Tensor, args
         with torch.no_grad():
             buf.actions[step] = action = agent.get_action(next_obs)
         next_obs, reward, terminations, truncations, infos = envs.step(action.clamp(-1, 1))
-        buf.rewards[step] = reward * args.reward_scale
+        buf.rewards[step] = reward * args.ppo.reward_scale
         buf.dones[step], buf.terminated[step] = (terminations | truncations).float(), terminations.float()
         buf.next_obs[step] = next_obs
         if "final_info" in infos:
@@ -354,14 +354,14 @@ def episode_columns(args: Args, progress: Progress, episodes: dict, envs: Envs) 
     for k, kind in enumerate(ELEMENT_KINDS):
         if ((task == k) & ~near).any():
             row[f"ordinary_place_{kind}"] = float(placed[(task == k) & ~near].mean())
-    if args.near_goal_share > 0:
+    if args.starts.near_goal_share > 0:
         row.update(near_goal_radius=float(np.mean(progress.near_goal_radius)), near_goal_episodes=int(near.sum()),
                    near_goal_place_success=float(placed[near].mean()) if near.any() else float("nan"),
                    ordinary_place_success=float(placed[~near].mean()) if (~near).any() else float("nan"),
                    **{f"near_goal_radius_{kind}": r for kind, r in zip(ELEMENT_KINDS, progress.near_goal_radius)})
         if widen_near_goal(args, progress, task[near].tolist(), placed[near].tolist()):
-            call_task(envs, "set_near_goal_starts", args.near_goal_share, tuple(progress.near_goal_radius),
-                      args.near_goal_max_steps)
+            call_task(envs, "set_near_goal_starts", args.starts.near_goal_share, tuple(progress.near_goal_radius),
+                      args.starts.near_goal_max_steps)
     return row
 
 
@@ -371,7 +371,7 @@ def promote(run: Run, envs: Envs) -> str:
     progress.stage_index += 1
     progress.stage_start_step = progress.global_step
     progress.smoothed_success = None
-    stage = run.args.curriculum[progress.stage_index]
+    stage = run.args.stages.curriculum[progress.stage_index]
     progress.stage_changes.append((progress.global_step, stage))
     for e in (envs, run.eval_envs):
         set_curriculum_stage(e, stage)
@@ -391,27 +391,27 @@ def train(run: Run) -> Progress:
     envs = make_envs(args, args.num_envs, device)
     batch_size = args.num_envs * args.num_steps
     num_iterations = math.ceil(args.total_timesteps / batch_size)
-    stage = args.curriculum[progress.stage_index]
+    stage = args.stages.curriculum[progress.stage_index]
     if not progress.stage_changes:
         progress.stage_changes.append((0, stage))
     for e in (envs, run.eval_envs):
         set_curriculum_stage(e, stage)
-    if args.near_goal_share > 0:
+    if args.starts.near_goal_share > 0:
         if progress.near_goal_radius is None:
-            progress.near_goal_radius = [args.near_goal_radius] * len(ELEMENT_KINDS)
+            progress.near_goal_radius = [args.starts.near_goal_radius] * len(ELEMENT_KINDS)
             progress.near_goal_recent = [[] for _ in ELEMENT_KINDS]
-        call_task(envs, "set_near_goal_starts", args.near_goal_share, tuple(progress.near_goal_radius),
-                  args.near_goal_max_steps)
+        call_task(envs, "set_near_goal_starts", args.starts.near_goal_share, tuple(progress.near_goal_radius),
+                  args.starts.near_goal_max_steps)
 
     run_dir.mkdir(parents=True, exist_ok=True)
     writer = SummaryWriter(str(run_dir))
     if not args.resume:
-        writer.add_text("hyperparameters", "|param|value|\n|-|-|\n" + "\n".join(f"|{k}|{v}|" for k, v in vars(args).items()))
+        writer.add_text("hyperparameters", "|param|value|\n|-|-|\n" + "\n".join(f"|{k}|{v}|" for k, v in args.flat().items()))
     log = CSVLog(run_dir / "progress.csv", progress.global_step if args.resume else None)
 
     demos = None
-    if args.demos:
-        files = [np.load(path) for path in args.demos]
+    if args.warm.demos:
+        files = [np.load(path) for path in args.warm.demos]
         demos = tuple(torch.as_tensor(np.concatenate([f[k] for f in files]), dtype=torch.float32, device=device)
                       for k in ("obs", "actions"))
     buf = Rollout.zeros(args.num_steps, args.num_envs, run.obs_dim, run.act_dim, device)
@@ -432,31 +432,31 @@ def train(run: Run) -> Progress:
         while progress.iteration < num_iterations and not stop:
             progress.iteration += 1
             t0 = time.time()
-            if args.anneal_lr:
-                run.optimizer.param_groups[0]["lr"] = args.learning_rate * (1.0 - (progress.iteration - 1.0) / num_iterations)
+            if args.ppo.anneal_lr:
+                run.optimizer.param_groups[0]["lr"] = args.ppo.learning_rate * (1.0 - (progress.iteration - 1.0) / num_iterations)
             update_args = args
-            if args.stage_schedules:
+            if args.stages.stage_schedules:
                 update_args = stage_schedule(args, progress)
-                run.optimizer.param_groups[0]["lr"] = update_args.learning_rate
+                run.optimizer.param_groups[0]["lr"] = update_args.ppo.learning_rate
             episodes = defaultdict(list)
             next_obs = collect(agent, envs, buf, next_obs, args, progress, episodes)
             batch = update_batch(run, buf, next_obs, episodes, intrinsic_running)
             losses = ppo_update(agent, run.optimizer, batch, update_args, run.icm, run.icm_optimizer, demos,
-                                value_only=progress.iteration <= args.critic_warmup_iterations)
+                                value_only=progress.iteration <= args.warm.critic_warmup_iterations)
             # statistics change after the update, so that each update sees its rollout's normalization
-            if args.norm_obs and not args.freeze_obs_norm and not args.residual_of:
+            if args.ppo.norm_obs and not args.warm.freeze_obs_norm and not args.warm.residual_of:
                 agent.obs_rms.update(agent.features(batch["obs"]))
 
             # ---- logs, evaluation, curriculum ----
             sps = batch_size / (time.time() - t0)
             row = dict(global_step=progress.global_step, iteration=progress.iteration, stage=stage, sps=round(sps, 1),
                        learning_rate=run.optimizer.param_groups[0]["lr"], episodes=len(episodes["success"]),
-                       clip_coef=update_args.clip_coef, ent_coef=update_args.ent_coef)
+                       clip_coef=update_args.ppo.clip_coef, ent_coef=update_args.ppo.ent_coef)
             row.update(losses)
             row.update(episode_columns(args, progress, episodes, envs))
             if progress.iteration % args.eval_freq == 0 or progress.iteration == num_iterations:
                 result = evaluate_envs(agent, run.eval_envs, args.num_eval_steps, seed=args.seed + 10_000 + progress.iteration)
-                s, a = result["eval_place_success"], args.success_smoothing
+                s, a = result["eval_place_success"], args.stages.success_smoothing
                 if not math.isnan(s):
                     progress.smoothed_success = s if progress.smoothed_success is None else a * s + (1 - a) * progress.smoothed_success
                 row.update(result, smoothed_eval_success=progress.smoothed_success)
@@ -475,7 +475,7 @@ def train(run: Run) -> Progress:
             if promotion or progress.iteration % args.checkpoint_freq == 0 or progress.iteration == num_iterations:
                 run.save()
             if promotion and args.save_model:  # the policy at the end of each stage, kept to be evaluated (at cp4)
-                ended = f"checkpoint_stage{progress.stage_index}_{args.curriculum[progress.stage_index - 1]}.pt"
+                ended = f"checkpoint_stage{progress.stage_index}_{args.stages.curriculum[progress.stage_index - 1]}.pt"
                 shutil.copyfile(checkpoint_path(args), checkpoint_path(args).with_name(ended))
     except KeyboardInterrupt:
         interrupted = True

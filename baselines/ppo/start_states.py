@@ -142,9 +142,9 @@ def widen_near_goal(args: PPOArgs, progress: Progress, task_ids: list[int], plac
             continue
         window = progress.near_goal_recent[k]
         window.append(float(ok))
-        del window[:-args.near_goal_window]
-        if len(window) == args.near_goal_window and np.mean(window) >= args.near_goal_promote and progress.near_goal_radius[k] < 1:
-            progress.near_goal_radius[k] = round(min(1.0, progress.near_goal_radius[k] + args.near_goal_step), 6)
+        del window[:-args.starts.near_goal_window]
+        if len(window) == args.starts.near_goal_window and np.mean(window) >= args.starts.near_goal_promote and progress.near_goal_radius[k] < 1:
+            progress.near_goal_radius[k] = round(min(1.0, progress.near_goal_radius[k] + args.starts.near_goal_step), 6)
             window.clear()
             widened.add(k)
     return bool(widened)

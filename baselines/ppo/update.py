@@ -52,15 +52,15 @@ def signal_advantages(args, rewards: torch.Tensor, intrinsic: torch.Tensor, valu
     never trains on a state after success (the env resets), and a guess below that lets holding near the goal
     outvalue placing."""
     truncated = dones - terminated
-    extrinsic = rewards + intrinsic if joins_extrinsic_reward(args.curiosity) else rewards
-    if getattr(args, "success_value", "critic") == "absorbing":
+    extrinsic = rewards + intrinsic if joins_extrinsic_reward(args.icm.curiosity) else rewards
+    if args.ppo.success_value == "absorbing":
         final_values = final_values.clone()
-        final_values[..., 0] = torch.where(terminated.bool(), extrinsic / (1 - args.gamma), final_values[..., 0])
-    signals = [(extrinsic, args.gamma, bootstrap_mask(terminated, truncated, args.bootstrap_at_done))]
+        final_values[..., 0] = torch.where(terminated.bool(), extrinsic / (1 - args.ppo.gamma), final_values[..., 0])
+    signals = [(extrinsic, args.ppo.gamma, bootstrap_mask(terminated, truncated, args.ppo.bootstrap_at_done))]
     if values.shape[-1] == 2:
-        signals.append((intrinsic, args.icm_gamma, dones))
+        signals.append((intrinsic, args.icm.icm_gamma, dones))
     advantages = torch.stack([gae(r, values[..., h], next_value[:, h], final_values[..., h] * mask, dones, gamma,
-                                  args.gae_lambda) for h, (r, gamma, mask) in enumerate(signals)], -1)
+                                  args.ppo.gae_lambda) for h, (r, gamma, mask) in enumerate(signals)], -1)
     return advantages.mean(-1), advantages + values
 
 
@@ -69,19 +69,19 @@ def ppo_update(agent: Agent, optimizer: optim.Optimizer, batch: dict, args, icm:
                value_only: bool = False) -> dict[str, float]:
     """PPO's clipped update on one rollout, with the settings of `args` (ppo.py's Args): `batch` holds obs,
     next_obs, actions, logprobs and advantages, flat over steps and envs, and returns and values [batch,
-    value heads] (the value loss is the mean of the heads'). `args.update_epochs` epochs of
-    `args.num_minibatches` shuffled minibatches (numpy's RNG), stopping after an epoch whose last minibatch's approximate KL
-    exceeds `args.target_kl`; ICM learns on the same minibatches. `demos` (obs, actions) add a
-    behaviour-cloning term, `args.residual_l2_coef` a pull of a residual agent's correction towards zero;
+    value heads] (the value loss is the mean of the heads'). `args.ppo.update_epochs` epochs of
+    `args.ppo.num_minibatches` shuffled minibatches (numpy's RNG), stopping after an epoch whose last minibatch's approximate KL
+    exceeds `args.ppo.target_kl`; ICM learns on the same minibatches. `demos` (obs, actions) add a
+    behaviour-cloning term, `args.warm.residual_l2_coef` a pull of a residual agent's correction towards zero;
     `value_only` trains the critic alone (the warm-up). The mean of each loss."""
     batch_size = len(batch["obs"])
-    minibatch_size = batch_size // args.num_minibatches
+    minibatch_size = batch_size // args.ppo.num_minibatches
     b_inds = np.arange(batch_size)
     advantages = batch["advantages"]
-    if args.norm_adv == "batch":
+    if args.ppo.norm_adv == "batch":
         advantages = (advantages - advantages.mean()) / (advantages.std() + 1e-8)
     losses = defaultdict(list)  # tensors, read once at the end: a .item() per loss per minibatch costs more
-    for _epoch in range(args.update_epochs):
+    for _epoch in range(args.ppo.update_epochs):
         np.random.shuffle(b_inds)
         for start in range(0, batch_size, minibatch_size):
             mb = torch.from_numpy(b_inds[start:start + minibatch_size]).to(batch["obs"].device)
@@ -92,33 +92,33 @@ def ppo_update(agent: Agent, optimizer: optim.Optimizer, batch: dict, args, icm:
             with torch.no_grad():
                 approx_kl = ((ratio - 1) - logratio).mean()
             mb_adv = advantages[mb]
-            if args.norm_adv == "minibatch":
+            if args.ppo.norm_adv == "minibatch":
                 mb_adv = (mb_adv - mb_adv.mean()) / (mb_adv.std() + 1e-8)
-            pg_loss = torch.max(-mb_adv * ratio, -mb_adv * torch.clamp(ratio, 1 - args.clip_coef, 1 + args.clip_coef)).mean()
+            pg_loss = torch.max(-mb_adv * ratio, -mb_adv * torch.clamp(ratio, 1 - args.ppo.clip_coef, 1 + args.ppo.clip_coef)).mean()
             mb_ret = batch["returns"][mb]
-            if args.clip_vloss:
+            if args.ppo.clip_vloss:
                 mb_val = batch["values"][mb]
-                v_clipped = mb_val + torch.clamp(newvalue - mb_val, -args.clip_coef, args.clip_coef)
+                v_clipped = mb_val + torch.clamp(newvalue - mb_val, -args.ppo.clip_coef, args.ppo.clip_coef)
                 v_loss = 0.5 * torch.max((newvalue - mb_ret) ** 2, (v_clipped - mb_ret) ** 2).mean()
             else:
                 v_loss = 0.5 * ((newvalue - mb_ret) ** 2).mean()
             entropy_loss = entropy.mean()
-            loss = pg_loss - args.ent_coef * entropy_loss + v_loss * args.vf_coef
-            if demos is not None and args.bc_coef > 0:
+            loss = pg_loss - args.ppo.ent_coef * entropy_loss + v_loss * args.ppo.vf_coef
+            if demos is not None and args.warm.bc_coef > 0:
                 d = torch.randint(len(demos[0]), (len(mb),), device=mb.device)
                 bc_loss = ((agent.actor_mean(agent.normalize(demos[0][d])) - demos[1][d]) ** 2).mean()
-                loss = loss + args.bc_coef * bc_loss
+                loss = loss + args.warm.bc_coef * bc_loss
                 losses["bc_loss"].append(bc_loss.detach())
-            if args.residual_l2_coef > 0:
+            if args.warm.residual_l2_coef > 0:
                 l2 = agent.correction(obs).pow(2).sum(-1).mean()
-                loss = loss + args.residual_l2_coef * l2
+                loss = loss + args.warm.residual_l2_coef * l2
                 losses["residual_l2"].append(l2.detach())
             if value_only:
-                loss = v_loss * args.vf_coef
+                loss = v_loss * args.ppo.vf_coef
             optimizer.zero_grad()
             loss.backward()
-            if args.max_grad_norm is not None:
-                nn.utils.clip_grad_norm_(agent.parameters(), args.max_grad_norm)
+            if args.ppo.max_grad_norm is not None:
+                nn.utils.clip_grad_norm_(agent.parameters(), args.ppo.max_grad_norm)
             optimizer.step()
             if icm is not None:
                 icm_losses = icm.update(icm_optimizer, obs, batch["next_obs"][mb], actions)
@@ -128,7 +128,7 @@ def ppo_update(agent: Agent, optimizer: optim.Optimizer, batch: dict, args, icm:
             losses["policy_loss"].append(pg_loss.detach())
             losses["entropy"].append(entropy_loss.detach())
             losses["approx_kl"].append(approx_kl)
-        if args.target_kl is not None and approx_kl > args.target_kl:
+        if args.ppo.target_kl is not None and approx_kl > args.ppo.target_kl:
             break
     return {k: torch.stack(v).double().mean().item() for k, v in losses.items()}
 
