@@ -245,7 +245,7 @@ def _touching(u) -> str:
 
 def ordinary_rollouts(checkpoint: Path, seeds: int = DIAGNOSE_SEEDS) -> str:
     """What the policy does from ordinary resets (the test seeds evaluation starts with, the policy's mean, the task's
-    step limit): per task and seed, when it grasped, whether it placed, the carry distance at the grasp, the least
+    step limit): per task and seed, the goal slot, when it grasped, whether it placed, the carry distance at the grasp, the least
     after it and at the end, the same measured along the start paths (`path_distance`), the element's distance to
     its goal at the end, what the element touched at the end (the plate aside) and whether the arm had stopped (its joints
     moved less than 0.02 rad over the last 20 steps) while the policy's mean still asked for motion."""
@@ -260,9 +260,9 @@ def ordinary_rollouts(checkpoint: Path, seeds: int = DIAGNOSE_SEEDS) -> str:
 
     agent, kwargs = load_policy(checkpoint, "ConstructionPickPlace-v1")
     kwargs = {k: v for k, v in kwargs.items() if k not in ("obs_mode", "reward_mode")}
-    lines = ["| task | seed | grasped at step | placed | carry distance at the grasp / least / end (rad) | "
+    lines = ["| task | seed | goal slot | grasped at step | placed | carry distance at the grasp / least / end (rad) | "
              "along the start paths, at the grasp / end (rad) | element to goal at the end (m) | element touching at the end | "
-             "arm stopped, still pushing |", "|---|---|---|---|---|---|---|---|---|"]
+             "arm stopped, still pushing |", "|---|---|---|---|---|---|---|---|---|---|"]
     for env_id in TASK_ENV_IDS.values():
         env = gym.make(env_id, obs_mode="state", reward_mode="normalized_dense", **kwargs)
         u = env.unwrapped
@@ -280,7 +280,7 @@ def ordinary_rollouts(checkpoint: Path, seeds: int = DIAGNOSE_SEEDS) -> str:
             moved = float(sum((a - b).abs().sum() for a, b in zip(qs[-20:], qs[-19:])))
             pushing = float(torch.stack(actions[-20:]).abs().mean()) > 0.3
             fmt = lambda xs: f"{xs[0]:.1f} / {min(xs):.1f} / {xs[-1]:.1f}" if xs else "-"  # noqa: E731
-            lines.append(f"| {env_id} | {seed} | {'-' if grasped is None else grasped + 1} | "
+            lines.append(f"| {env_id} | {seed} | {int(u.goal_slot[0])} | {'-' if grasped is None else grasped + 1} | "
                          f"{'yes' if bool(step.info['success'][0]) else 'no'} | {fmt(carry)} | "
                          f"{f'{path[0]:.1f} / {path[-1]:.1f}' if path else '-'} | {float(step.info['place_dist'][0]):.2f} | "
                          f"{_touching(u)} | {'yes' if moved < 0.02 and pushing else 'no'} |")
