@@ -63,25 +63,29 @@ def run_or_resume(run: Run) -> None:
         ship(run)
 
 
-def training_wall_s(progress_csv: Path, samples_per_iteration: int) -> float:
-    """The wall time of a run's training iterations (rollouts and updates), summed from its progress.csv:
-    evaluations, start-ups and the time between sessions are not in it."""
+def training_wall_s(progress_csv: Path, samples_per_iteration: int, until_step: Optional[int] = None) -> float:
+    """The wall time of a run's training iterations (rollouts and updates), summed from its progress.csv (up to
+    `until_step` when given): evaluations, start-ups and the time between sessions are not in it."""
     with open(progress_csv, newline="") as f:
-        return sum(samples_per_iteration / float(row["sps"]) for row in csv.DictReader(f) if row["sps"])
+        return sum(samples_per_iteration / float(row["sps"]) for row in csv.DictReader(f)
+                   if row["sps"] and (until_step is None or int(row["global_step"]) <= until_step))
 
 
-def ship(run: Run, before_the_end: bool = False) -> Path:
+def ship(run: Run, before_the_end: bool = False, snapshot: Optional[Path] = None, chosen: Optional[str] = None) -> Path:
     """The final policy of a run that has reached the end of its plan to `run.shipped`, with its Args and
     its campaign record (method, env steps, stages, wall time, hardware), for scripts/evaluate.py; the
     optimizers and random states stay in the run's own checkpoint in campaign/, which resumes it. With
-    `before_the_end`, the policy where the run stands now (its record says at which step of its plan)."""
-    ckpt = load_checkpoint(checkpoint_of(run))
+    `before_the_end`, the policy where the run stands now (its record says at which step of its plan); with
+    `snapshot`, that earlier checkpoint of the run instead, the record saying how it was `chosen`."""
+    path = snapshot or checkpoint_of(run)
+    ckpt = load_checkpoint(path)
     a, progress = ckpt["args"], ckpt["progress"]
-    if progress["global_step"] < run.args.total_timesteps and not before_the_end:
+    if progress["global_step"] < run.args.total_timesteps and not before_the_end and snapshot is None:
         raise SystemExit(f"{run.name}: at step {progress['global_step']:,} of {run.args.total_timesteps:,}; "
                          f"ship it when it has run to the end ({run.command})")
-    wall = training_wall_s(checkpoint_of(run).with_name("progress.csv"), a["num_envs"] * a["num_steps"])
-    return ship_checkpoint(checkpoint_of(run), run.shipped, run.command, {
+    wall = training_wall_s(checkpoint_of(run).with_name("progress.csv"), a["num_envs"] * a["num_steps"],
+                           progress["global_step"])
+    return ship_checkpoint(path, run.shipped, run.command, {
         "method": run.method or f"{run.what} (PPO, sparse reward, curiosity {a['curiosity']}; experiments/paper.py)",
         "env steps": f"{progress['global_step']:,}" + ("" if progress["global_step"] >= run.args.total_timesteps
                                                        else f" (of the {run.args.total_timesteps:,} planned)"),
@@ -89,6 +93,7 @@ def ship(run: Run, before_the_end: bool = False) -> Path:
         "wall time": f"{wall / 3600:.1f} h of training iterations (rollouts and updates, summed from progress.csv; "
                      "evaluations, start-ups and pauses not counted), across sessions, with whatever else ran beside it",
         "hardware": hardware(f"physx_cpu with {a['num_envs']} env processes, the networks on the CPU"),
+        **({"chosen": chosen} if chosen else {}),
     })
 
 

@@ -1,8 +1,10 @@
 """The general agent learnt from reward alone: no demonstrations, no expert states, no cloned weights.
 
     python -m experiments.from_scratch --dry-run        # the plan, and where each run stands
-    python -m experiments.from_scratch                  # run (or resume) it; ships when it reaches its budget
+    python -m experiments.from_scratch                  # run (or resume) it, a snapshot every 250,000 env steps;
+                                                        # at its budget, ships the best snapshot (--ship-best)
     python -m experiments.from_scratch --ship-now       # ship the policy where the run stands now
+    python -m experiments.from_scratch --ship-best      # ship the snapshot that places most on validation seeds
     python -m experiments.from_scratch --report         # its section of docs/RESULTS.md and its curve
     python -m experiments.from_scratch --diagnose       # its policy from near-goal starts, into the experiment page
 
@@ -27,10 +29,12 @@ assets/checkpoints/scratch_general_agent.pt with its campaign record. The recipe
 from __future__ import annotations
 
 import csv
+import hashlib
 import json
 import math
 import os
 import shlex
+import shutil
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Optional
@@ -42,7 +46,8 @@ from baselines.ppo import ppo
 from baselines.ppo.args import command_line
 from baselines.ppo.checkpoints import load_checkpoint
 from baselines.ppo.evaluation import PAPER_TABLE_II, failures, kinds, pct
-from experiments.campaign import CAMPAIGN_DIR, SHIPPED_DIR, Run, describe, run_or_resume, ship, training_wall_s
+from experiments.campaign import CAMPAIGN_DIR, SHIPPED_DIR, Run, checkpoint_of, describe, ship, training_wall_s
+from experiments.refine import VALIDATION_SEED, best_snapshot, validate
 from ms_construction.parameters import ELEMENT_KINDS
 from ms_construction.reporting import update_section
 from ms_construction.curriculum import FINAL_STAGE
@@ -50,6 +55,8 @@ from ms_construction.curriculum import FINAL_STAGE
 BUDGET = 20_000_000
 """env steps at most (the issue's budget on this CPU)."""
 COMMAND = "python -m experiments.from_scratch"
+PAGE = Path("docs/experiments/from_scratch.md")
+"""the experiment page: the diagnosis and the snapshots' validations are written into it."""
 STARTS = {1_682_000: "fifth start: carry along the start paths, reach in joint space"}
 """env step: the recipe change the campaign went on with there (the fourth start's steps before it; the experiment page
 says how each start came to be)."""
@@ -165,8 +172,9 @@ def report(run: Run, results: Path = Path("docs/RESULTS.md")) -> str:
     if EVAL_JSON.is_file():
         data = json.loads(EVAL_JSON.read_text())
         shipped = load_checkpoint(run.shipped)["campaign"]["record"] if run.shipped.is_file() else {}
-        lines += [f"The shipped policy ({run.shipped}; {shipped.get('method', '?')}; env steps: {shipped.get('env steps', '?')}), "
-                  f"evaluated with the paper's protocol: `{data['command']}`.", "",
+        lines += [f"The shipped policy ({run.shipped}; {shipped.get('method', '?')}; env steps: {shipped.get('env steps', '?')}"
+                  + (f"; {shipped['chosen']}" if shipped.get("chosen") else "")
+                  + f"), evaluated with the paper's protocol: `{data['command']}`.", "",
                   "| task | pick % [95% CI] | place % [95% CI] | paper's general agent: pick / place % | failures by kind |",
                   "|---|---|---|---|---|"]
         for env_id, r in data["tasks"].items():
@@ -194,8 +202,9 @@ def near_goal_rollouts(checkpoint: Path, radius: float = DIAGNOSE_RADIUS, seeds:
                        steps: int = DIAGNOSE_STEPS) -> str:
     """Where the policy takes an element it starts holding near its goal: per task and seed (near-goal starts at
     `radius`, the policy's mean, at most `steps` steps), whether it placed, the element's distance and angle to
-    the goal and the arm's carry distance at the start and the end, the joints at the end, and how often the
-    policy's mean lay past the action bounds (where every draw clips alike: PPO cannot move such a mean back)."""
+    the goal and the arm's carry distance at the start and the end, how far the element trailed its place on the plate
+    (`hold_lag`, the median over the steps and at the end), the joints at the end, and how often the policy's mean lay
+    past the action bounds (where every draw clips alike: PPO cannot move such a mean back)."""
     import gymnasium as gym
     import torch
 
@@ -206,8 +215,8 @@ def near_goal_rollouts(checkpoint: Path, radius: float = DIAGNOSE_RADIUS, seeds:
     agent, kwargs = load_policy(checkpoint, "ConstructionPickPlace-v1")
     kwargs = {k: v for k, v in kwargs.items() if k not in ("obs_mode", "reward_mode")}
     lines = ["| task | seed | steps | placed | distance to goal, start / end (m) | angle, start / end (deg) | "
-             "carry distance, start / end (rad) | joints at the end (rad) | mean past the bounds (share; largest) |",
-             "|---|---|---|---|---|---|---|---|---|"]
+             "carry distance, start / end (rad) | element behind the plate, median / end (m) | joints at the end (rad) | "
+             "mean past the bounds (share; largest) |", "|---|---|---|---|---|---|---|---|---|---|"]
     for env_id in TASK_ENV_IDS.values():
         env = gym.make(env_id, obs_mode="state", reward_mode="normalized_dense", **kwargs)
         u = env.unwrapped
@@ -215,18 +224,19 @@ def near_goal_rollouts(checkpoint: Path, radius: float = DIAGNOSE_RADIUS, seeds:
         for seed in range(seeds):
             obs, info = env.reset(seed=seed)
             start = (float(u.evaluate()["place_dist"][0]), float(u.evaluate()["place_angle_deg"][0]), float(u.carry_distance()[0]))
-            means = []
+            means, lag = [], []
             for t in range(steps):
                 with torch.no_grad():
                     means.append(agent.get_action(obs.float(), deterministic=True))
                 obs, _, terminated, truncated, info = env.step(means[-1].clamp(-1, 1))
+                lag.append(float(u.hold_lag()[0]))
                 if bool(terminated[0]) or bool(truncated[0]):
                     break
             mean = torch.cat(means).abs()
             q = " ".join(f"{v:.2f}" for v in u.agent.robot.get_qpos()[0].tolist())
             lines.append(f"| {env_id} | {seed} | {t + 1} | {'yes' if bool(info['success'][0]) else 'no'} | "
                          f"{start[0]:.2f} / {float(info['place_dist'][0]):.2f} | {start[1]:.0f} / {float(info['place_angle_deg'][0]):.0f} | "
-                         f"{start[2]:.2f} / {float(u.carry_distance()[0]):.2f} | {q} | "
+                         f"{start[2]:.2f} / {float(u.carry_distance()[0]):.2f} | {sorted(lag)[len(lag) // 2]:.2f} / {lag[-1]:.2f} | {q} | "
                          f"{float((mean > 1).float().mean()):.2f}; {float(mean.max()):.2f} |")
         env.close()
     return "\n".join(lines)
@@ -247,7 +257,9 @@ def ordinary_rollouts(checkpoint: Path, seeds: int = DIAGNOSE_SEEDS) -> str:
     """What the policy does from ordinary resets (the test seeds evaluation starts with, the policy's mean, the task's
     step limit): per task and seed, the goal slot, when it grasped, whether it placed, the carry distance at the grasp, the least
     after it and at the end, the same measured along the start paths (`path_distance`), the element's distance to
-    its goal at the end, what the element touched at the end (the plate aside) and whether the arm had stopped (its joints
+    its goal at the end, how far the held element trailed its place on the plate (`hold_lag`: the median over the held
+    steps and at the end; jammed against a slab or wall, it stays behind while the arm goes on), what the element
+    touched at the end (the plate aside) and whether the arm had stopped (its joints
     moved less than 0.02 rad over the last 20 steps) while the policy's mean still asked for motion."""
     import gymnasium as gym
     import torch
@@ -261,13 +273,14 @@ def ordinary_rollouts(checkpoint: Path, seeds: int = DIAGNOSE_SEEDS) -> str:
     agent, kwargs = load_policy(checkpoint, "ConstructionPickPlace-v1")
     kwargs = {k: v for k, v in kwargs.items() if k not in ("obs_mode", "reward_mode")}
     lines = ["| task | seed | goal slot | grasped at step | placed | carry distance at the grasp / least / end (rad) | "
-             "along the start paths, at the grasp / end (rad) | element to goal at the end (m) | element touching at the end | "
-             "arm stopped, still pushing |", "|---|---|---|---|---|---|---|---|---|---|"]
+             "along the start paths, at the grasp / end (rad) | element to goal at the end (m) | "
+             "element behind the plate, median / end (m) | element touching at the end | arm stopped, still pushing |",
+             "|---|---|---|---|---|---|---|---|---|---|---|"]
     for env_id in TASK_ENV_IDS.values():
         env = gym.make(env_id, obs_mode="state", reward_mode="normalized_dense", **kwargs)
         u = env.unwrapped
         for seed in range(EvalArgs.seed, EvalArgs.seed + seeds):
-            grasped, carry, path, qs, actions = None, [], [], [], []
+            grasped, carry, path, lag, qs, actions = None, [], [], [], [], []
             for t, step in enumerate(rollout(agent, env, seed)):
                 qs.append(u.agent.robot.get_qpos()[0].clone())
                 actions.append(step.action[0])
@@ -275,6 +288,7 @@ def ordinary_rollouts(checkpoint: Path, seeds: int = DIAGNOSE_SEEDS) -> str:
                     grasped = t if grasped is None else grasped
                     carry.append(float(u.install_offset().abs().sum()))
                     path.append(float(u.path_distance()[0]))
+                    lag.append(float(u.hold_lag()[0]))
                 if bool(step.terminated[0]) or bool(step.truncated[0]):
                     break
             moved = float(sum((a - b).abs().sum() for a, b in zip(qs[-20:], qs[-19:])))
@@ -283,8 +297,75 @@ def ordinary_rollouts(checkpoint: Path, seeds: int = DIAGNOSE_SEEDS) -> str:
             lines.append(f"| {env_id} | {seed} | {int(u.goal_slot[0])} | {'-' if grasped is None else grasped + 1} | "
                          f"{'yes' if bool(step.info['success'][0]) else 'no'} | {fmt(carry)} | "
                          f"{f'{path[0]:.1f} / {path[-1]:.1f}' if path else '-'} | {float(step.info['place_dist'][0]):.2f} | "
+                         f"{f'{sorted(lag)[len(lag) // 2]:.2f} / {lag[-1]:.2f}' if lag else '-'} | "
                          f"{_touching(u)} | {'yes' if moved < 0.02 and pushing else 'no'} |")
         env.close()
+    return "\n".join(lines)
+
+
+SNAPSHOT_EVERY = 250_000
+"""env steps between the run's snapshots. The policy's deterministic success swings from one checkpoint to the next
+(window placements 22% and 8% on the same 50 test seeds at 6,782,000 and 7,168,000 env steps, ceiling panels 2% and
+18%: docs/experiments/from_scratch.md), so the run keeps snapshots and ships the one that validates best."""
+SNAPSHOT_DIR = Path("runs/scratch_snapshots")
+"""where the snapshots are kept (checkpoint_<env steps>.pt, with their validations): not committed, so the candidates
+are those of the sessions on this machine, and the shipped policy."""
+VALIDATION_EPISODES = 30
+"""episodes per task (validation seeds, VALIDATION_SEED on: never the test seeds) that judge each snapshot."""
+
+
+def train(run: Run, every: int = SNAPSHOT_EVERY, snapshots: Path = SNAPSHOT_DIR, page: Path = PAGE) -> None:
+    """Run (or resume) the campaign to its budget in parts of `every` env steps, each part's checkpoint copied to
+    `snapshots`, then ship the best snapshot (`ship_best`). Ctrl-C stops it with the checkpoint saved (ppo.py)."""
+    ckpt = checkpoint_of(run)
+    snapshots.mkdir(parents=True, exist_ok=True)
+    while (done := load_checkpoint(ckpt)["progress"]["global_step"] if ckpt.is_file() else 0) < run.args.total_timesteps:
+        part = run.args.replace(total_timesteps=min((done // every + 1) * every, run.args.total_timesteps))
+        ppo.main(part.replace(resume=str(ckpt), extend=True) if ckpt.is_file() else part)
+        shutil.copyfile(ckpt, snapshots / f"checkpoint_{part.total_timesteps}.pt")
+    if run.shipped is not None:
+        ship_best(run, snapshots=snapshots, page=page)
+
+
+def ship_best(run: Run, episodes: int = VALIDATION_EPISODES, snapshots: Path = SNAPSHOT_DIR,
+              page: Path = PAGE) -> Optional[Path]:
+    """Validate every snapshot in `snapshots` and the policy shipped now (`episodes` per task from VALIDATION_SEED,
+    each validation kept beside the snapshots) and ship the snapshot that places most on its worst task, then on
+    average (`refine.best_snapshot`); the shipped policy stays where it validates best. The validations go to the
+    section `snapshot-validations` of `page`. The snapshot shipped, or None."""
+    candidates = {int(p.stem.split("_")[1]): p for p in snapshots.glob("checkpoint_*.pt")}
+    if not candidates:
+        raise SystemExit(f"no snapshots in {snapshots}: `{COMMAND}` keeps one every {SNAPSHOT_EVERY:,} env steps")
+    validated = {step: validate(p, snapshots / f"val{episodes}_{step}.json", episodes) for step, p in sorted(candidates.items())}
+    if run.shipped.is_file():
+        tag = hashlib.sha1(run.shipped.read_bytes()).hexdigest()[:8]  # the file names the policy it judged
+        validated[-1] = validate(run.shipped, snapshots / f"val{episodes}_shipped_{tag}.json", episodes)
+    for step, placed in validated.items():
+        print(f"{'shipped now' if step < 0 else f'{step:,} env steps'}: placed on validation "
+              + ", ".join(f"{k} {v:.2f}" for k, v in placed.items()))
+    best = best_snapshot(validated)
+    update_section(page, "snapshot-validations", snapshot_table(validated, best, episodes), "Learning from reward alone: the experiment")
+    if best < 0:
+        print(f"{run.shipped} validates best: it stays")
+        return None
+    chosen = (f"the best of {len(candidates)} snapshots ({min(candidates):,} to {max(candidates):,} env steps"
+              + (", and the policy shipped before" if -1 in validated else "")
+              + f") on {episodes} validation episodes per task (seeds {VALIDATION_SEED:,} on): placed "
+              + ", ".join(f"{k} {v:.2f}" for k, v in validated[best].items()))
+    ship(run, snapshot=candidates[best], chosen=chosen)
+    return candidates[best]
+
+
+def snapshot_table(validated: dict, best: int, episodes: int) -> str:
+    """`ship_best`'s validations as a table: a row per candidate (env steps; -1 the policy shipped before it)."""
+    lines = [f"Command: `{COMMAND} --ship-best` ({episodes} validation episodes per task, seeds {VALIDATION_SEED:,} on, the "
+             "policy's mean; the snapshots kept on the machine that ran it).", "",
+             "| policy | placed on validation: " + " / ".join(k.removesuffix("-v1") for k in next(iter(validated.values())))
+             + " % | worst task % | shipped |", "|---|---|---|---|"]
+    for step, placed in validated.items():
+        lines.append(f"| {'shipped before' if step < 0 else f'snapshot at {step:,} env steps'} | "
+                     + " / ".join(f"{100 * v:.0f}" for v in placed.values())
+                     + f" | {100 * min(placed.values()):.0f} | {'yes' if step == best else ''} |")
     return "\n".join(lines)
 
 
@@ -297,6 +378,9 @@ class Args:
     """print the plan and where the run stands, and exit."""
     ship_now: bool = False
     """ship the policy where the run stands now (its record says at which step of the plan), and exit."""
+    ship_best: bool = False
+    """validate the run's snapshots on this machine and the shipped policy, ship the snapshot that places most (if
+    that is not the shipped one), and exit."""
     report: bool = False
     """write its section of docs/RESULTS.md and its curve (docs/images/scratch_curve.png), and exit."""
     diagnose: bool = False
@@ -322,14 +406,16 @@ def main(args: Args) -> None:
             ordinary = (f"Command: `{COMMAND} --diagnose` (the campaign's checkpoint at {progress:,} env steps; ordinary "
                         f"resets on the first {DIAGNOSE_SEEDS} test seeds, the policy's mean).\n\n" + ordinary_rollouts(ckpt))
             for name, body in (("near-goal-rollouts", near), ("ordinary-rollouts", ordinary)):
-                update_section(Path("docs/experiments/from_scratch.md"), name, body, "Learning from reward alone: the experiment")
+                update_section(PAGE, name, body, "Learning from reward alone: the experiment")
                 print(body)
         elif args.report:
             print(report(run))
         elif args.ship_now:
             ship(run, before_the_end=True)
+        elif args.ship_best:
+            ship_best(run)
         elif not args.dry_run:
-            run_or_resume(run)
+            train(run)
 
 
 if __name__ == "__main__":

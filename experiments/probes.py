@@ -86,6 +86,7 @@ PROBES = {
 STARTS = {
     "start_1682k": ("runs/campaign_1682k.pt", "9688cdd", "the campaign's fourth start at 1,682,000 env steps"),
     "start_4092k": ("runs/campaign_4092k.pt", "51f96b5", "the campaign's fifth start at 4,092,000 env steps"),
+    "start_6782k": ("runs/campaign_6782k.pt", "a327587", "the campaign's fifth start at 6,782,000 env steps"),
 }
 """name: (where its checkpoint is put, the commit whose campaign/scratch_general_agent/checkpoint.pt it is, what it
 is): the campaign checkpoints the continuation probes of a round start from."""
@@ -117,6 +118,13 @@ CONTINUATIONS = {
                                _recipe(exp_name="probeO_share05_weights", checkpoint=STARTS["start_4092k"][0],
                                        near_goal_radius=1.0, eval_freq=1000, near_goal_share=0.5,
                                        task_weights=(2.0, 2.0, 1.0)) + " (ran its 600,000 steps)", "start_4092k"),
+    "start_6782k": (*_start("start_6782k"), None),
+    "control_from_6782k": ("the campaign run on (the recipe unchanged)",
+                           "python -m experiments.from_scratch (resumed at 6,782,000 steps, stopped at 7,168,000)", None),
+    "probeP_lag": ("the carry distance counts how far the held element trails its place on the plate, jammed against a slab "
+                   "or wall (`--carry-counts-lag`)",
+                   _recipe(exp_name="probeP_lag", checkpoint=STARTS["start_6782k"][0], near_goal_radius=1.0,
+                           eval_freq=1000, carry_counts_lag=True, total_timesteps=400_000) + " (ran its 400,000 steps)", "start_6782k"),
 }
 """name: (what it changed, how its policy came to be, the start it went on from: its steps count after that start's);
 each evaluated with `python -m experiments.probes --evaluate <name> --checkpoint <its checkpoint>` (EVAL into

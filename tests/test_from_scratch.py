@@ -94,6 +94,7 @@ def test_a_tiny_run_ships_before_its_end_with_a_record_that_says_where_it_stands
     rows = [line for line in table.splitlines()[2:]]
     assert [r.split(" | ")[0] for r in rows] == ["| CeilingInstallation-v1", "| WindowInstallation-v1", "| Flooring-v1"]
     assert all(" | yes | " in r for r in rows), "radius 0 starts installed: placed at the first step"
+    assert all(float(r.split(" | ")[7].split(" / ")[1]) < 0.02 for r in rows), "and on its plate: not behind it"
     # a fresh policy's mean lies near 0: never past the action bounds
     assert all(r.rstrip(" |").split(" | ")[-1].startswith("0.00; ") for r in rows), rows
     # and from ordinary resets (test seeds): a fresh policy grasps nothing and leaves the element on the table
@@ -102,7 +103,7 @@ def test_a_tiny_run_ships_before_its_end_with_a_record_that_says_where_it_stands
     assert [r[0] for r in rows] == ["CeilingInstallation-v1", "WindowInstallation-v1", "Flooring-v1"]
     assert all(r[1] == "1000000" and r[2] in ("0", "1", "2", "3") and r[3] == "-" and r[4] == "no" and r[5] == "-"
                for r in rows), rows
-    assert all("staging_table" in r[8] for r in rows), rows
+    assert all(r[8] == "-" and "staging_table" in r[9] for r in rows), rows  # never held: no lag behind the plate
 
 
 def test_the_report_draws_the_curve_and_writes_the_section(tmp_path, monkeypatch):
@@ -161,3 +162,38 @@ def test_the_continuation_table_compares_each_probe_s_evaluation_with_the_contro
     assert [r.split(" | ")[0] for r in rows] == ["| control_campaign", "| probeM_paths"], "in CONTINUATIONS' order, evaluated ones only"
     assert "| 2,012,000 | 100% / 50% / 90% | 0.0 [0.0, 50.0] / 0.0 [0.0, 50.0] / 20.0 [0.0, 50.0] |" in rows[1]
     assert "--carry-along-paths" in table and "python -m experiments.probes --evaluate probeM_paths" in table
+
+
+def test_the_campaign_keeps_snapshots_and_ships_the_one_that_validates_best(tmp_path, monkeypatch):
+    """`train` runs in parts, a snapshot at the end of each; it then ships the snapshot that places most on its worst
+    task on validation, with a record that says so; a shipped policy that validates better than every snapshot stays."""
+    small = dict(num_envs=2, num_steps=20, num_minibatches=2, update_epochs=1, num_eval_envs=1, eval_freq=100,
+                 checkpoint_freq=1, env_id="Flooring-v1", log_dir=str(tmp_path), exp_name="tiny", total_timesteps=80)
+    [run] = fs.scratch_runs(num_envs=2)
+    run = dataclasses.replace(run, args=fs.scratch_args(**small), shipped=tmp_path / "scratch.pt")
+    placed = {"checkpoint_40": dict(ceiling=0.5, window=0.4), "checkpoint_80": dict(ceiling=0.9, window=0.1),
+              "scratch": dict(ceiling=1.0, window=1.0)}
+    validated = []
+
+    def fake_validate(checkpoint, out, episodes):
+        assert out.parent == tmp_path / "snapshots" and episodes == fs.VALIDATION_EPISODES
+        validated.append(checkpoint.stem)
+        return placed[checkpoint.stem]
+
+    monkeypatch.setattr(fs, "validate", fake_validate)
+    fs.train(run, every=40, snapshots=tmp_path / "snapshots", page=tmp_path / "page.md")
+    assert sorted(p.name for p in (tmp_path / "snapshots").glob("*.pt")) == ["checkpoint_40.pt", "checkpoint_80.pt"]
+    assert validated == ["checkpoint_40", "checkpoint_80"], "nothing shipped before: the snapshots alone"
+    shipped = torch.load(run.shipped, weights_only=False)
+    assert shipped["progress"]["global_step"] == 40, "the better worst task, not the better mean"
+    assert "the best of 2 snapshots" in shipped["campaign"]["record"]["chosen"]
+    assert shipped["campaign"]["record"]["env steps"] == "40 (of the 80 planned)"
+    rows = [r for r in (tmp_path / "page.md").read_text().splitlines() if r.startswith("| snapshot")]
+    assert rows == ["| snapshot at 40 env steps | 50 / 40 | 40 | yes |", "| snapshot at 80 env steps | 90 / 10 | 10 |  |"]
+    before = run.shipped.read_bytes()
+    assert fs.ship_best(run, snapshots=tmp_path / "snapshots", page=tmp_path / "page.md") is None
+    assert run.shipped.read_bytes() == before
+    assert "| shipped before | 100 / 100 | 100 | yes |" in (tmp_path / "page.md").read_text()
+    # the run is done: train again only ships (no part is run)
+    fs.train(run, every=40, snapshots=tmp_path / "snapshots", page=tmp_path / "page.md")
+    assert len(list((tmp_path / "snapshots").glob("*.pt"))) == 2

@@ -8,6 +8,7 @@ site's poses alone (ms_construction/goal_configurations.py).
   and a shortcut straight from the lift to the goal pays less than the path.
 - With `reach_in_joint_space` the reach toward the element is measured in joint space to the configurations that
   grasp it on the staging table: it falls on the way there and they grasp.
+- With `carry_counts_lag` the carry distance also counts how far a jammed element trails its plate.
 - A near-goal start is a valid state: the element held against the plate, nothing penetrating, still after a
   step; radius 0 starts it installed (placed at the first step), and evaluation-style resets are untouched.
 """
@@ -272,4 +273,31 @@ def test_near_goal_episodes_are_cut_at_their_own_limit_and_ordinary_ones_are_not
     assert not any(bool(env.step(torch.zeros(1, 6))[3][0]) for _ in range(8))
     with pytest.raises(ValueError, match="max_steps must be a positive"):
         u.set_near_goal_starts(0.5, 0.5, max_steps=0)
+    env.close()
+
+
+def test_the_carry_counts_an_element_jammed_behind_its_plate():
+    """`carry_counts_lag`: a floor panel pushed on into the slab stays on it and trails the plate; the carry distance
+    then counts LAG_WEIGHT per metre of that lag over the joints' own distance. Carried freely, the element keeps up."""
+    env = make_env("Flooring-v1", control_mode="pd_joint_delta_pos", reward_mode="dense", carry_along_paths=True,
+                   carry_counts_lag=True)
+    u = env.unwrapped
+    u.set_near_goal_starts(1.0, 0.0)  # installed
+    env.reset(seed=100)
+    q = u.agent.robot.get_qpos()[0]
+    paths = u._load_start_paths()["waypoints"][u.task_id[0], u.goal_slot[0]].flatten(0, 1)  # [M, P, 6]
+    path = paths[(paths[:, 0, :5] - q[:5]).abs().sum(-1).argmin()]
+    out = path[1] - path[0]  # the first step out of the goal: back along the plate's axis
+    push = -out / out.abs().max()
+    for _ in range(10):  # on into the slab
+        env.step(push[None])
+    lag = float(u.hold_lag()[0])
+    assert lag > 0.05, "the slab stops the element while the plate goes on"
+    assert float(u.evaluate()["place_dist"][0]) < 0.05, "the element stays on the slab, at its goal"
+    assert float(u.carry_distance()[0]) == pytest.approx(float(u.path_distance()[0]) + u.LAG_WEIGHT * lag, abs=1e-4)
+    for _ in range(16):  # back out and away
+        env.step(-push[None])
+    assert float(u.hold_lag()[0]) < 0.02, "carried freely, the element keeps its place on the plate"
+    u.carry_counts_lag = False
+    assert float(u.carry_distance()[0]) == pytest.approx(float(u.path_distance()[0]))
     env.close()

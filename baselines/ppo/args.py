@@ -92,6 +92,9 @@ class RunArgs:
     reach_in_joint_space: bool = False
     """the dense rewards' reach toward the element's grasp half measured in joint space to the configurations that
     grasp it on the staging table (the tasks' `reach_in_joint_space`, `reach_distance`), in training."""
+    carry_counts_lag: bool = False
+    """the dense rewards' carry distance counts how far the held element trails its place on the plate (the tasks'
+    `carry_counts_lag`, `hold_lag`: jammed against a slab or wall while the arm goes on), in training."""
     task_weights: Optional[tuple[float, float, float]] = None
     """the general task's sampling weights of ceiling, window and flooring in the training envs (None: uniform;
     `1 2 1`: window installation half the episodes); evaluation always samples uniformly."""

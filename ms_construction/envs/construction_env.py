@@ -104,6 +104,7 @@ class ConstructionTaskEnv(BaseEnv):
         obs_install_offset: bool = False,
         carry_along_paths: bool = False,
         reach_in_joint_space: bool = False,
+        carry_counts_lag: bool = False,
         **kwargs,
     ):
         self._tol_init = resolve_tolerances(curriculum_stage, tolerances)
@@ -121,6 +122,7 @@ class ConstructionTaskEnv(BaseEnv):
         self.obs_install_offset = bool(obs_install_offset)
         self.carry_along_paths = bool(carry_along_paths)
         self.reach_in_joint_space = bool(reach_in_joint_space)
+        self.carry_counts_lag = bool(carry_counts_lag)
         self.robot_init_qpos_noise = robot_init_qpos_noise
         self._step_grasp_frame, self._in_step_readout = None, False
         self.near_goal_share, self.near_goal_radius, self.near_goal_max_steps = 0.0, None, None
@@ -553,10 +555,26 @@ class ConstructionTaskEnv(BaseEnv):
         to the nearest installation configuration of the env's goal slot, joint 6 shifted by the element's turn
         on the plate and compared modulo the element's symmetry period. Falls at every step of a straight joint
         move to the goal from anywhere (the turret turning the way its limits allow), and so along any carry
-        that heads there; no demonstrations involved. With `carry_along_paths`, `path_distance` instead."""
-        if self.carry_along_paths:
-            return self.path_distance()
-        return self.install_offset().abs().sum(-1)
+        that heads there; no demonstrations involved. With `carry_along_paths`, `path_distance` instead; with
+        `carry_counts_lag`, plus LAG_WEIGHT times `hold_lag`."""
+        distance = self.path_distance() if self.carry_along_paths else self.install_offset().abs().sum(-1)
+        if self.carry_counts_lag:
+            distance = distance + self.LAG_WEIGHT * self.hold_lag()
+        return distance
+
+    LAG_WEIGHT = 10.0
+    """rad per m; with `carry_counts_lag`, each metre the held element trails its place on the plate adds this much to
+    the carry distance: an element jammed 0.25 m under the slab's rim counts as far from its goal as a 2.5 rad joint
+    move, where the arm's joints alone say it is nearly there."""
+
+    def hold_lag(self) -> torch.Tensor:
+        """[n] m; how far the held element's centre is from where the suction plate holds it. The hold cannot pass an
+        element through walls and slabs: stopped there, it trails the plate while the arm goes on (the ceiling panels
+        pushed against the slab's underside beside their opening, docs/experiments/from_scratch.md). About 0 while
+        carrying, up to tau_pick for a step or two after the grasp (the pull onto the plate), a few cm pressed into
+        the goal; meaningless while nothing is held."""
+        target = pose_mul(self.agent.tcp.pose.raw_pose, self.gripper.hold_pose_in_tcp)
+        return torch.linalg.norm(self.obj.pose.raw_pose[:, :3] - target[:, :3], dim=-1)
 
     def path_distance(self) -> torch.Tensor:
         """[n] rad; how far the arm is from holding its element installed along the nearest start path of its goal
