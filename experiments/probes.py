@@ -125,6 +125,10 @@ CONTINUATIONS = {
                    "or wall (`--carry-counts-lag`)",
                    _recipe(exp_name="probeP_lag", checkpoint=STARTS["start_6782k"][0], near_goal_radius=1.0,
                            eval_freq=1000, carry_counts_lag=True, total_timesteps=400_000) + " (ran its 400,000 steps)", "start_6782k"),
+    "probeQ_path_offset": ("the observation gains the joint move to a point a little ahead along the start path "
+                           "(`--obs-path-offset`; zero weights on it at the start)",
+                           _recipe(exp_name="probeQ_path_offset", checkpoint=STARTS["start_6782k"][0], near_goal_radius=1.0,
+                                   eval_freq=1000, obs_path_offset=True, total_timesteps=400_000), "start_6782k"),
 }
 """name: (what it changed, how its policy came to be, the start it went on from: its steps count after that start's);
 each evaluated with `python -m experiments.probes --evaluate <name> --checkpoint <its checkpoint>` (EVAL into
@@ -138,7 +142,8 @@ def continuation_table() -> str:
     from baselines.ppo.evaluation import pct
 
     lines = ["| policy | what it changed | env steps in all | pick: ceiling / window / flooring | "
-             "placed: ceiling / window / flooring |", "|---|---|---|---|---|"]
+             "placed: ceiling / window / flooring | training episodes of its last 200,000 steps placed, ordinary "
+             "resets: ceiling / window / flooring (episodes) |", "|---|---|---|---|---|---|"]
     for name, (what, _, _) in CONTINUATIONS.items():
         path = PROBE_DIR / f"{name}_eval.json"
         if not path.is_file():
@@ -148,12 +153,26 @@ def continuation_table() -> str:
         steps = result.get("global_step")
         lines.append(f"| {name} | {what} | {'-' if steps is None else f'{steps:,}'} | "
                      + " / ".join(f"{100 * t['pick_success']:.0f}%" for t in tasks) + " | "
-                     + " / ".join(pct(t["place_success"], t["place_success_ci95"]) for t in tasks) + " |")
+                     + " / ".join(pct(t["place_success"], t["place_success_ci95"]) for t in tasks) + " | "
+                     + _late_training(PROBE_DIR / f"{name}.csv") + " |")
     commands = "\n".join(f"- {name}: `{how}`, then `python -m experiments.probes --evaluate {name} --checkpoint <its checkpoint>` "
                          f"(`{EVAL}`)" for name, (_, how, _) in CONTINUATIONS.items())
     return (f"Command: `python -m experiments.probes` (from {PROBE_DIR}/*_eval.json).\n\n"
             "Each policy evaluated with the paper's protocol on the first 50 test seeds of each task (deterministic); "
             "placed with its Wilson 95% interval.\n\n" + "\n".join(lines) + "\n\nHow each came to be:\n\n" + commands)
+
+
+def _late_training(path: Path, window: int = 200_000) -> str:
+    """The ordinary-reset training episodes of a run's last `window` env steps that placed, per task (its progress.csv
+    at `path`: a probe's, or the campaign's rows over a control's steps); "-" for a start (no training of its own).
+    Hundreds of episodes of the stochastic policy, where the evaluation has 50 of one checkpoint's mean."""
+    if not path.is_file():
+        return "-"
+    with open(path, newline="") as f:
+        rows = list(csv.DictReader(f))
+    late = [r for r in rows if int(r["global_step"]) > int(rows[-1]["global_step"]) - window]
+    episodes = sum(float(r["episodes"]) - float(r["near_goal_episodes"] or 0) for r in late)
+    return " / ".join(_pct(_mean(late, f"ordinary_place_{k}")) for k in ("ceiling", "window", "flooring")) + f" ({episodes:,.0f})"
 
 
 def evaluate_continuation(name: str, checkpoint: Path) -> None:

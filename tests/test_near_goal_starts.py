@@ -9,6 +9,7 @@ site's poses alone (ms_construction/goal_configurations.py).
 - With `reach_in_joint_space` the reach toward the element is measured in joint space to the configurations that
   grasp it on the staging table: it falls on the way there and they grasp.
 - With `carry_counts_lag` the carry distance also counts how far a jammed element trails its plate.
+- The path-offset observation points along the start path: following it places the ceiling panel.
 - A near-goal start is a valid state: the element held against the plate, nothing penetrating, still after a
   step; radius 0 starts it installed (placed at the first step), and evaluation-style resets are untouched.
 """
@@ -300,4 +301,34 @@ def test_the_carry_counts_an_element_jammed_behind_its_plate():
     assert float(u.hold_lag()[0]) < 0.02, "carried freely, the element keeps its place on the plate"
     u.carry_counts_lag = False
     assert float(u.carry_distance()[0]) == pytest.approx(float(u.path_distance()[0]))
+    env.close()
+
+
+def test_the_path_offset_observation_leads_along_the_start_path_into_the_goal():
+    """`obs_path_offset` appends, after the install offset, the joint move to a point a little ahead along the start path
+    (`path_offset`): 0 installed, and a proportional controller that follows it from anywhere on the path (a lift above
+    the table included) brings the ceiling panel up into its opening, the path-measured carry falling on the way."""
+    plain = make_env("CeilingInstallation-v1", control_mode="pd_joint_delta_pos", reward_mode="dense", obs_install_offset=True)
+    env = make_env("CeilingInstallation-v1", control_mode="pd_joint_delta_pos", reward_mode="dense", obs_install_offset=True,
+                   obs_path_offset=True, carry_along_paths=True)
+    obs_p, obs = plain.reset(seed=3)[0], env.reset(seed=3)[0]
+    assert obs.shape[-1] == obs_p.shape[-1] + 6 and torch.equal(obs[..., :-6], obs_p)
+    u = env.unwrapped
+    u.set_near_goal_starts(1.0, 0.0)
+    obs = env.reset(seed=0)[0]
+    assert float(obs[0, -6:].abs().sum()) < 1e-3, "installed: nothing ahead"
+    u.set_near_goal_starts(1.0, 1.0)
+    placed = 0
+    for seed in range(4):
+        obs = env.reset(seed=seed)[0]
+        carry = [float(u.carry_distance()[0])]
+        for _ in range(80):
+            obs, _, terminated, _, info = env.step((obs[:, -6:] / 0.1).clamp(-1, 1))
+            carry.append(float(u.carry_distance()[0]))
+            if bool(terminated[0]):
+                break
+        placed += int(info["success"][0])
+        assert carry[-1] < carry[0] - 1.0 or carry[0] < 1.5, carry
+    assert placed >= 3, placed
+    plain.close()
     env.close()

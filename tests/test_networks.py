@@ -1,8 +1,10 @@
-"""The policy network's options that change what it can express: the bounded mean."""
+"""The policy network's options that change what it can express: the bounded mean, and the inputs a policy gains
+when a run adds the path offset to its observation."""
 
+import pytest
 import torch
 
-from baselines.ppo.checkpoints import make_agent
+from baselines.ppo.checkpoints import make_agent, with_path_offset_inputs
 from baselines.ppo.networks import Agent
 
 
@@ -26,3 +28,29 @@ def test_the_bounded_mean_comes_back_from_a_checkpoint_s_args():
     args = dict(hidden_size=32, curiosity="none", rotation_features=True, num_layers=2)
     assert not isinstance(make_agent(args, 43, 6).actor_mean[-1], torch.nn.Tanh)
     assert isinstance(make_agent({**args, "bounded_mean": True}, 43, 6).actor_mean[-1], torch.nn.Tanh)
+
+
+@pytest.mark.parametrize("rotation_features,elapsed", [(True, False), (False, True)])
+def test_a_policy_gains_the_path_offset_inputs_and_acts_as_before(rotation_features, elapsed):
+    """The path offset lands after the install offset and before the elapsed time; the widened policy and value give the
+    checkpoint's outputs whatever the new inputs say, and its observation statistics are the checkpoint's for the rest."""
+    args = dict(hidden_size=32, curiosity="none", rotation_features=rotation_features, num_layers=2, bounded_mean=True,
+                obs_elapsed_time=elapsed, obs_install_offset=True)
+    old = make_agent(args, 49, 6)
+    with torch.no_grad():  # statistics that are not the defaults, as a trained policy's
+        old.obs_rms.mean.uniform_(-1, 1)
+        old.obs_rms.var.uniform_(0.5, 2)
+        old.obs_rms.count.fill_(1e6)
+    ckpt = dict(args=args, agent=old.state_dict(), obs_dim=49, act_dim=6, icm=None)
+    wide = with_path_offset_inputs(ckpt, "test.pt")
+    assert wide["obs_dim"] == 55 and wide["args"]["obs_path_offset"] and not ckpt["args"].get("obs_path_offset")
+    new = make_agent(wide["args"], 55, 6)
+    new.load_state_dict(wide["agent"])
+    x = torch.randn(64, 49)
+    at = 49 - int(elapsed)
+    widened = torch.cat([x[:, :at], 3 * torch.randn(64, 6), x[:, at:]], 1)
+    with torch.no_grad():
+        assert torch.allclose(new.get_action(widened, True), old.get_action(x, True), atol=1e-6)
+        assert torch.allclose(new.get_value(widened), old.get_value(x), atol=1e-6)
+    with pytest.raises(SystemExit, match="without curiosity"):
+        with_path_offset_inputs({**ckpt, "icm": {"w": torch.zeros(1)}}, "test.pt")

@@ -86,6 +86,10 @@ class RunArgs:
     obs_install_offset: bool = False
     """append the joint move to the nearest installation configuration (the tasks' `obs_install_offset`: IK of
     the goal pose, what the dense reward's carry term measures) to the observation, in training and evaluation."""
+    obs_path_offset: bool = False
+    """append the joint move to the point a little ahead along the start path (the tasks' `obs_path_offset`: what
+    `carry_along_paths` measures the carry along) to the observation, in training and evaluation. A run from
+    `--checkpoint` of a policy without it gets zero weights on it: the policy acts as before until it learns to read it."""
     carry_along_paths: bool = False
     """the dense rewards' carry measured along the near-goal starts' collision-checked joint paths (the tasks'
     `carry_along_paths`, `path_distance`) instead of straight to the installation configuration, in training."""

@@ -156,11 +156,34 @@ def check_fit(ckpt: dict, path, env_id: str, obs_dim: int, act_dim: int, control
                          f"not {control_mode}: use --control-mode {ckpt['args']['control_mode']}")
 
 
+PATH_OFFSET_SIZE = 6
+"""numbers the tasks' `obs_path_offset` appends (a joint move)."""
+
+
+def with_path_offset_inputs(ckpt: dict, path) -> dict:
+    """`ckpt` (a plain policy trained without `obs_path_offset`) for a run that adds the path offset to the observation
+    (after the install offset, before the elapsed time): the first layers of its policy and value get zero weights for
+    the new inputs and its observation statistics a mean of 0 and a variance of 1 for them (a joint move in rad), so
+    that it acts and values as before until the run learns to read them. A copy; `path` names it in errors."""
+    args = ckpt["args"]
+    if args.get("residual_of") or ckpt.get("icm") is not None:
+        raise SystemExit(f"--checkpoint {path}: only a plain policy without curiosity gains the path-offset inputs")
+    agent = dict(ckpt["agent"])
+    at = agent["obs_rms.mean"].shape[0] - int(bool(args.get("obs_elapsed_time")))  # the features end as the obs does
+    for key, fill in (("obs_rms.mean", 0.0), ("obs_rms.var", 1.0)):
+        v = agent[key]
+        agent[key] = torch.cat([v[:at], torch.full((PATH_OFFSET_SIZE,), fill, dtype=v.dtype), v[at:]])
+    for key in ("critic.0.weight", "actor_mean.0.weight"):
+        w = agent[key]
+        agent[key] = torch.cat([w[:, :at], torch.zeros(w.shape[0], PATH_OFFSET_SIZE, dtype=w.dtype), w[:, at:]], 1)
+    return {**ckpt, "agent": agent, "obs_dim": ckpt["obs_dim"] + PATH_OFFSET_SIZE, "args": {**args, "obs_path_offset": True}}
+
+
 def policy_env_kwargs(args: dict) -> dict:
     """The env kwargs that a checkpoint's policy (its saved `args`) acts in, beside obs_mode="state": its control
-    mode, and the observation's optional entries (install offset, elapsed time) it was trained with."""
+    mode, and the observation's optional entries (install offset, path offset, elapsed time) it was trained with."""
     return dict(control_mode=args["control_mode"],
-                **{k: True for k in ("obs_install_offset", "obs_elapsed_time") if args.get(k)})
+                **{k: True for k in ("obs_install_offset", "obs_path_offset", "obs_elapsed_time") if args.get(k)})
 
 
 def load_policy(path, env_id: str) -> tuple[Agent, dict]:

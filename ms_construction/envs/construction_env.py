@@ -102,6 +102,7 @@ class ConstructionTaskEnv(BaseEnv):
         task_weights: Optional[Mapping[str, float]] = None,
         obs_elapsed_time: bool = False,
         obs_install_offset: bool = False,
+        obs_path_offset: bool = False,
         carry_along_paths: bool = False,
         reach_in_joint_space: bool = False,
         carry_counts_lag: bool = False,
@@ -120,6 +121,7 @@ class ConstructionTaskEnv(BaseEnv):
         self._task_weights = self._check_task_weights(task_weights)
         self.obs_elapsed_time = bool(obs_elapsed_time)
         self.obs_install_offset = bool(obs_install_offset)
+        self.obs_path_offset = bool(obs_path_offset)
         self.carry_along_paths = bool(carry_along_paths)
         self.reach_in_joint_space = bool(reach_in_joint_space)
         self.carry_counts_lag = bool(carry_counts_lag)
@@ -520,6 +522,8 @@ class ConstructionTaskEnv(BaseEnv):
             )
         if self.obs_install_offset:  # after the rest, so that a policy without it reads them unchanged
             obs["install_offset"] = self.install_offset()
+        if self.obs_path_offset:  # after it, for the same reason
+            obs["path_offset"] = self.path_offset()
         if self.obs_elapsed_time:  # last, so that a policy without it reads the rest unchanged
             obs["elapsed"] = (self.elapsed_steps.float() / self.MAX_EPISODE_STEPS)[:, None]
         return obs
@@ -586,6 +590,11 @@ class ConstructionTaskEnv(BaseEnv):
         fourth start's carries, docs/experiments/from_scratch.md); this distance falls on the way up and over them
         and into the opening along the plate's axis. No demonstrations: the paths come from IK of the goal and
         the table."""
+        return self._path_projection()[0]
+
+    def _path_projection(self) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
+        """`path_distance` [n], the waypoints [n, P, 6] of the start path it is measured along, and the path's length
+        from the installation to the point it is measured from [n]."""
         sp = self._load_start_paths()
         n = len(self.task_id)
         w = sp["waypoints"][self.task_id, self.goal_slot].flatten(1, 2)  # [n, M, P, 6], M paths of P waypoints
@@ -598,13 +607,32 @@ class ConstructionTaskEnv(BaseEnv):
         t_near = ((rel[..., :5] * seg[..., :5]).sum(-1) / (seg[..., :5] ** 2).sum(-1).clamp(min=1e-9)).clamp(0, 1)
         length = seg.abs().sum(-1)
         before = torch.cumsum(length, -1) - length  # the path's length from the installation to each segment
-        total = torch.full(rel.shape[:2], torch.inf, device=rel.device)
-        for t in (t_near, torch.zeros_like(t_near), torch.ones_like(t_near)):
-            diff = rel - t[..., None] * seg
-            off_path = diff[..., :5].abs().sum(-1) + (torch.remainder(diff[..., 5] + period / 2, period) - period / 2).abs()
-            total = torch.minimum(total, (self.PATH_DEVIATION_WEIGHT * off_path + before + t * length).amin(-1))  # [n, M]
-        total = torch.where(sp["usable"][self.task_id, self.goal_slot] > 0, total, torch.full_like(total, torch.inf))
-        return total.amin(-1).reshape(n)
+        ts = torch.stack([t_near, torch.zeros_like(t_near), torch.ones_like(t_near)])  # [3, n, M, P - 1]
+        diff = rel[None] - ts[..., None] * seg[None]
+        off_path = diff[..., :5].abs().sum(-1) + (torch.remainder(diff[..., 5] + period / 2, period) - period / 2).abs()
+        cost = self.PATH_DEVIATION_WEIGHT * off_path + before + ts * length
+        usable = sp["usable"][self.task_id, self.goal_slot] > 0  # [n, M]
+        cost = torch.where(usable[None, :, :, None], cost, torch.full_like(cost, torch.inf))
+        total, best = cost.permute(1, 0, 2, 3).reshape(n, -1).min(-1)
+        k, m, j = torch.unravel_index(best, cost.permute(1, 0, 2, 3).shape[1:])
+        rows = torch.arange(n, device=cost.device)
+        return total, w[rows, m], before[rows, m, j] + ts[k, rows, m, j] * length[rows, m, j]
+
+    PATH_LOOKAHEAD = 0.5
+    """rad; `path_offset` points this far (joint-space, L1) along the path ahead of the arm's nearest point on it."""
+
+    def path_offset(self) -> torch.Tensor:
+        """[n, 6] rad; the joint move from the arm's configuration to the point PATH_LOOKAHEAD ahead, toward the
+        installation, of its nearest point on the start path `path_distance` measures along (the installation
+        configuration itself within PATH_LOOKAHEAD of it), joint 6's part taken modulo the element's symmetry, as
+        `install_offset` is for the straight move: which way the path-measured carry falls from here."""
+        _, w, at = self._path_projection()
+        length = (w[:, 1:] - w[:, :-1]).abs().sum(-1).sum(-1)
+        target = self._path_points(w, ((at - self.PATH_LOOKAHEAD).clamp(min=0) / length.clamp(min=1e-9)).clamp(0, 1))
+        diff = target - self.agent.robot.get_qpos()
+        period = self._sym_period[self.task_id]
+        diff[:, 5] = torch.remainder(diff[:, 5] + self.plate_turn() + period / 2, period) - period / 2
+        return diff
 
     REACH_RANGE = 6.0
     """rad; with `reach_in_joint_space`, the joint-space reach falls linearly from 1 at a grasp configuration to 0

@@ -77,6 +77,9 @@ that knows how much of it is left can hurry (Pardo et al. 2018, time limits in R
 `obs_install_offset=True` appends, before it, the joint move (6 numbers, rad) from the arm's configuration to
 the nearest one that holds the element installed (`extra/install_offset`: IK of the goal pose, what the dense
 reward's carry term measures; joint 6's part modulo the element's symmetry). Off by default.
+`obs_path_offset=True` appends, after that, the joint move to the point {ConstructionTaskEnv.PATH_LOOKAHEAD:g} rad ahead along the start path that
+`carry_along_paths` measures the carry along (`extra/path_offset`, `path_offset`): which way that carry falls. Off
+by default.
 """
 
 
