@@ -10,7 +10,9 @@ ended (m from its goal).
 
 Probes that go on from a campaign checkpoint (`CONTINUATIONS`) are compared where the campaign is judged: each
 policy evaluated with the paper's protocol on the same test seeds (scripts/evaluate.py --all, deterministic), its
-JSON kept beside the CSVs as <name>_eval.json; the campaign itself, run on for as many steps, is the control.
+JSON kept beside the CSVs as <name>_eval.json; the campaign itself, run on for as many steps, is the control. They are
+also compared by their training episodes of the last 200,000 steps (hundreds of episodes, where an evaluation has
+50 of one checkpoint's mean), from <name>.csv: a probe's progress.csv, or a control's rows of the campaign's.
 """
 
 from __future__ import annotations
