@@ -265,6 +265,10 @@ class ConstructionTaskEnv(BaseEnv):
             self._place_goal_markers(env_idx)
 
             self.held[env_idx] = False
+            # the last episode's hold must not outlive it: `plate_turn` (and through it the joint 6 part of
+            # `install_offset`, `path_offset` and the carry) reads it before the grasp sets the new one. Until then
+            # the element counts as unturned on the plate, as it lies in `install_configurations`
+            self.gripper.hold_pose_in_tcp[env_idx] = pose_inv(self._grasp_in_el[task])
             self.picked[env_idx] = False
             self.first_grasp_now[env_idx] = False
             self.near_goal_start[env_idx] = False
@@ -549,7 +553,8 @@ class ConstructionTaskEnv(BaseEnv):
 
     def plate_turn(self) -> torch.Tensor:
         """[n] rad; how far the held element is turned on the plate about the plate's axis (the grasp keeps the
-        element's yaw relative to the plate); 0 when it lies as in `install_configurations`."""
+        element's yaw relative to the plate); 0 when it lies as in `install_configurations`, and before the episode's
+        grasp (each reset sets the nominal hold)."""
         grasp_q = self._grasp_in_el[self.task_id, 3:]
         turn = qmul(qconj(grasp_q), qconj(self.hold_pose_in_tcp[:, 3:]))  # a rotation about the plate's z axis
         return 2 * torch.atan2(turn[:, 3], turn[:, 0])
