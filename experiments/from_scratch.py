@@ -29,7 +29,6 @@ assets/checkpoints/scratch_general_agent.pt with its campaign record. The recipe
 from __future__ import annotations
 
 import csv
-import hashlib
 import json
 import math
 import os
@@ -47,7 +46,7 @@ from baselines.ppo.args import command_line
 from baselines.ppo.checkpoints import load_checkpoint
 from baselines.ppo.evaluation import PAPER_TABLE_II, failures, kinds, pct
 from experiments.campaign import CAMPAIGN_DIR, SHIPPED_DIR, Run, checkpoint_of, describe, ship, training_wall_s
-from experiments.refine import VALIDATION_SEED, best_snapshot, validate
+from experiments.refine import VALIDATION_SEED, best_snapshot, content_tag, validate
 from ms_construction.parameters import ELEMENT_KINDS
 from ms_construction.reporting import update_section
 from ms_construction.curriculum import FINAL_STAGE
@@ -338,8 +337,7 @@ def ship_best(run: Run, episodes: int = VALIDATION_EPISODES, snapshots: Path = S
         raise SystemExit(f"no snapshots in {snapshots}: `{COMMAND}` keeps one every {SNAPSHOT_EVERY:,} env steps")
     validated = {step: validate(p, snapshots / f"val{episodes}_{step}.json", episodes) for step, p in sorted(candidates.items())}
     if run.shipped.is_file():
-        tag = hashlib.sha1(run.shipped.read_bytes()).hexdigest()[:8]  # the file names the policy it judged
-        validated[-1] = validate(run.shipped, snapshots / f"val{episodes}_shipped_{tag}.json", episodes)
+        validated[-1] = validate(run.shipped, snapshots / f"val{episodes}_shipped_{content_tag(run.shipped)}.json", episodes)
     for step, placed in validated.items():
         print(f"{'shipped now' if step < 0 else f'{step:,} env steps'}: placed on validation "
               + ", ".join(f"{k} {v:.2f}" for k, v in placed.items()))

@@ -139,6 +139,12 @@ def ppo_args(args: Args, bank: Path) -> ppo.Args:
         sim_backend="physx_cpu", cuda=False)
 
 
+def content_tag(path: Path) -> str:
+    """A short hash of a file's bytes: a validation of a shipped policy is kept under it, so that the file names the
+    policy it judged (a policy shipped later gets its own)."""
+    return hashlib.sha1(path.read_bytes()).hexdigest()[:8]
+
+
 def validate(checkpoint: Path, out: Path, episodes: int, seed: int = VALIDATION_SEED) -> dict:
     if not out.exists():
         evaluation.main(evaluation.Args(checkpoint=checkpoint, all=True, episodes=episodes, seed=seed, json=out))
@@ -192,9 +198,8 @@ def main(args: Args) -> Path:
         if better and args.ship and shipped_refinement(args.clone):
             # a refinement shipped before is the bar too: replacing it with anything that beats the clone could
             # ship a worse agent (the same fresh episodes for both; the test seeds stay unseen)
-            tag = hashlib.sha1(SHIPPED.read_bytes()).hexdigest()[:8]  # the file names the agent it judged
-            now = timed("confirmation", lambda: validate(SHIPPED, args.run_dir / f"confirm{m}_shipped_{tag}.json", m,
-                                                         CONFIRMATION_SEED))
+            judged = args.run_dir / f"confirm{m}_shipped_{content_tag(SHIPPED)}.json"
+            now = timed("confirmation", lambda: validate(SHIPPED, judged, m, CONFIRMATION_SEED))
             better = beats(confirmed[1], now)
             print(f"confirmation against the agent shipped now ({SHIPPED}; shipped -> refined): "
                   + ", ".join(f"{k} {now[k]:.3f} -> {confirmed[1][k]:.3f}" for k in clone_val))
