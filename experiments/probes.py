@@ -89,6 +89,8 @@ STARTS = {
     "start_1682k": ("runs/campaign_1682k.pt", "9688cdd", "the campaign's fourth start at 1,682,000 env steps"),
     "start_4092k": ("runs/campaign_4092k.pt", "51f96b5", "the campaign's fifth start at 4,092,000 env steps"),
     "start_6782k": ("runs/campaign_6782k.pt", "a327587", "the campaign's fifth start at 6,782,000 env steps"),
+    "start_10558k": ("runs/campaign_10558k.pt", "ea4fd7f",
+                     "the campaign's fifth start at 10,558,000 env steps (the hold reset since 10,010,000)"),
 }
 """name: (where its checkpoint is put, the commit whose campaign/scratch_general_agent/checkpoint.pt it is, what it
 is): the campaign checkpoints the continuation probes of a round start from."""
@@ -131,6 +133,14 @@ CONTINUATIONS = {
                            "(`--obs-path-offset`; zero weights on it at the start)",
                            _recipe(exp_name="probeQ_path_offset", checkpoint=STARTS["start_6782k"][0], near_goal_radius=1.0,
                                    eval_freq=1000, obs_path_offset=True, total_timesteps=400_000), "start_6782k"),
+    "start_10558k": (*_start("start_10558k"), None),
+    "control_from_10558k": ("the campaign run on (the recipe unchanged)",
+                            "python baselines/ppo/ppo.py --resume campaign/scratch_general_agent/checkpoint.pt --extend "
+                            "--total-timesteps 11058000 --curriculum cp4 (the campaign resumed at 10,558,000 steps)", None),
+    "probeR_path_offset": ("Q again, from the later start with the hold reset (`--obs-path-offset`; zero weights on it "
+                           "at the start)",
+                           _recipe(exp_name="probeR_path_offset", checkpoint=STARTS["start_10558k"][0], near_goal_radius=1.0,
+                                   eval_freq=1000, obs_path_offset=True, total_timesteps=500_000), "start_10558k"),
 }
 """name: (what it changed, how its policy came to be, the start it went on from: its steps count after that start's);
 each evaluated with `python -m experiments.probes --evaluate <name> --checkpoint <its checkpoint>` (EVAL into
