@@ -56,9 +56,10 @@ BUDGET = 20_000_000
 COMMAND = "python -m experiments.from_scratch"
 PAGE = Path("docs/experiments/from_scratch.md")
 """the experiment page: the diagnosis and the snapshots' validations are written into it."""
-STARTS = {1_682_000: "fifth start: carry along the start paths, reach in joint space"}
-"""env step: the recipe change the campaign went on with there (the fourth start's steps before it; the experiment page
-says how each start came to be)."""
+STARTS = {1_682_000: "fifth start: carry along the start paths, reach in joint space",
+          10_010_000: "observation mended: each reset sets the nominal hold (a8d32d8)"}
+"""env step: the change the campaign went on with there, of the recipe or of the tasks (the fourth start's steps before
+the first; the experiment page says how each came to be)."""
 
 
 def scratch_args(num_envs: Optional[int] = None, **overrides) -> ppo.Args:
@@ -126,7 +127,7 @@ def draw_curve(rows: list[dict], out: Path) -> None:
                  label=f"start radius: {kind} (right axis)")
     for step, what in STARTS.items():
         ax.axvline(step / 1e6, color="black", lw=0.8, ls="-.")
-        ax.text(step / 1e6, 97, " " + what, fontsize=7, va="top")
+        ax.text(step / 1e6, 2, " " + what.split(":")[0], fontsize=7, rotation=90, va="bottom")  # the caption has the rest
     ax2.set_ylim(0, 1.05)
     ax2.set_ylabel("near-goal start radius (fraction of the path)")
     ax.set_xlabel("env steps (millions)")
