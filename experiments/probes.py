@@ -172,7 +172,8 @@ def continuation_table() -> str:
     return (f"Command: `python -m experiments.probes` (from {PROBE_DIR}/*_eval.json).\n\n"
             "Each policy evaluated with the paper's protocol on the first 50 test seeds of each task (deterministic); "
             "placed with its Wilson 95% interval. Evaluated with each reset setting the nominal hold (a8d32d8): the "
-            "evaluations before it read the last episode's hold in the offset observation.\n\n" + "\n".join(lines) + "\n\nHow each came to be:\n\n" + commands)
+            "evaluations before it read the last episode's hold in the offset observation.\n\n" + "\n".join(lines)
+            + "\n\nHow each came to be:\n\n" + commands)
 
 
 def _late_training(path: Path, window: int = 200_000) -> str:

@@ -89,6 +89,13 @@ class SuctionGripper:
         self._gravity = torch.tensor(gravity, dtype=torch.float32, device=device)
         self._gravity_np = np.asarray(gravity, np.float32)
 
+    def reset(self, env_idx: torch.Tensor, nominal_hold: torch.Tensor) -> None:
+        """At an episode's start: nothing held, and the hold of the last episode's grasp replaced by `nominal_hold`
+        [len(env_idx), 7] (the element unturned on the plate), so that nothing read before the grasp (the env's
+        `plate_turn`) depends on the episode before."""
+        self.held[env_idx] = False
+        self.hold_pose_in_tcp[env_idx] = nominal_hold
+
     def tcp_in_element(self, element: Actor) -> torch.Tensor:
         """Raw pose [n, 7] of the plate's tcp in the element's frame."""
         return pose_mul(pose_inv(element.pose.raw_pose), self.tcp.pose.raw_pose)

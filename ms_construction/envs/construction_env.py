@@ -264,11 +264,9 @@ class ConstructionTaskEnv(BaseEnv):
                 el.set_angular_velocity(zeros)
             self._place_goal_markers(env_idx)
 
-            self.held[env_idx] = False
-            # the last episode's hold must not outlive it: `plate_turn` (and through it the joint 6 part of
-            # `install_offset`, `path_offset` and the carry) reads it before the grasp sets the new one. Until then
-            # the element counts as unturned on the plate, as it lies in `install_configurations`
-            self.gripper.hold_pose_in_tcp[env_idx] = pose_inv(self._grasp_in_el[task])
+            # `plate_turn` (the joint 6 part of `install_offset`, `path_offset` and the carry) reads the hold before the
+            # grasp sets it: until then the element counts as unturned, as it lies in `install_configurations`
+            self.gripper.reset(env_idx, pose_inv(self._grasp_in_el[task]))
             self.picked[env_idx] = False
             self.first_grasp_now[env_idx] = False
             self.near_goal_start[env_idx] = False
