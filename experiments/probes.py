@@ -91,6 +91,7 @@ STARTS = {
     "start_6782k": ("runs/campaign_6782k.pt", "a327587", "the campaign's fifth start at 6,782,000 env steps"),
     "start_10558k": ("runs/campaign_10558k.pt", "ea4fd7f",
                      "the campaign's fifth start at 10,558,000 env steps (the hold reset since 10,010,000)"),
+    "start_12948k": ("runs/campaign_12948k.pt", "3b9685c", "the campaign's fifth start at 12,948,000 env steps"),
 }
 """name: (where its checkpoint is put, the commit whose campaign/scratch_general_agent/checkpoint.pt it is, what it
 is): the campaign checkpoints the continuation probes of a round start from."""
@@ -141,6 +142,20 @@ CONTINUATIONS = {
                            "at the start)",
                            _recipe(exp_name="probeR_path_offset", checkpoint=STARTS["start_10558k"][0], near_goal_radius=1.0,
                                    eval_freq=1000, obs_path_offset=True, total_timesteps=500_000), "start_10558k"),
+    "start_12948k": (*_start("start_12948k"), None),
+    "control_from_12948k": ("the campaign run on (the recipe unchanged)",
+                            "python baselines/ppo/ppo.py --resume campaign/scratch_general_agent/checkpoint.pt --extend "
+                            "--total-timesteps 13448000 --curriculum cp4 (the campaign resumed at 12,948,000 steps)", None),
+    "probeS_share02": ("a fifth of the episodes from near-goal starts instead of 80% (`--near-goal-share 0.2`): every "
+                       "radius is 1 and those starts all place, so most episodes trained what the policy already does",
+                       _recipe(exp_name="probeS_share02", checkpoint=STARTS["start_12948k"][0], near_goal_radius=1.0,
+                               eval_freq=1000, near_goal_share=0.2, total_timesteps=500_000), "start_12948k"),
+    "probeT_share02_failure_weights": ("S + task types sampled by their recent failures (`--failure-task-weights 100`: "
+                                       "0.1 + the failure rate of each one's last 100 ordinary episodes)",
+                                       _recipe(exp_name="probeT_share02_failure_weights",
+                                               checkpoint=STARTS["start_12948k"][0], near_goal_radius=1.0, eval_freq=1000,
+                                               near_goal_share=0.2, failure_task_weights=100, total_timesteps=500_000),
+                                       "start_12948k"),
 }
 """name: (what it changed, how its policy came to be, the start it went on from: its steps count after that start's);
 each evaluated with `python -m experiments.probes --evaluate <name> --checkpoint <its checkpoint>` (EVAL into

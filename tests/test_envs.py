@@ -122,9 +122,17 @@ def test_task_weights_kwarg_is_validated_and_weighs_the_general_task_s_choice():
     env = make_env("ConstructionPickPlace-v1", task_weights={"ceiling": 0, "window": 3})
     seen = [int(env.reset(seed=s)[1]["task_id"][0]) for s in range(40)]
     again = [int(env.reset(seed=s)[1]["task_id"][0]) for s in range(40)]
+    # a trainer moves them between resets (failure-weighted sampling), validated alike; None is uniform again
+    env.unwrapped.set_task_weights({"ceiling": 0, "window": 0})
+    only_floors = {int(env.reset(seed=s)[1]["task_id"][0]) for s in range(10)}
+    with pytest.raises(ValueError, match="not all 0"):
+        env.unwrapped.set_task_weights({"ceiling": 0, "window": 0, "flooring": 0})
+    env.unwrapped.set_task_weights(None)
+    uniform = {int(env.reset(seed=s)[1]["task_id"][0]) for s in range(40)}
     env.close()
     assert seen == again  # a seed still fixes the episode
     assert 0 not in seen and 20 < seen.count(1) < 40 and seen.count(2) > 0
+    assert only_floors == {2} and uniform == {0, 1, 2}
 
 
 def test_obs_elapsed_time_appends_the_step_fraction_last_and_changes_nothing_else():

@@ -469,3 +469,44 @@ def test_near_goal_starts_widen_per_task_with_success_and_a_resumed_run_goes_on_
     first = next(c for c in calls if c[0] == "set_near_goal_starts")
     assert first == ("set_near_goal_starts", (1.0, tuple(progress.near_goal_radius), None)), calls
     assert resumed.global_step == 240
+
+
+def test_failure_task_weights_sample_more_of_what_fails_and_a_resumed_run_sets_them_from_its_checkpoint(tmp_path, monkeypatch):
+    """--failure-task-weights: each task type weighs the floor + its failure rate over its last N ordinary-reset
+    episodes (near-goal starts do not count); the weights reach the training envs, the CSV and the checkpoint's
+    windows, and a resumed run sets the workers' weights from those windows."""
+    from baselines.ppo.start_states import FAILURE_WEIGHT_FLOOR, failure_task_weights
+
+    with pytest.raises(SystemExit, match="without --task-weights"):
+        ppo.validate(Args.of(env_id="ConstructionPickPlace-v1", failure_task_weights=10, task_weights=(1.0, 1.0, 1.0)))
+    with pytest.raises(SystemExit, match="general task"):
+        ppo.validate(Args.of(env_id="Flooring-v1", failure_task_weights=10))
+    progress = ppo.Progress()
+    assert failure_task_weights(Args.of(failure_task_weights=4), progress, [], []) == pytest.approx([1 / 3] * 3)
+    weights = failure_task_weights(Args.of(failure_task_weights=4), progress, [0, 0, 1, 2, 2, 2, 2, 2],
+                                   [1, 1, 0, 1, 1, 0, 0, 0])
+    assert progress.ordinary_recent == [[1.0, 1.0], [0.0], [1.0, 0.0, 0.0, 0.0]]  # the last 4 of each type
+    raw = [FAILURE_WEIGHT_FLOOR, 1 + FAILURE_WEIGHT_FLOOR, 0.75 + FAILURE_WEIGHT_FLOOR]
+    assert weights == pytest.approx([w / sum(raw) for w in raw])
+
+    calls = []
+    original = ppo.call_task
+    monkeypatch.setattr(ppo, "call_task", lambda envs, name, *a: (calls.append((name, a)), original(envs, name, *a))[1])
+    args = tiny_args(tmp_path, exp_name="weights", env_id="ConstructionPickPlace-v1", reward_mode="normalized_dense",
+                     curiosity="none", curriculum=("cp4",), failure_task_weights=5, total_timesteps=80)
+    ppo.main(args)
+    rows = read_csv(tmp_path / "weights" / "progress.csv")
+    assert all(sum(float(r[f"task_weight_{k}"]) for k in ("ceiling", "window", "flooring")) == pytest.approx(1)
+               for r in rows)
+    first = next(a for name, a in calls if name == "set_task_weights")
+    assert list(first[0]) == ["ceiling", "window", "flooring"] and list(first[0].values()) == pytest.approx([1 / 3] * 3)
+    path = tmp_path / "weights" / "checkpoint.pt"
+    ckpt = torch.load(path, weights_only=False)
+    assert ckpt["progress"]["ordinary_recent"] == [[], [], []]  # no ordinary episode ends in 40 steps
+    ckpt["progress"]["ordinary_recent"] = [[1.0, 1.0], [0.0], [1.0, 0.0]]  # as if some had
+    torch.save(ckpt, path)
+    calls.clear()
+    ppo.main(ppo.Args.of(resume=str(path), extend=True, total_timesteps=120, curriculum=("cp4",)))
+    first = next(a for name, a in calls if name == "set_task_weights")
+    raw = [FAILURE_WEIGHT_FLOOR, 1 + FAILURE_WEIGHT_FLOOR, 0.5 + FAILURE_WEIGHT_FLOOR]
+    assert list(first[0].values()) == pytest.approx([w / sum(raw) for w in raw])

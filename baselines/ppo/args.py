@@ -102,6 +102,10 @@ class RunArgs:
     task_weights: Optional[tuple[float, float, float]] = None
     """the general task's sampling weights of ceiling, window and flooring in the training envs (None: uniform;
     `1 2 1`: window installation half the episodes); evaluation always samples uniformly."""
+    failure_task_weights: int = 0
+    """if > 0, instead of `task_weights`: after each iteration the training envs sample each task type with weight
+    0.1 + the share of its last this-many training episodes from ordinary resets that did not place (kept in
+    checkpoints): more of what the policy fails, so that one task type's gains do not go unnoticed as another's losses."""
 
 
 @dataclass
@@ -346,6 +350,10 @@ def validate(args: Args) -> None:
                                           or sum(args.task_weights) <= 0):
         raise SystemExit(f"--task-weights {args.task_weights}: three weights >= 0, not all 0 (ceiling, window, flooring), "
                          "of the general task ConstructionPickPlace-v1 only")
+    if args.failure_task_weights < 0 or (args.failure_task_weights and (args.task_weights is not None
+                                                                      or args.env_id != "ConstructionPickPlace-v1")):
+        raise SystemExit(f"--failure-task-weights {args.failure_task_weights}: a window of episodes (> 0; 0: off), of the "
+                         "general task ConstructionPickPlace-v1 only, without --task-weights")
     for name in ("near_goal_share", "near_goal_radius", "near_goal_promote"):
         if not 0 <= values[name] <= 1:
             raise SystemExit(f"--{name.replace('_', '-')} must lie in [0, 1], got {values[name]}")

@@ -88,6 +88,8 @@ class Progress:
     it starts."""
     near_goal_recent: Optional[list] = None
     """per task type, whether each of its latest near-goal episodes placed (the window a widening looks at)."""
+    ordinary_recent: Optional[list] = None
+    """per task type, whether each of its latest episodes from ordinary resets placed (--failure-task-weights)."""
 
 
 def save_checkpoint(path: Path, args, progress: Progress, agent: Agent, optimizer, icm, icm_optimizer,
@@ -235,13 +237,15 @@ CSV_FIELDS = [
     "end_place_angle_deg", "held_at_end", "near_goal_radius", "near_goal_episodes", "near_goal_place_success",
     "ordinary_place_success", "ordinary_place_ceiling", "ordinary_place_window", "ordinary_place_flooring",
     "near_goal_radius_ceiling", "near_goal_radius_window", "near_goal_radius_flooring",
+    "task_weight_ceiling", "task_weight_window", "task_weight_flooring",
 ]
 """`end_*` and `held_at_end`: where the iteration's training episodes ended (mean place distance in m and
 angle error in degrees to the goal at the last step, share with the element held), what a run that
 places nothing still shows. `near_goal_*`: the start-state curriculum's radius (the mean of the task types', and each one's) and its episodes
 (--near-goal-share);
 `ordinary_place_success`: the place success of the other training episodes, those from ordinary resets, and
-`ordinary_place_<task>` the same per task type."""
+`ordinary_place_<task>` the same per task type; `task_weight_<task>`: the training envs' sampling probability of each
+task type from the next iteration on (--failure-task-weights)."""
 
 
 class CSVLog:

@@ -55,7 +55,7 @@ from baselines.ppo.curiosity import ICM, make_icm
 from baselines.ppo.evaluation import evaluate_envs, finished_episodes, reset
 from baselines.ppo.networks import Agent
 from baselines.ppo.update import adam, ppo_update, signal_advantages
-from baselines.ppo.start_states import StartFromStates, widen_near_goal
+from baselines.ppo.start_states import StartFromStates, failure_task_weights, widen_near_goal
 from ms_construction.envs.construction_env import NearGoalTimeLimit
 from ms_construction.parameters import ELEMENT_KINDS
 from ms_construction.vector_env import CPUVectorEnv
@@ -97,7 +97,8 @@ def make_envs(args: Args, num_envs: int, device: torch.device, eval_mode: bool =
 
 
 def call_task(envs: Envs, name: str, *args) -> None:
-    """The task's method `name(*args)` in every env of `envs` (set_curriculum_stage, set_near_goal_starts)."""
+    """The task's method `name(*args)` in every env of `envs` (set_curriculum_stage, set_near_goal_starts,
+    set_task_weights)."""
     if isinstance(envs, CPUVectorEnv):
         envs.call(name, *args)
     else:
@@ -356,6 +357,10 @@ def episode_columns(args: Args, progress: Progress, episodes: dict, envs: Envs) 
     for k, kind in enumerate(ELEMENT_KINDS):
         if ((task == k) & ~near).any():
             row[f"ordinary_place_{kind}"] = float(placed[(task == k) & ~near].mean())
+    if args.failure_task_weights:
+        weights = failure_task_weights(args, progress, task[~near].tolist(), placed[~near].tolist())
+        call_task(envs, "set_task_weights", dict(zip(ELEMENT_KINDS, weights)))
+        row.update({f"task_weight_{kind}": w for kind, w in zip(ELEMENT_KINDS, weights)})
     if args.starts.near_goal_share > 0:
         row.update(near_goal_radius=float(np.mean(progress.near_goal_radius)), near_goal_episodes=int(near.sum()),
                    near_goal_place_success=float(placed[near].mean()) if near.any() else float("nan"),
@@ -404,6 +409,8 @@ def train(run: Run) -> Progress:
             progress.near_goal_recent = [[] for _ in ELEMENT_KINDS]
         call_task(envs, "set_near_goal_starts", args.starts.near_goal_share, tuple(progress.near_goal_radius),
                   args.starts.near_goal_max_steps)
+    if args.failure_task_weights:  # where the run left them (uniform at its start)
+        call_task(envs, "set_task_weights", dict(zip(ELEMENT_KINDS, failure_task_weights(args, progress, [], []))))
 
     run_dir.mkdir(parents=True, exist_ok=True)
     writer = SummaryWriter(str(run_dir))

@@ -12,7 +12,8 @@ on from the step the state was taken at, so that a failure that was a late arriv
 windows are: docs/experiments/general_agent.md). Evaluation never uses it.
 
 The other start states need no policy: near-goal starts (the tasks' `set_near_goal_starts`, the element held on
-a path out of its goal, up to a radius per task type); `widen_near_goal` is ppo.py's rule for widening those radii.
+a path out of its goal, up to a radius per task type); `widen_near_goal` is ppo.py's rule for widening those radii,
+and `failure_task_weights` its rule for sampling more of the task types whose ordinary episodes fail.
 
     python -m baselines.ppo.start_states --checkpoint assets/checkpoints/general_agent_clone_direct.pt --episodes 1500 \\
         --out runs/failure_states.pt
@@ -32,6 +33,7 @@ from tqdm import tqdm
 
 from baselines.ppo.args import Args as PPOArgs
 from baselines.ppo.checkpoints import Progress, load_policy
+from ms_construction.parameters import ELEMENT_KINDS
 from ms_construction.rollout import policy_episode
 
 FIRST_SEED = 430_000
@@ -148,6 +150,26 @@ def widen_near_goal(args: PPOArgs, progress: Progress, task_ids: list[int], plac
             window.clear()
             widened.add(k)
     return bool(widened)
+
+
+FAILURE_WEIGHT_FLOOR = 0.1
+"""--failure-task-weights: a task type that placed every recent episode still weighs this (it is still trained)."""
+
+
+def failure_task_weights(args: PPOArgs, progress: Progress, task_ids: list[int], placed: list[float]) -> list[float]:
+    """Record the ordinary-reset episodes that ended (their task types and whether they placed) and return the task
+    types' sampling probabilities: FAILURE_WEIGHT_FLOOR + each one's failure rate over its last
+    --failure-task-weights episodes (a type with none yet counts as failing all), normalized. The windows are part
+    of the progress: a resumed run goes on with them."""
+    window = args.failure_task_weights
+    if progress.ordinary_recent is None:
+        progress.ordinary_recent = [[] for _ in ELEMENT_KINDS]
+    for k, ok in zip(task_ids, placed):
+        recent = progress.ordinary_recent[k]
+        recent.append(float(ok))
+        del recent[:-window]
+    weights = [FAILURE_WEIGHT_FLOOR + (1.0 - float(np.mean(r)) if r else 1.0) for r in progress.ordinary_recent]
+    return [w / sum(weights) for w in weights]
 
 
 @dataclass

@@ -144,6 +144,11 @@ class ConstructionTaskEnv(BaseEnv):
             raise ValueError(f"task_weights={dict(weights)!r}: give weights >= 0, not all 0, for task types of {self.TASKS}")
         return torch.tensor(w) / sum(w)
 
+    def set_task_weights(self, weights: Optional[Mapping[str, float]]) -> None:
+        """From the next reset on, sample the general task's task types with these weights (as the `task_weights`
+        kwarg; None: uniform): how a trainer samples more of the task types its policy fails."""
+        self._task_weights = self._check_task_weights(weights)
+
     # ------------------------------------------------------------------------------------- #
     # configuration
     # ------------------------------------------------------------------------------------- #
