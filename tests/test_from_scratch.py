@@ -165,35 +165,47 @@ def test_the_continuation_table_compares_each_probe_s_evaluation_with_the_contro
 
 
 def test_the_campaign_keeps_snapshots_and_ships_the_one_that_validates_best(tmp_path, monkeypatch):
-    """`train` runs in parts, a snapshot at the end of each; it then ships the snapshot that places most on its worst
-    task on validation, with a record that says so; a shipped policy that validates better than every snapshot stays."""
+    """`train` runs in parts, a snapshot at the end of each; it then screens the snapshots on validation, validates
+    the best of them again on fresh episodes, and ships the one that places most there on its worst task, with a
+    record that says so; a shipped policy that confirms better than every snapshot stays."""
     small = dict(num_envs=2, num_steps=20, num_minibatches=2, update_epochs=1, num_eval_envs=1, eval_freq=100,
                  checkpoint_freq=1, env_id="Flooring-v1", log_dir=str(tmp_path), exp_name="tiny", total_timesteps=80)
     [run] = fs.scratch_runs(num_envs=2)
     run = dataclasses.replace(run, args=fs.scratch_args(**small), shipped=tmp_path / "scratch.pt")
-    placed = {"checkpoint_40": dict(ceiling=0.5, window=0.4), "checkpoint_80": dict(ceiling=0.9, window=0.1),
-              "scratch": dict(ceiling=1.0, window=1.0)}
+    screening = {"checkpoint_40": dict(ceiling=0.5, window=0.4), "checkpoint_80": dict(ceiling=0.9, window=0.1),
+                 "scratch": dict(ceiling=1.0, window=1.0)}
+    confirmation = {"checkpoint_40": dict(ceiling=0.3, window=0.3), "checkpoint_80": dict(ceiling=0.6, window=0.5),
+                    "scratch": dict(ceiling=0.9, window=0.9)}
     validated = []
 
-    def fake_validate(checkpoint, out, episodes):
-        assert out.parent == tmp_path / "snapshots" and episodes == fs.VALIDATION_EPISODES
-        validated.append(checkpoint.stem)
-        return placed[checkpoint.stem]
+    def fake_validate(checkpoint, out, episodes, seed=fs.VALIDATION_SEED):
+        assert out.parent == tmp_path / "snapshots" and not out.exists()
+        confirming = (episodes, seed) == (fs.CONFIRM_EPISODES, fs.CONFIRMATION_SEED)
+        assert confirming or (episodes, seed) == (fs.VALIDATION_EPISODES, fs.VALIDATION_SEED)
+        validated.append((checkpoint.stem, confirming))
+        return (confirmation if confirming else screening)[checkpoint.stem]
 
     monkeypatch.setattr(fs, "validate", fake_validate)
+    monkeypatch.setattr(fs, "CONFIRM_TOP", 2)
     fs.train(run, every=40, snapshots=tmp_path / "snapshots", page=tmp_path / "page.md")
     assert sorted(p.name for p in (tmp_path / "snapshots").glob("*.pt")) == ["checkpoint_40.pt", "checkpoint_80.pt"]
-    assert validated == ["checkpoint_40", "checkpoint_80"], "nothing shipped before: the snapshots alone"
+    assert sorted(validated) == [("checkpoint_40", False), ("checkpoint_40", True), ("checkpoint_80", False),
+                                 ("checkpoint_80", True)], "nothing shipped before: the snapshots alone, both confirmed"
     shipped = torch.load(run.shipped, weights_only=False)
-    assert shipped["progress"]["global_step"] == 40, "the better worst task, not the better mean"
+    assert shipped["progress"]["global_step"] == 80, "the confirmation chooses, not the screening"
     assert "the best of 2 snapshots" in shipped["campaign"]["record"]["chosen"]
-    assert shipped["campaign"]["record"]["env steps"] == "40 (of the 80 planned)"
+    assert "among the 2 best on 30" in shipped["campaign"]["record"]["chosen"]
+    assert shipped["campaign"]["record"]["env steps"] == "80"
     rows = [r for r in (tmp_path / "page.md").read_text().splitlines() if r.startswith("| snapshot")]
-    assert rows == ["| snapshot at 40 env steps | 50 / 40 | 40 | yes |", "| snapshot at 80 env steps | 90 / 10 | 10 |  |"]
-    before = run.shipped.read_bytes()
+    assert rows == ["| snapshot at 40 env steps | 50 / 40 | 40 | 30 / 30 | 30 |  |",
+                    "| snapshot at 80 env steps | 90 / 10 | 10 | 60 / 50 | 50 | yes |"]
+    before, validated[:] = run.shipped.read_bytes(), []
     assert fs.ship_best(run, snapshots=tmp_path / "snapshots", page=tmp_path / "page.md") is None
     assert run.shipped.read_bytes() == before
-    assert "| shipped before | 100 / 100 | 100 | yes |" in (tmp_path / "page.md").read_text()
+    assert ("checkpoint_80", True) not in validated, "only the best on the screening are confirmed"
+    page = (tmp_path / "page.md").read_text()
+    assert "| snapshot at 80 env steps | 90 / 10 | 10 | - | - |  |" in page
+    assert "| shipped before | 100 / 100 | 100 | 90 / 90 | 90 | yes |" in page
     # the run is done: train again only ships (no part is run)
     fs.train(run, every=40, snapshots=tmp_path / "snapshots", page=tmp_path / "page.md")
     assert len(list((tmp_path / "snapshots").glob("*.pt"))) == 2
