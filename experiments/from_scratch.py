@@ -46,7 +46,8 @@ from baselines.ppo.args import command_line
 from baselines.ppo.checkpoints import load_checkpoint
 from baselines.ppo.evaluation import PAPER_TABLE_II, failures, kinds, pct
 from experiments.campaign import CAMPAIGN_DIR, SHIPPED_DIR, Run, checkpoint_of, describe, ship, training_wall_s
-from experiments.refine import CONFIRMATION_SEED, VALIDATION_SEED, best_snapshot, content_tag, validate
+from experiments.refine import (CONFIRMATION_SEED, VALIDATION_SEED, best_snapshot, content_tag, ranked_snapshots,
+                               validate)
 from ms_construction.parameters import ELEMENT_KINDS
 from ms_construction.reporting import update_section
 from ms_construction.curriculum import FINAL_STAGE
@@ -348,7 +349,7 @@ def ship_best(run: Run, episodes: int = VALIDATION_EPISODES, snapshots: Path = S
         candidates[-1], tags[-1] = run.shipped, f"shipped_{content_tag(run.shipped)}"
     screened = {step: validate(candidates[step], snapshots / f"val{episodes}_{tags[step]}.json", episodes)
                 for step in sorted(candidates, key=lambda k: (k < 0, k))}  # the policy shipped before last
-    top = sorted(screened, key=lambda k: (min(screened[k].values()), sum(screened[k].values())), reverse=True)[:CONFIRM_TOP]
+    top = ranked_snapshots(screened)[:CONFIRM_TOP]
     confirmed = {step: validate(candidates[step], snapshots / f"val{CONFIRM_EPISODES}_{tags[step]}_confirm.json",
                                 CONFIRM_EPISODES, seed=CONFIRMATION_SEED) for step in top}
     for step, placed in screened.items():

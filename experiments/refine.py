@@ -216,9 +216,14 @@ def shipped_refinement(clone: Path) -> bool:
     return SHIPPED.is_file() and not (clone.is_file() and SHIPPED.read_bytes() == clone.read_bytes())
 
 
+def ranked_snapshots(validated: dict) -> list:
+    """The snapshots (their env steps), best first: most placed on the worst task, then on average."""
+    return sorted(validated, key=lambda k: (min(validated[k].values()), sum(validated[k].values())), reverse=True)
+
+
 def best_snapshot(validated: dict) -> int:
     """The snapshot (its env steps) whose validation places most on its worst task, then on average."""
-    return max(validated, key=lambda k: (min(validated[k].values()), sum(validated[k].values())))
+    return ranked_snapshots(validated)[0]
 
 
 def beats(refined: dict, clone: dict) -> bool:
