@@ -7,7 +7,9 @@ site's poses alone (ms_construction/goal_configurations.py).
 - With `carry_along_paths` it is measured along the start paths: their length left, falling along every one,
   and a shortcut straight from the lift to the goal pays less than the path.
 - With `reach_in_joint_space` the reach toward the element is measured in joint space to the configurations that
-  grasp it on the staging table: it falls on the way there and they grasp.
+  grasp it on the staging table: it falls on the way there and they grasp. With `reach_toward_path_sides` as well,
+  only the configurations on the turret side a usable start path of the goal slot leaves from count: the window
+  opening at y = +0.85 pays its reach toward the +pi side, the other two toward -pi.
 - With `carry_counts_lag` the carry distance also counts how far a jammed element trails its plate.
 - The path-offset observation points along the start path: following it places the ceiling panel.
 - A near-goal start is a valid state: the element held against the plate, nothing penetrating, still after a
@@ -192,6 +194,37 @@ def test_the_joint_space_reach_leads_to_configurations_that_grasp_and_pays_on_th
         _, _, _, _, info = env.step(torch.zeros(1, 6))
         assert bool(info["is_grasped"][0]), "a table grasp configuration grasps"
     env.close()
+
+
+def test_the_reach_toward_path_sides_pays_for_the_turret_side_the_goal_slot_s_start_paths_leave_from():
+    """The window openings' start paths leave the table from one turret side each (goal_configurations.start_paths:
+    +pi for the opening at y = +0.85, slot 2; -pi for the others); with `reach_toward_path_sides` the reach distance
+    is 0 at that side's table grasp configuration and the full joint move away at the other one, so the dense
+    reward pays more for arriving at the side the carry can go on from. Without it both sides count alike."""
+    with pytest.raises(ValueError, match="reach_in_joint_space"):
+        make_env("WindowInstallation-v1", reach_toward_path_sides=True)
+    env = make_env("WindowInstallation-v1", control_mode="pd_joint_delta_pos", reward_mode="dense", reach_in_joint_space=True,
+                   reach_toward_path_sides=True)
+    plain = make_env("WindowInstallation-v1", control_mode="pd_joint_delta_pos", reward_mode="dense", reach_in_joint_space=True)
+    table = lift_configurations(0.0)[ELEMENT_KINDS.index("window")]  # [side: +pi, -pi, 6]
+    apart = float(np.abs(table[0, :5] - table[1, :5]).sum())
+    for slot, good in ((0, 1), (1, 1), (2, 0)):
+        reach, reward = {}, {}
+        for e in (env, plain):
+            e.reset(seed=0)
+        for side in (0, 1):
+            for e in (env, plain):
+                u = e.unwrapped
+                u.goal_slot[:] = slot
+                u.agent.robot.set_qpos(torch.tensor(table[side][None], dtype=torch.float32))
+            u = env.unwrapped
+            reach[side] = float(u.reach_distance()[0])
+            reward[side] = float(u.compute_dense_reward(None, torch.zeros(1, 6), u.evaluate())[0])
+            assert float(plain.unwrapped.reach_distance()[0]) < 1e-4, "without the option either side counts"
+        assert reach[good] < 1e-4 and reach[1 - good] == pytest.approx(apart, rel=1e-4), (slot, reach)
+        assert reward[good] > reward[1 - good], (slot, reward)
+    env.close()
+    plain.close()
 
 
 def test_progress_pays_each_step_s_fall_of_the_carry_distance_and_nothing_for_going_back_and_forth():

@@ -96,6 +96,9 @@ class RunArgs:
     reach_in_joint_space: bool = False
     """the dense rewards' reach toward the element's grasp half measured in joint space to the configurations that
     grasp it on the staging table (the tasks' `reach_in_joint_space`, `reach_distance`), in training."""
+    reach_toward_path_sides: bool = False
+    """with `reach_in_joint_space`, the reach measured only to the table grasp configurations on the turret sides that
+    the goal slot's usable start paths leave from (the tasks' `reach_toward_path_sides`), in training."""
     carry_counts_lag: bool = False
     """the dense rewards' carry distance counts how far the held element trails its place on the plate (the tasks'
     `carry_counts_lag`, `hold_lag`: jammed against a slab or wall while the arm goes on), in training."""
@@ -354,6 +357,8 @@ def validate(args: Args) -> None:
                                                                       or args.env_id != "ConstructionPickPlace-v1")):
         raise SystemExit(f"--failure-task-weights {args.failure_task_weights}: a window of episodes (> 0; 0: off), of the "
                          "general task ConstructionPickPlace-v1 only, without --task-weights")
+    if args.reach_toward_path_sides and not args.reach_in_joint_space:
+        raise SystemExit("--reach-toward-path-sides narrows the joint-space reach: give --reach-in-joint-space too")
     for name in ("near_goal_share", "near_goal_radius", "near_goal_promote"):
         if not 0 <= values[name] <= 1:
             raise SystemExit(f"--{name.replace('_', '-')} must lie in [0, 1], got {values[name]}")

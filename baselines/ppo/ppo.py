@@ -73,7 +73,7 @@ def make_envs(args: Args, num_envs: int, device: torch.device, eval_mode: bool =
     physx_cpu (one env each), ManiSkillVectorEnv on physx_cuda. With `video_dir`, evaluation videos."""
     kwargs = dict(obs_mode="state", reward_mode=args.reward_mode, render_mode="rgb_array" if video_dir else None)
     kwargs.update(policy_env_kwargs(args.flat()))
-    for reward_option in ("carry_along_paths", "reach_in_joint_space", "carry_counts_lag"):  # the training envs' dense reward
+    for reward_option in ("carry_along_paths", "reach_in_joint_space", "reach_toward_path_sides", "carry_counts_lag"):  # the training envs' dense reward
         if getattr(args, reward_option) and not eval_mode:
             kwargs[reward_option] = True
     if args.task_weights is not None and not eval_mode:

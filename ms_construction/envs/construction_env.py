@@ -105,6 +105,7 @@ class ConstructionTaskEnv(BaseEnv):
         obs_path_offset: bool = False,
         carry_along_paths: bool = False,
         reach_in_joint_space: bool = False,
+        reach_toward_path_sides: bool = False,
         carry_counts_lag: bool = False,
         **kwargs,
     ):
@@ -124,6 +125,9 @@ class ConstructionTaskEnv(BaseEnv):
         self.obs_path_offset = bool(obs_path_offset)
         self.carry_along_paths = bool(carry_along_paths)
         self.reach_in_joint_space = bool(reach_in_joint_space)
+        if reach_toward_path_sides and not reach_in_joint_space:
+            raise ValueError("reach_toward_path_sides=True narrows the joint-space reach: give reach_in_joint_space=True too")
+        self.reach_toward_path_sides = bool(reach_toward_path_sides)
         self.carry_counts_lag = bool(carry_counts_lag)
         self.robot_init_qpos_noise = robot_init_qpos_noise
         self._step_grasp_frame, self._in_step_readout = None, False
@@ -651,11 +655,21 @@ class ConstructionTaskEnv(BaseEnv):
         suction grasp, which keeps the element's turn), from the nearest configuration that grasps the element where
         it lies on the staging table (its centre: `goal_configurations.lift_configurations(0)`, with the turret at
         about +pi or -pi). Falls along a joint move to the table the way the turret's limits allow, where the
-        bearing around the pedestal turns the turret either way."""
+        bearing around the pedestal turns the turret either way. With `reach_toward_path_sides`, only to those on the
+        turret sides that a usable start path of the env's goal slot leaves the table from: an element grasped
+        from the other side has no collision-free way to its goal along them (the window opening at y = +0.85 is
+        reached only from the turret's +pi side, the other two only from -pi), and the carry measured along them
+        pulls it nowhere."""
         if self._table_q is None:
             self._table_q = torch.tensor(lift_configurations(0.0), dtype=torch.float32, device=self.device)
         q = self.agent.robot.get_qpos()
-        return (self._table_q[self.task_id][..., :5] - q[:, None, :5]).abs().sum(-1).amin(-1)
+        distance = (self._table_q[self.task_id][..., :5] - q[:, None, :5]).abs().sum(-1)  # [n, 2 turret sides]
+        if self.reach_toward_path_sides:
+            usable = self._load_start_paths()["usable"][self.task_id, self.goal_slot]  # [n, configurations x sides]
+            side_used = usable.view(len(q), -1, 2).amax(1) > 0
+            side_used |= ~side_used.any(-1, keepdim=True)  # a slot without usable paths: either side, as without the option
+            distance = torch.where(side_used, distance, torch.full_like(distance, torch.inf))
+        return distance.amin(-1)
 
     def install_offset(self) -> torch.Tensor:
         """[n, 6] rad; the joint move from the arm's configuration to the nearest one that holds its element

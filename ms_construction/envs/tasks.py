@@ -62,9 +62,11 @@ length left, each radian off it counted {ConstructionTaskEnv.PATH_DEVIATION_WEIG
 site's barriers, not on the straight joint move that runs the element into them. `reach_in_joint_space=True`
 makes half the reach term joint-space too: 1 - d / {ConstructionTaskEnv.REACH_RANGE:g} rad of the arm's distance (joints 1-5) from the nearest
 configuration that grasps the element on the staging table (`reach_distance`), so that the turret turns the way
-its limits allow (the bearing term turns it either way). `carry_counts_lag=True` adds to the carry distance
+its limits allow (the bearing term turns it either way); with `reach_toward_path_sides=True` as well, only to
+those on the turret side(s) that the goal slot's usable start paths leave the table from, so that the element is
+grasped where a collision-free way to its goal begins. `carry_counts_lag=True` adds to the carry distance
 {ConstructionTaskEnv.LAG_WEIGHT:g} rad per metre that the held element trails its place on the plate (`hold_lag`: stopped by a slab
-or wall while the arm goes on), so that pushing a jammed element on does not pay. All three off by default.
+or wall while the arm goes on), so that pushing a jammed element on does not pay. All four off by default.
 
 **Start states:** `set_near_goal_starts(share, radius)` makes a share of the following resets start with the
 element held on a collision-free joint path out of its goal (reverse curriculum generation; IK, no
