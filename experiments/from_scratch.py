@@ -15,9 +15,9 @@ assets/checkpoints/scratch_general_agent.pt with its campaign record. The recipe
 | setting | value | why |
 |---|---|---|
 | reward | normalized_dense: the tasks' dense reward / 10 (placing pays 10, a held step at most 4.5) | its carry term is linear in the arm's joint-space distance from the installation configuration (IK of the goal, ms_construction/goal_configurations.py), so it pulls from the pick, the way the turret's limits allow; its progress term pays each step's fall of that distance at once (probe G) |
-| reward options | the carry measured along the start paths (`carry_along_paths`), the reach toward the element half in joint space (`reach_in_joint_space`) | the fourth start's policy carried elements straight into the slab, the wall and the barriers beside the staging table and stopped there, and turned the turret the wrong way to its limit on the way to the table (its `--diagnose`); probe N (both) placed the most of the continuations from its 1,682,000-step checkpoint |
+| reward options | the carry measured along the start paths (`carry_along_paths`), the reach toward the element half in joint space (`reach_in_joint_space`), since 17,250,000 steps toward the turret side the goal slot's start paths leave from (`reach_toward_path_sides`) | the fourth start's policy carried elements straight into the slab, the wall and the barriers beside the staging table and stopped there, and turned the turret the wrong way to its limit on the way to the table (its `--diagnose`); probe N (both) placed the most of the continuations from its 1,682,000-step checkpoint. The window opening at y = +0.85 is reached along its paths only from the turret's +pi side, and every policy grasped windows from -pi: it placed 0-2 of its 17 test episodes in every evaluation |
 | success | absorbing: bootstrapped with its reward for ever | the critic never trains on a state after success; its guess let hovering near the goal outvalue placing |
-| start states | 80% of the training episodes start held on a collision-free joint path out of the goal (`set_near_goal_starts`), each task type's radius widening from 0.1 of the path by 0.1 once 60% of its last 20 such episodes placed; such an episode that has not placed in 80 steps is cut | reverse curriculum generation (Florensa et al. 2017) from resets the env computes by IK: no demonstrations; evaluation always resets as usual. One radius for all three types widened on lucky iterations of the easy type (probe F); with half the episodes and no cut, a failed start wandered for 250 steps and an update held a handful of near-goal episodes (probes I-L) |
+| start states | 80% of the training episodes (20% since 17,250,000 steps, when every radius had long been 1) start held on a collision-free joint path out of the goal (`set_near_goal_starts`), each task type's radius widening from 0.1 of the path by 0.1 once 60% of its last 20 such episodes placed; such an episode that has not placed in 80 steps is cut | reverse curriculum generation (Florensa et al. 2017) from resets the env computes by IK: no demonstrations; evaluation always resets as usual. One radius for all three types widened on lucky iterations of the easy type (probe F); with half the episodes and no cut, a failed start wandered for 250 steps and an update held a handful of near-goal episodes (probes I-L) |
 | observation | the tasks' state + the joint move to the installation configuration (`obs_install_offset`) | what the carry term measures, from IK of the goal pose: following it places from near-goal starts (a test); without it the policy must learn IK of nine goal slots itself |
 | policy | Gaussian, its mean bounded by tanh (`bounded_mean`) | an unbounded mean drifted past the action bounds, where every draw clips alike and PPO cannot move it back (the third start's `--diagnose`) |
 | discount | gamma 0.95, GAE lambda 0.95 | values of a few dozen steps: the dense reward carries the rest, and the critic learns them quickly |
@@ -58,7 +58,8 @@ COMMAND = "python -m experiments.from_scratch"
 PAGE = Path("docs/experiments/from_scratch.md")
 """the experiment page: the diagnosis and the snapshots' validations are written into it."""
 STARTS = {1_682_000: "fifth start: carry along the start paths, reach in joint space",
-          10_010_000: "observation mended: each reset sets the nominal hold (a8d32d8)"}
+          10_010_000: "observation mended: each reset sets the nominal hold (a8d32d8)",
+          17_250_000: "sixth start: reach toward the path sides, a fifth of the episodes from near-goal starts (probe U)"}
 """env step: the change the campaign went on with there, of the recipe or of the tasks (the fourth start's steps before
 the first; the experiment page says how each came to be)."""
 
@@ -71,8 +72,9 @@ def scratch_args(num_envs: Optional[int] = None, **overrides) -> ppo.Args:
         sim_backend="physx_cpu", cuda=False, curriculum=(FINAL_STAGE,), total_timesteps=BUDGET, curiosity="none",
         success_value="absorbing", bootstrap_at_done="always", gamma=0.95, gae_lambda=0.95,
         num_envs=num_envs, num_steps=2000 // num_envs, update_epochs=8, num_minibatches=8, target_kl=0.1,
-        near_goal_share=0.8, near_goal_radius=0.1, near_goal_step=0.1, near_goal_promote=0.6, near_goal_window=20,
+        near_goal_share=0.2, near_goal_radius=0.1, near_goal_step=0.1, near_goal_promote=0.6, near_goal_window=20,
         near_goal_max_steps=80, obs_install_offset=True, bounded_mean=True, carry_along_paths=True, reach_in_joint_space=True,
+        reach_toward_path_sides=True,
         eval_freq=25, checkpoint_freq=10, log_dir=str(CAMPAIGN_DIR),
     )
     return args.replace(**overrides)
@@ -334,6 +336,54 @@ def train(run: Run, every: int = SNAPSHOT_EVERY, snapshots: Path = SNAPSHOT_DIR,
         ship_best(run, snapshots=snapshots, page=page)
 
 
+ADOPT_MAY_DIFFER = ("exp_name", "log_dir", "checkpoint", "total_timesteps", "eval_freq", "near_goal_radius")
+"""the settings a continuation probe the campaign goes on from may have run with other than the recipe's: where it
+logged, what it started from, its length and evaluations, and its first start radius (its radii are in its progress)."""
+
+
+def adopt(run: Run, probe_dir: Path) -> None:
+    """Go on with the campaign from a continuation probe (experiments/probes.py) that ran the recipe, changed as the
+    recipe now is, from the campaign's checkpoint (a start of STARTS): the probe's checkpoint (weights, optimizer, start
+    radii, random states) becomes the campaign's, with its env steps and iterations counted on from the start's and
+    the recipe's args, and its progress.csv rows, so counted, follow the campaign's. Refuses a probe that ran
+    another recipe than `run`'s (beyond ADOPT_MAY_DIFFER) or started elsewhere than the campaign's checkpoint."""
+    import torch
+
+    ckpt, csv_path = checkpoint_of(run), checkpoint_of(run).with_name("progress.csv")
+    start, probe = load_checkpoint(ckpt), load_checkpoint(probe_dir / "checkpoint.pt", "--adopt")
+    resolved = run.args.replace()
+    ppo.resolve_defaults(resolved)  # as a run saves its args: defaults that depend on the machine filled in
+    recipe, ran = resolved.flat(), ppo.Args.of(**probe["args"]).flat()  # fields newer than the probe: their defaults
+    differ = sorted(k for k in recipe if k not in ADOPT_MAY_DIFFER and ran[k] != recipe[k])
+    if differ:
+        raise SystemExit(f"--adopt {probe_dir}: the probe ran another recipe than the campaign's now ({', '.join(differ)}); "
+                         "change the recipe (scratch_args) first")
+    began = load_checkpoint(probe["args"]["checkpoint"], "the probe's --checkpoint") if probe["args"].get("checkpoint") else None
+    if began is None or not all(torch.equal(v, start["agent"][k]) for k, v in began["agent"].items()):
+        raise SystemExit(f"--adopt {probe_dir}: the probe did not start from the campaign's checkpoint ({ckpt})")
+    at, iteration = start["progress"]["global_step"], start["progress"]["iteration"]
+    probe["args"] = recipe
+    probe["progress"] = {**probe["progress"], "global_step": at + probe["progress"]["global_step"],
+                         "iteration": iteration + probe["progress"]["iteration"],
+                         "stage_changes": start["progress"]["stage_changes"],
+                         "stage_start_step": start["progress"]["stage_start_step"]}
+    with open(csv_path) as f:
+        rows = [r for r in csv.DictReader(f) if int(r["global_step"]) <= at]
+    with open(probe_dir / "progress.csv") as f:
+        added = list(csv.DictReader(f))
+    for r in added:
+        r["global_step"], r["iteration"] = str(at + int(r["global_step"])), str(iteration + int(r["iteration"]))
+    fields = list(rows[0]) if rows else list(added[0])
+    tmp = ckpt.with_name(ckpt.name + ".tmp")
+    torch.save(probe, tmp)
+    with open(csv_path, "w", newline="") as f:
+        writer = csv.DictWriter(f, fieldnames=fields, extrasaction="ignore")
+        writer.writeheader()
+        writer.writerows(rows + added)
+    os.replace(tmp, ckpt)
+    print(f"the campaign goes on from {probe_dir} at {probe['progress']['global_step']:,} env steps")
+
+
 def ship_best(run: Run, episodes: int = VALIDATION_EPISODES, snapshots: Path = SNAPSHOT_DIR,
               page: Path = PAGE) -> Optional[Path]:
     """Screen every snapshot in `snapshots` and the policy shipped now (`episodes` per task from VALIDATION_SEED),
@@ -409,6 +459,9 @@ class Args:
     6 test seeds per task) and write where it took the elements into docs/experiments/from_scratch.md, and exit."""
     checkpoint: Optional[Path] = None
     """with --diagnose: this checkpoint's policy instead (a probe's), printed only."""
+    adopt: Optional[Path] = None
+    """a continuation probe's run folder (runs/probes/<name>) that went on from the campaign's checkpoint with the
+    recipe as it is now: the campaign goes on from it, its steps counted on (`adopt`), and exit."""
 
 
 def main(args: Args) -> None:
@@ -435,6 +488,8 @@ def main(args: Args) -> None:
             ship(run, before_the_end=True)
         elif args.ship_best:
             ship_best(run)
+        elif args.adopt is not None:
+            adopt(run, args.adopt)
         elif not args.dry_run:
             train(run)
 

@@ -209,3 +209,37 @@ def test_the_campaign_keeps_snapshots_and_ships_the_one_that_validates_best(tmp_
     # the run is done: train again only ships (no part is run)
     fs.train(run, every=40, snapshots=tmp_path / "snapshots", page=tmp_path / "page.md")
     assert len(list((tmp_path / "snapshots").glob("*.pt"))) == 2
+
+
+def test_the_campaign_goes_on_from_a_probe_of_its_recipe_with_its_steps_counted_on(tmp_path):
+    """`--adopt`: a probe that went on from the campaign's checkpoint with the recipe as it now is becomes the
+    campaign's checkpoint (its weights, its progress counted on from the start's steps and iterations, the recipe's
+    args) and its CSV rows follow the campaign's, counted on; the campaign then resumes from there. A probe of another
+    recipe, or one that started elsewhere, is refused."""
+    small = dict(num_envs=2, num_steps=20, num_minibatches=2, update_epochs=1, num_eval_envs=1, eval_freq=100,
+                 checkpoint_freq=1, env_id="Flooring-v1", log_dir=str(tmp_path))
+    [run] = fs.scratch_runs(num_envs=2)
+    run = dataclasses.replace(run, args=fs.scratch_args(**small, exp_name="campaign", total_timesteps=80), shipped=None)
+    campaign.run_or_resume(run)
+    start = campaign.checkpoint_of(run)
+    probe_args = fs.scratch_args(**small, exp_name="probe", total_timesteps=120, checkpoint=str(start), near_goal_radius=1.0)
+    ppo.main(probe_args.replace(gamma=0.9, exp_name="other_recipe", total_timesteps=40))
+    with pytest.raises(SystemExit, match="another recipe.*gamma"):
+        fs.adopt(run, tmp_path / "other_recipe")
+    ppo.main(probe_args.replace(checkpoint=None, exp_name="elsewhere", total_timesteps=40))
+    with pytest.raises(SystemExit, match="did not start from the campaign's checkpoint"):
+        fs.adopt(run, tmp_path / "elsewhere")
+    ppo.main(probe_args)
+    probe = torch.load(tmp_path / "probe" / "checkpoint.pt", weights_only=False)
+    fs.adopt(run, tmp_path / "probe")
+    adopted = torch.load(start, weights_only=False)
+    assert adopted["progress"]["global_step"] == 80 + 120 and adopted["progress"]["iteration"] == 2 + 3
+    assert adopted["progress"]["near_goal_radius"] == probe["progress"]["near_goal_radius"]
+    assert all(torch.equal(v, probe["agent"][k]) for k, v in adopted["agent"].items())
+    assert adopted["args"] == run.args.flat()
+    with open(start.with_name("progress.csv")) as f:
+        steps = [int(r["global_step"]) for r in csv.DictReader(f)]
+    assert steps == [40, 80, 120, 160, 200]
+    longer = dataclasses.replace(run, args=run.args.replace(total_timesteps=240))
+    campaign.run_or_resume(longer)
+    assert torch.load(start, weights_only=False)["progress"]["global_step"] == 240

@@ -10,6 +10,8 @@ site's poses alone (ms_construction/goal_configurations.py).
   grasp it on the staging table: it falls on the way there and they grasp. With `reach_toward_path_sides` as well,
   only the configurations on the turret side a usable start path of the goal slot leaves from count: the window
   opening at y = +0.85 pays its reach toward the +pi side, the other two toward -pi.
+- Reach starts (`reach_start_share`) pose the arm on the way to the table from the side the goal slot's paths leave
+  from, the element untouched.
 - With `carry_counts_lag` the carry distance also counts how far a jammed element trails its plate.
 - The path-offset observation points along the start path: following it places the ceiling panel.
 - A near-goal start is a valid state: the element held against the plate, nothing penetrating, still after a
@@ -223,6 +225,40 @@ def test_the_reach_toward_path_sides_pays_for_the_turret_side_the_goal_slot_s_st
             assert float(plain.unwrapped.reach_distance()[0]) < 1e-4, "without the option either side counts"
         assert reach[good] < 1e-4 and reach[1 - good] == pytest.approx(apart, rel=1e-4), (slot, reach)
         assert reward[good] > reward[1 - good], (slot, reward)
+    env.close()
+    plain.close()
+
+
+def test_reach_starts_pose_the_arm_on_the_way_to_the_turret_side_of_the_goal_slot_s_paths_and_leave_the_element():
+    """`reach_start_share=1`: every reset starts with the arm part of the way from its start configuration to the table
+    grasp configuration on the side the goal slot's start paths leave from (+pi for the window opening at y = +0.85,
+    -pi for the others): the turret turned that way, the reach distance shorter than at rest, the element lying on
+    the table where an ordinary reset puts it, untouched by a still step and not grasped. A share out of [0, 1] is
+    refused."""
+    with pytest.raises(ValueError, match="reach_start_share"):
+        make_env("WindowInstallation-v1", reach_start_share=1.5)
+    env = make_env("WindowInstallation-v1", control_mode="pd_joint_delta_pos", reach_start_share=1.0,
+                   reach_in_joint_space=True, reach_toward_path_sides=True)
+    plain = make_env("WindowInstallation-v1", control_mode="pd_joint_delta_pos", reach_in_joint_space=True,
+                     reach_toward_path_sides=True)
+    u, p = env.unwrapped, plain.unwrapped
+    slots = set()
+    for seed in range(12):
+        env.reset(seed=seed)
+        plain.reset(seed=seed)
+        slot = int(u.goal_slot[0])
+        slots.add(slot)
+        assert slot == int(p.goal_slot[0])
+        q, rest = u.agent.robot.get_qpos()[0], p.agent.robot.get_qpos()[0]
+        turned = float(q[0] - rest[0])
+        assert (turned >= 0) if slot == 2 else (turned <= 0), (slot, turned)
+        assert float(u.reach_distance()[0]) <= float(p.reach_distance()[0]) + 1e-5
+        before = u.obj.pose.raw_pose[0].clone()
+        assert torch.allclose(before, p.obj.pose.raw_pose[0], atol=1e-5), "the element lies where an ordinary reset puts it"
+        _, _, _, _, info = env.step(torch.zeros(1, 6))
+        assert not bool(info["is_grasped"][0]) and not bool(info["near_goal_start"][0])
+        assert float(torch.linalg.norm(u.obj.pose.raw_pose[0, :3] - before[:3])) < 0.01, "nothing hit the element"
+    assert slots == {0, 1, 2}
     env.close()
     plain.close()
 

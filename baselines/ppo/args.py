@@ -273,6 +273,10 @@ class StartStateArgs:
     """near-goal episodes of a task type whose success decides a widening."""
     near_goal_max_steps: Optional[int] = None
     """a near-goal episode that has not placed within this many steps is truncated (None: the task's step limit)."""
+    reach_start_share: float = 0.0
+    """this share of the training episodes start with the arm part of the way from its start configuration to a table
+    grasp configuration on a turret side the goal slot's start paths leave from, the element lying on the table (the
+    tasks' `reach_start_share`: the start-state curriculum's first stretch); evaluation always resets as usual."""
 
 
 _GROUP = tyro.conf.OmitArgPrefixes  # a group's fields keep their flat flags: --gamma, not --ppo.gamma
@@ -359,7 +363,7 @@ def validate(args: Args) -> None:
                          "general task ConstructionPickPlace-v1 only, without --task-weights")
     if args.reach_toward_path_sides and not args.reach_in_joint_space:
         raise SystemExit("--reach-toward-path-sides narrows the joint-space reach: give --reach-in-joint-space too")
-    for name in ("near_goal_share", "near_goal_radius", "near_goal_promote"):
+    for name in ("near_goal_share", "near_goal_radius", "near_goal_promote", "reach_start_share"):
         if not 0 <= values[name] <= 1:
             raise SystemExit(f"--{name.replace('_', '-')} must lie in [0, 1], got {values[name]}")
     if not 0 <= args.starts.start_states_share <= 1:

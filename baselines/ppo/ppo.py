@@ -78,6 +78,8 @@ def make_envs(args: Args, num_envs: int, device: torch.device, eval_mode: bool =
             kwargs[reward_option] = True
     if args.task_weights is not None and not eval_mode:
         kwargs["task_weights"] = dict(zip(ELEMENT_KINDS, args.task_weights))
+    if args.starts.reach_start_share and not eval_mode:
+        kwargs["reach_start_share"] = args.starts.reach_start_share
     # near-goal starts are set (and left off in evaluation) by set_near_goal_starts; this applies their time limit
     wrappers = (NearGoalTimeLimit,) if args.starts.near_goal_max_steps is not None and not eval_mode else ()
     if args.sim_backend == "physx_cpu":

@@ -106,6 +106,7 @@ class ConstructionTaskEnv(BaseEnv):
         carry_along_paths: bool = False,
         reach_in_joint_space: bool = False,
         reach_toward_path_sides: bool = False,
+        reach_start_share: float = 0.0,
         carry_counts_lag: bool = False,
         **kwargs,
     ):
@@ -128,6 +129,9 @@ class ConstructionTaskEnv(BaseEnv):
         if reach_toward_path_sides and not reach_in_joint_space:
             raise ValueError("reach_toward_path_sides=True narrows the joint-space reach: give reach_in_joint_space=True too")
         self.reach_toward_path_sides = bool(reach_toward_path_sides)
+        if not 0 <= reach_start_share <= 1:
+            raise ValueError(f"reach_start_share must lie in [0, 1], got {reach_start_share}")
+        self.reach_start_share = float(reach_start_share)
         self.carry_counts_lag = bool(carry_counts_lag)
         self.robot_init_qpos_noise = robot_init_qpos_noise
         self._step_grasp_frame, self._in_step_readout = None, False
@@ -280,6 +284,8 @@ class ConstructionTaskEnv(BaseEnv):
             self.first_grasp_now[env_idx] = False
             self.near_goal_start[env_idx] = False
             self.carry_prev[env_idx] = -1.0
+            if self.reach_start_share > 0:
+                self._start_on_the_way(env_idx)
             if self.near_goal_share > 0:
                 self._start_near_goal(env_idx)
 
@@ -363,6 +369,34 @@ class ConstructionTaskEnv(BaseEnv):
         self.gripper.hold_pose_in_tcp[idx] = hold
         self.picked[idx] = True
         self.near_goal_start[idx] = True
+
+    REACH_START_MAX = 0.75
+    """a reach start poses the arm at most this fraction of the way to the table: the last stretch of the joint line
+    passes the plate through the element lying there."""
+
+    def _start_on_the_way(self, env_idx: torch.Tensor) -> None:
+        """A `reach_start_share` of the resets (before near-goal starts draw theirs) start with the arm a uniform
+        fraction in [0, REACH_START_MAX) of the way along the joint line from its start configuration to a table grasp
+        configuration (`reach_distance`'s) on a turret side that a usable start path of the goal slot leaves from, the
+        element lying on the table: the start-state curriculum's first stretch, which near-goal starts (the element
+        already held) leave out. Without it a policy that grasps every element from one turret side never learns
+        that a goal slot is reached only from the other one (the window opening at y = +0.85)."""
+        chosen = torch.rand(len(env_idx)) < self.reach_start_share
+        if not bool(chosen.any()):
+            return
+        if self._table_q is None:
+            self._table_q = torch.tensor(lift_configurations(0.0), dtype=torch.float32, device=self.device)
+        idx = env_idx[chosen]
+        usable = self._load_start_paths()["usable"][self.task_id[idx], self.goal_slot[idx]]
+        sides = usable.view(len(idx), -1, 2).amax(1) + 1e-6  # a slot without usable paths: either side
+        target = self._table_q[self.task_id[idx], torch.multinomial(sides, 1)[:, 0]]
+        qpos = self.agent.robot.get_qpos()[env_idx].clone()
+        qpos[chosen] += torch.rand(len(idx), 1) * self.REACH_START_MAX * (target - qpos[chosen])
+        self.agent.reset(qpos)
+        if self.gpu_sim_enabled:
+            self.scene._gpu_apply_all()
+            self.scene.px.gpu_update_articulation_kinematics()
+            self.scene._gpu_fetch_all()
 
     def _place_goal_markers(self, env_idx: torch.Tensor) -> None:
         task, goal = self.task_id[env_idx], self._goal_table[self.task_id[env_idx], self.goal_slot[env_idx]]
