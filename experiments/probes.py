@@ -40,6 +40,12 @@ def _recipe(**overrides) -> str:
     return "python baselines/ppo/ppo.py " + shlex.join(command_line(args))
 
 
+def _fifth_recipe(**overrides) -> str:
+    """`_recipe` as the campaign's fifth start ran it (to 17,250,000 env steps): 80% of the episodes from near-goal
+    starts, the reach toward either turret side."""
+    return _recipe(**{"near_goal_share": 0.8, "reach_toward_path_sides": False, **overrides})
+
+
 PROBES = {
     "probeA_floor_jointcarry": ("the new dense reward (joint-space carry), ppo.py's dense defaults (gamma 0.99, 4 x 4 "
                                 "minibatches, bootstrap with the critic at success)",
@@ -68,19 +74,19 @@ PROBES = {
                                 "git checkout 9115d4e && python -m experiments.from_scratch (stopped at 514,000 steps)"),
     "probeI_general_install_offset": ("the campaign's recipe (H, placing paying 10) + the joint move to the "
                                       "installation configuration in the observation (`--obs-install-offset`)",
-                                      _recipe(obs_install_offset=True, near_goal_share=0.5, near_goal_max_steps=None, bounded_mean=False,
+                                      _fifth_recipe(obs_install_offset=True, near_goal_share=0.5, near_goal_max_steps=None, bounded_mean=False,
                                               exp_name="probeI_general_install_offset", carry_along_paths=False, reach_in_joint_space=False)
                                       + " (stopped at 190,000 steps)"),
     "probeJ_offset_ng_limit80": ("I + near-goal episodes cut at 80 steps (`--near-goal-max-steps 80`)",
-                                 _recipe(obs_install_offset=True, near_goal_share=0.5, near_goal_max_steps=80, bounded_mean=False,
+                                 _fifth_recipe(obs_install_offset=True, near_goal_share=0.5, near_goal_max_steps=80, bounded_mean=False,
                                          exp_name="probeJ_offset_ng_limit80", carry_along_paths=False, reach_in_joint_space=False)
                                  + " (stopped at 48,000 steps, to start K)"),
     "probeK_offset_limit80_tanh": ("J + the policy's mean bounded by tanh (`--bounded-mean`)",
-                                   _recipe(obs_install_offset=True, near_goal_share=0.5, near_goal_max_steps=80, bounded_mean=True,
+                                   _fifth_recipe(obs_install_offset=True, near_goal_share=0.5, near_goal_max_steps=80, bounded_mean=True,
                                            exp_name="probeK_offset_limit80_tanh", carry_along_paths=False, reach_in_joint_space=False) + " (stopped at 174,000 steps)"),
     "probeL_share08": ("K + 80% of the episodes from near-goal starts (`--near-goal-share 0.8`): the recipe of the "
                        "campaign's fourth start, which went on from this probe's checkpoint",
-                       _recipe(exp_name="probeL_share08", carry_along_paths=False, reach_in_joint_space=False) + " (then the campaign: python -m experiments.from_scratch)"),
+                       _fifth_recipe(exp_name="probeL_share08", carry_along_paths=False, reach_in_joint_space=False) + " (then the campaign: python -m experiments.from_scratch)"),
 }
 """name: (what it changed, its arguments beyond COMMON or its whole command), in the order they ran."""
 
@@ -92,6 +98,9 @@ STARTS = {
     "start_10558k": ("runs/campaign_10558k.pt", "ea4fd7f",
                      "the campaign's fifth start at 10,558,000 env steps (the hold reset since 10,010,000)"),
     "start_12948k": ("runs/campaign_12948k.pt", "3b9685c", "the campaign's fifth start at 12,948,000 env steps"),
+    "start_17250k": ("runs/campaign_17250k.pt", "066f2d2", "the campaign's fifth start at 17,250,000 env steps"),
+    "start_17500k": ("runs/campaign_17500k.pt", "0a742fe",
+                     "the campaign's sixth start at 17,500,000 env steps (probe U adopted)"),
 }
 """name: (where its checkpoint is put, the commit whose campaign/scratch_general_agent/checkpoint.pt it is, what it
 is): the campaign checkpoints the continuation probes of a round start from."""
@@ -110,17 +119,17 @@ CONTINUATIONS = {
     "control_campaign": ("the campaign run on (the recipe unchanged, its optimizer and start radii kept)",
                          "python -m experiments.from_scratch (resumed at 1,682,000 steps, stopped at 2,022,000)", None),
     "probeM_paths": ("the dense reward's carry measured along the start paths (`--carry-along-paths`)",
-                     _recipe(exp_name="probeM_paths", checkpoint=STARTS["start_1682k"][0], near_goal_radius=0.8,
+                     _fifth_recipe(exp_name="probeM_paths", checkpoint=STARTS["start_1682k"][0], near_goal_radius=0.8,
                              eval_freq=1000, carry_along_paths=True, reach_in_joint_space=False)
                      + " (stopped at 330,000 steps)", "start_1682k"),
     "probeN_paths_joint_reach": ("M + the reach toward the element in joint space (`--reach-in-joint-space`)",
-                                 _recipe(exp_name="probeN_paths_joint_reach", checkpoint=STARTS["start_1682k"][0],
+                                 _fifth_recipe(exp_name="probeN_paths_joint_reach", checkpoint=STARTS["start_1682k"][0],
                                          near_goal_radius=0.8, eval_freq=1000, carry_along_paths=True,
                                          reach_in_joint_space=True) + " (stopped at 344,000 steps)", "start_1682k"),
     "start_4092k": (*_start("start_4092k"), None),
     "probeO_share05_weights": ("half the episodes from near-goal starts instead of 80% (`--near-goal-share 0.5`) and "
                                "ceiling panels and windows sampled twice as often as floor panels (`--task-weights 2 2 1`)",
-                               _recipe(exp_name="probeO_share05_weights", checkpoint=STARTS["start_4092k"][0],
+                               _fifth_recipe(exp_name="probeO_share05_weights", checkpoint=STARTS["start_4092k"][0],
                                        near_goal_radius=1.0, eval_freq=1000, near_goal_share=0.5,
                                        task_weights=(2.0, 2.0, 1.0)) + " (ran its 600,000 steps)", "start_4092k"),
     "start_6782k": (*_start("start_6782k"), None),
@@ -128,11 +137,11 @@ CONTINUATIONS = {
                            "python -m experiments.from_scratch (resumed at 6,782,000 steps, stopped at 7,168,000)", None),
     "probeP_lag": ("the carry distance counts how far the held element trails its place on the plate, jammed against a slab "
                    "or wall (`--carry-counts-lag`)",
-                   _recipe(exp_name="probeP_lag", checkpoint=STARTS["start_6782k"][0], near_goal_radius=1.0,
+                   _fifth_recipe(exp_name="probeP_lag", checkpoint=STARTS["start_6782k"][0], near_goal_radius=1.0,
                            eval_freq=1000, carry_counts_lag=True, total_timesteps=400_000) + " (ran its 400,000 steps)", "start_6782k"),
     "probeQ_path_offset": ("the observation gains the joint move to a point a little ahead along the start path "
                            "(`--obs-path-offset`; zero weights on it at the start)",
-                           _recipe(exp_name="probeQ_path_offset", checkpoint=STARTS["start_6782k"][0], near_goal_radius=1.0,
+                           _fifth_recipe(exp_name="probeQ_path_offset", checkpoint=STARTS["start_6782k"][0], near_goal_radius=1.0,
                                    eval_freq=1000, obs_path_offset=True, total_timesteps=400_000), "start_6782k"),
     "start_10558k": (*_start("start_10558k"), None),
     "control_from_10558k": ("the campaign run on (the recipe unchanged)",
@@ -140,7 +149,7 @@ CONTINUATIONS = {
                             "--total-timesteps 11058000 --curriculum cp4 (the campaign resumed at 10,558,000 steps)", None),
     "probeR_path_offset": ("Q again, from the later start with the hold reset (`--obs-path-offset`; zero weights on it "
                            "at the start)",
-                           _recipe(exp_name="probeR_path_offset", checkpoint=STARTS["start_10558k"][0], near_goal_radius=1.0,
+                           _fifth_recipe(exp_name="probeR_path_offset", checkpoint=STARTS["start_10558k"][0], near_goal_radius=1.0,
                                    eval_freq=1000, obs_path_offset=True, total_timesteps=500_000), "start_10558k"),
     "start_12948k": (*_start("start_12948k"), None),
     "control_from_12948k": ("the campaign run on (the recipe unchanged)",
@@ -148,14 +157,29 @@ CONTINUATIONS = {
                             "--total-timesteps 13448000 --curriculum cp4 (the campaign resumed at 12,948,000 steps)", None),
     "probeS_share02": ("a fifth of the episodes from near-goal starts instead of 80% (`--near-goal-share 0.2`): every "
                        "radius is 1 and those starts all place, so most episodes trained what the policy already does",
-                       _recipe(exp_name="probeS_share02", checkpoint=STARTS["start_12948k"][0], near_goal_radius=1.0,
+                       _fifth_recipe(exp_name="probeS_share02", checkpoint=STARTS["start_12948k"][0], near_goal_radius=1.0,
                                eval_freq=1000, near_goal_share=0.2, total_timesteps=500_000), "start_12948k"),
     "probeT_share02_failure_weights": ("S + task types sampled by their recent failures (`--failure-task-weights 100`: "
                                        "0.1 + the failure rate of each one's last 100 ordinary episodes)",
-                                       _recipe(exp_name="probeT_share02_failure_weights",
+                                       _fifth_recipe(exp_name="probeT_share02_failure_weights",
                                                checkpoint=STARTS["start_12948k"][0], near_goal_radius=1.0, eval_freq=1000,
                                                near_goal_share=0.2, failure_task_weights=100, total_timesteps=500_000),
                                        "start_12948k"),
+    "start_17250k": (*_start("start_17250k"), None),
+    "probeU_path_sides_share02": ("the reach toward the table from the turret side the goal slot's start paths leave from "
+                                  "(`--reach-toward-path-sides`: the window opening at y = +0.85 from +pi, where every "
+                                  "policy before grasped from -pi and placed 0-2 of its 17 test episodes) + S's fifth "
+                                  "of the episodes from near-goal starts; no control run: the recipe run on placed 0-2 "
+                                  "there in every evaluation since 1,682,000 steps",
+                                  _recipe(exp_name="probeU_path_sides_share02", checkpoint=STARTS["start_17250k"][0],
+                                          near_goal_radius=1.0, eval_freq=1000, near_goal_share=0.2,
+                                          reach_toward_path_sides=True, total_timesteps=250_000), "start_17250k"),
+    "probeV_reach_starts05": ("U's recipe (the campaign's sixth start, which went on from U) + half the episodes start "
+                              "with the arm part of the way to the table from the goal slot's side (`--reach-start-share "
+                              "0.5`): U's shaping alone did not turn the policy's reach, which went to -pi for every window",
+                              _recipe(exp_name="probeV_reach_starts05", checkpoint=STARTS["start_17500k"][0],
+                                      near_goal_radius=1.0, eval_freq=1000, reach_start_share=0.5,
+                                      total_timesteps=250_000), "start_17500k"),
 }
 """name: (what it changed, how its policy came to be, the start it went on from: its steps count after that start's);
 each evaluated with `python -m experiments.probes --evaluate <name> --checkpoint <its checkpoint>` (EVAL into
