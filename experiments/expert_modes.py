@@ -80,19 +80,26 @@ def modes(path: Path, tol: float) -> dict:
 
 
 def failures_by_slot(env_id: str, episodes: list[dict]) -> dict[str, list[int]]:
-    """Per goal slot: [episodes, failed] of an agent's evaluated episodes (the slot from a reset with each seed)."""
-    import gymnasium as gym
+    """Per goal slot: [episodes, failed] of an agent's evaluated episodes (the slot its record names, or, in records
+    from before 2026-11-27, the one a reset with its seed draws)."""
+    if all("goal_slot" in e for e in episodes):
+        slots = [e["goal_slot"] for e in episodes]
+    else:
+        import gymnasium as gym
 
-    import ms_construction  # noqa: F401  (registers the tasks)
+        import ms_construction  # noqa: F401  (registers the tasks)
 
-    env = gym.make(env_id, obs_mode="state", num_envs=1, sim_backend="physx_cpu")
+        env = gym.make(env_id, obs_mode="state", num_envs=1, sim_backend="physx_cpu")
+        slots = []
+        for e in episodes:
+            env.reset(seed=e["seed"])
+            slots.append(int(env.unwrapped.goal_slot.item()))
+        env.close()
     counts: dict[str, list[int]] = {}
-    for e in episodes:
-        env.reset(seed=e["seed"])
-        c = counts.setdefault(str(int(env.unwrapped.goal_slot.item())), [0, 0])
+    for slot, e in zip(slots, episodes):
+        c = counts.setdefault(str(slot), [0, 0])
         c[0] += 1
         c[1] += not e["placed"]
-    env.close()
     return dict(sorted(counts.items()))
 
 

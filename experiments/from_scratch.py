@@ -44,7 +44,7 @@ import tyro
 from baselines.ppo import ppo
 from baselines.ppo.args import command_line
 from baselines.ppo.checkpoints import load_checkpoint
-from baselines.ppo.evaluation import PAPER_TABLE_II, failures, kinds, pct
+from baselines.ppo.evaluation import PAPER_TABLE_II, by_goal_slot, failures, kinds, pct
 from experiments.campaign import CAMPAIGN_DIR, SHIPPED_DIR, Run, checkpoint_of, describe, ship, training_wall_s
 from experiments.refine import (CONFIRMATION_SEED, VALIDATION_SEED, best_snapshot, content_tag, ranked_snapshots,
                                validate)
@@ -178,8 +178,9 @@ def report(run: Run, results: Path = Path("docs/RESULTS.md")) -> str:
         lines += [f"The shipped policy ({run.shipped}; {shipped.get('method', '?')}; env steps: {shipped.get('env steps', '?')}"
                   + (f"; {shipped['chosen']}" if shipped.get("chosen") else "")
                   + f"), evaluated with the paper's protocol: `{data['command']}`.", "",
-                  "| task | pick % [95% CI] | place % [95% CI] | paper's general agent: pick / place % | failures by kind |",
-                  "|---|---|---|---|---|"]
+                  "| task | pick % [95% CI] | place % [95% CI] | paper's general agent: pick / place % | placed per goal slot "
+                  "(0, 1, 2) | failures by kind |",
+                  "|---|---|---|---|---|---|"]
         for env_id, r in data["tasks"].items():
             lost = [e for e in r["episode_results"] if not e["placed"]]
             not_picked = sum(not e["picked"] for e in lost)
@@ -187,7 +188,8 @@ def report(run: Run, results: Path = Path("docs/RESULTS.md")) -> str:
             text = ", ".join(([f"{not_picked} never picked"] if not_picked else []) + ([kinds(failed)] if failed else [])) or "none"
             paper = PAPER_TABLE_II[env_id]
             lines.append(f"| {env_id} | {pct(r['pick_success'], r['pick_success_ci95'])} | "
-                         f"{pct(r['place_success'], r['place_success_ci95'])} | {paper[0]:.2f} / {paper[1]:.2f} | {text} |")
+                         f"{pct(r['place_success'], r['place_success_ci95'])} | {paper[0]:.2f} / {paper[1]:.2f} | "
+                         f"{by_goal_slot(r['episode_results'])} | {text} |")
     else:
         lines.append(f"Not shipped yet: `{COMMAND} --ship-now` ships the policy where the run stands, then "
                      f"`python scripts/evaluate.py --checkpoint {run.shipped} --all --steps 50000 --json {EVAL_JSON}`.")

@@ -9,18 +9,22 @@
   of the staging table, one per side the turret can reach the table from. The start-state curriculum poses
   the arm on the joint line between a lift and an installation.
 
-Nothing here comes from demonstrations: the URDF, the manifest's goal and grasp poses, and IK.
+Nothing here comes from demonstrations: the URDF, the manifest's goal and grasp poses, and IK; where no IK path
+leaves a goal slot from the turret side its task type's other slots are reached from, one via configuration found
+once by the planner's RRT on the site (`plan_vias`, assets/start_path_vias.json).
 """
 
 from __future__ import annotations
 
 import dataclasses
 import functools
+import json
+from typing import Optional
 
 import numpy as np
 import sapien
 
-from ms_construction.assets import load_manifest
+from ms_construction.assets import ASSET_DIR, load_manifest
 from ms_construction.kinematics import ArmIK
 from ms_construction.parameters import DROP_CLEARANCE, ELEMENT_KINDS, START_YAW_DEG, SYMMETRIES_DEG
 
@@ -150,7 +154,8 @@ class StartPaths:
     lying on the staging table where a grasp leaves it (the last two with joint 6 nearest the installation's
     modulo the element's symmetry: the wrist does not spin for nothing). The corner is the back-off with the
     lift's arm joints (2-5), raised before it turns, where that keeps more of the path clear than the straight
-    joint line (then the corner is the back-off itself)."""
+    joint line (then the corner is the back-off itself), or a planned via (`plan_vias`) where that keeps more
+    clear still."""
     free: np.ndarray
     """[...]: the fraction of the path that is clear of the site and of the arm itself for the held element, by
     the planning expert's collision model (PATH_ARM_MARGIN) at each of START_TURNS_DEG."""
@@ -172,15 +177,54 @@ def _clear_fraction(planners: list, waypoints: np.ndarray, turns: list[float]) -
     return clear
 
 
-@functools.lru_cache(maxsize=None)
-def start_paths() -> StartPaths:
-    """The start paths (see StartPaths). Needs mplib: a few seconds, once per process."""
-    import tempfile
+VIAS_PATH = ASSET_DIR / "start_path_vias.json"
+"""the planned vias (`plan_vias`): {kind: {slot: {side: {configuration: [6 joints]}}}}, written by
+`python -m ms_construction.goal_configurations`."""
+
+
+def _path_planners(workdir, kind: str, site: dict) -> list:
+    """One planner per START_TURNS_DEG: the arm holding `kind` turned that much on the plate, among the site."""
     from pathlib import Path
 
     from ms_construction.planning.arm_planner import ArmPlanner
-    from ms_construction.planning.collision_model import planning_srdf, planning_urdf, site_collision_objects
+    from ms_construction.planning.collision_model import planning_srdf, planning_urdf
 
+    m = load_manifest()
+    grasp, size = _pose(m["elements"][kind]["grasp_pose"]), np.asarray(m["elements"][kind]["size"])
+    return [ArmPlanner(planning_urdf(PATH_ARM_MARGIN, size, (grasp * sapien.Pose(q=[np.cos(np.deg2rad(t) / 2), 0, 0,
+                                                                                    np.sin(np.deg2rad(t) / 2)])).inv(), -0.002),
+                       planning_srdf(True), Path(workdir), f"{kind}_{i}", dict(site)) for i, t in enumerate(START_TURNS_DEG)]
+
+
+def _path_ends(k: int, index: tuple, install, backoff, lift, table) -> tuple:
+    """A start path's installation, back-off, lift and table configurations; the last two with joint 6 nearest the
+    installation's modulo the element's symmetry (the wrist does not spin for nothing)."""
+    slot, c, side = index
+    q_install, q_back = install[k, slot, c], backoff[k, slot, c]
+    q_lift, q_table = lift[k, side].copy(), table[k, side].copy()
+    period = symmetry_period(ELEMENT_KINDS[k])
+    for q in (q_lift, q_table):
+        q[5] = q_install[5] + ((q[5] - q_install[5] + period / 2) % period - period / 2)
+    return q_install, q_back, q_lift, q_table
+
+
+def load_vias() -> dict:
+    return json.loads(VIAS_PATH.read_text()) if VIAS_PATH.is_file() else {}
+
+
+@functools.lru_cache(maxsize=None)
+def start_paths() -> StartPaths:
+    """The start paths (see StartPaths), with the shipped planned vias. Needs mplib: a few seconds, once per process."""
+    return _start_paths(json.dumps(load_vias()))
+
+
+@functools.lru_cache(maxsize=None)
+def _start_paths(vias_json: str) -> StartPaths:
+    import tempfile
+
+    from ms_construction.planning.collision_model import site_collision_objects
+
+    vias = json.loads(vias_json)
     m = load_manifest()
     install, lift = install_configurations().astype(np.float64), lift_configurations().astype(np.float64)
     table = lift_configurations(0.0).astype(np.float64)
@@ -191,17 +235,10 @@ def start_paths() -> StartPaths:
     turns = [float(np.deg2rad(t)) for t in START_TURNS_DEG]
     with tempfile.TemporaryDirectory(prefix="ms_construction_paths_") as workdir:
         for k, kind in enumerate(ELEMENT_KINDS):
-            grasp, size = _pose(m["elements"][kind]["grasp_pose"]), np.asarray(m["elements"][kind]["size"])
-            period = symmetry_period(kind)
-            planners = [ArmPlanner(planning_urdf(PATH_ARM_MARGIN, size, (grasp * sapien.Pose(q=[np.cos(t / 2), 0, 0, np.sin(t / 2)])).inv(),
-                                                 -0.002), planning_srdf(True), Path(workdir), f"{kind}_{i}", dict(site))
-                        for i, t in enumerate(turns)]
+            planners = _path_planners(workdir, kind, site)
             for index in np.ndindex(shape[1:]):
                 slot, c, side = index
-                q_install, q_back = install[k, slot, c], backoff[k, slot, c]
-                q_lift, q_table = lift[k, side].copy(), table[k, side].copy()
-                for q in (q_lift, q_table):
-                    q[5] = q_install[5] + ((q[5] - q_install[5] + period / 2) % period - period / 2)
+                q_install, q_back, q_lift, q_table = _path_ends(k, index, install, backoff, lift, table)
                 if np.array_equal(q_back, q_install):  # no way out of the opening in this branch
                     waypoints[(k,) + index] = [q_install] * 3 + [q_lift, q_table]
                     continue
@@ -209,6 +246,9 @@ def start_paths() -> StartPaths:
                 corner[1:5] = q_lift[1:5]
                 options = [np.array([q_install, q_back, q_back, q_lift, q_table]),
                            np.array([q_install, q_back, corner, q_lift, q_table])]
+                via = vias.get(kind, {}).get(str(slot), {}).get(str(side), {}).get(str(c))
+                if via is not None:
+                    options.append(np.array([q_install, q_back, np.asarray(via, dtype=np.float64), q_lift, q_table]))
                 clear = [_clear_fraction(planners, w, turns) for w in options]
                 best = int(np.argmax(clear))
                 waypoints[(k,) + index], free[(k,) + index] = options[best], clear[best]
@@ -226,3 +266,57 @@ def path_point(waypoints: np.ndarray, fraction: float) -> np.ndarray:
     start = ends[i] - seg[i]
     w = 0.0 if seg[i] == 0 else (at - start) / seg[i]
     return waypoints[i] + w * (waypoints[i + 1] - waypoints[i])
+
+
+VIA_PLAN_SECONDS = 5.0
+"""RRTConnect's time limit per try (`plan_vias`)."""
+VIA_PLAN_TRIES = 10
+
+
+def plan_vias(paths: Optional[StartPaths] = None) -> dict:
+    """Per task type, the turret side most of its goal slots have usable start paths from (a general agent grasps
+    an element type from one side), and for each slot without one from there, one via configuration per
+    installation configuration: the middle of an RRTConnect path (the planner's, on the site's collision model,
+    the element unturned on the plate) from the back-off to the lift, shortcut to a single via, kept where the path
+    install - back-off - via - lift - table is clear at every turn of START_TURNS_DEG. Only the window opening at
+    y = +0.85 needs one (its IK paths leave only from +pi; the other openings' only from -pi). The planner's
+    random draws are OMPL's own: a new plan differs, so the vias are planned once and shipped (VIAS_PATH)."""
+    import tempfile
+
+    from ms_construction.planning.collision_model import site_collision_objects
+
+    paths = paths if paths is not None else _start_paths("{}")
+    install, lift = install_configurations().astype(np.float64), lift_configurations().astype(np.float64)
+    table = lift_configurations(0.0).astype(np.float64)
+    backoff = backoff_configurations().astype(np.float64)
+    site = site_collision_objects(load_manifest())
+    turns = [float(np.deg2rad(t)) for t in START_TURNS_DEG]
+    sides = paths.usable.any(2)  # [kinds, slots, 2]
+    vias: dict = {}
+    with tempfile.TemporaryDirectory(prefix="ms_construction_vias_") as workdir:
+        for k, kind in enumerate(ELEMENT_KINDS):
+            side = int(np.argmax(sides[k].sum(0)))
+            planners = None
+            for slot in np.flatnonzero(~sides[k, :, side]):
+                for c in range(install.shape[2]):
+                    q_install, q_back, q_lift, q_table = _path_ends(k, (slot, c, side), install, backoff, lift, table)
+                    if np.array_equal(q_back, q_install):
+                        continue
+                    planners = planners or _path_planners(workdir, kind, site)
+                    for _ in range(VIA_PLAN_TRIES):
+                        path = planners[START_TURNS_DEG.index(0.0)].rrt_connect(q_back, q_lift, VIA_PLAN_SECONDS)
+                        if path is None:
+                            continue
+                        short = planners[START_TURNS_DEG.index(0.0)].shortcut(path)
+                        via = short[len(short) // 2]
+                        if len(short) == 3 and _clear_fraction(planners, np.array([q_install, q_back, via, q_lift, q_table]), turns) == 1.0:
+                            vias.setdefault(kind, {}).setdefault(str(slot), {}).setdefault(str(side), {})[str(c)] = \
+                                [round(float(v), 4) for v in via]
+                            break
+    return vias
+
+
+if __name__ == "__main__":
+    VIAS_PATH.write_text(json.dumps(plan_vias(), indent=1) + "\n")
+    print(f"wrote {VIAS_PATH}; the start paths now: usable per kind, slot, side:",
+          _start_paths(json.dumps(load_vias())).usable.any(2).astype(int).tolist())

@@ -2,6 +2,7 @@
 
 import json
 
+import gymnasium as gym
 import pytest
 import torch
 
@@ -69,11 +70,23 @@ def test_training_and_scripts_evaluate_py_run_the_same_episode_loop(tmp_path):
         envs.close()
     assert [e["seed"] for e in in_training] == [1_000_000, 1_000_001]
     for a, b in zip(by_script, in_training):
-        for key in ("task_id", "picked", "placed", "length", "held_at_end"):
+        for key in ("task_id", "goal_slot", "picked", "placed", "length", "held_at_end"):
             assert a[key] == b[key], key
         for key in ("ret", "final_place_dist", "final_place_angle_deg"):
             assert a[key] == pytest.approx(b[key], abs=1e-5), key
     assert summary["eval_episodes"] == 1 and summary["eval_place_success"] == float(by_script[1]["placed"])
+    # each record names its goal slot: the one a reset with its seed draws
+    env = gym.make("Flooring-v1", obs_mode="state")
+    for e in by_script:
+        env.reset(seed=e["seed"])
+        assert e["goal_slot"] == int(env.unwrapped.goal_slot[0])
+    env.close()
+
+
+def test_placed_per_goal_slot_counts_each_slot_s_episodes():
+    episodes = [dict(goal_slot=s, placed=p) for s, p in ((2, False), (0, True), (2, True), (0, True), (1, False))]
+    assert evaluation.by_goal_slot(episodes) == "2/2, 0/1, 1/2"
+    assert evaluation.by_goal_slot([dict(placed=True)]) == "-", "records from before the slot was kept"
 
 
 def test_the_recorded_episode_is_one_video_named_by_task_and_seed(tmp_path):

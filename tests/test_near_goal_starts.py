@@ -8,8 +8,7 @@ site's poses alone (ms_construction/goal_configurations.py).
   and a shortcut straight from the lift to the goal pays less than the path.
 - With `reach_in_joint_space` the reach toward the element is measured in joint space to the configurations that
   grasp it on the staging table: it falls on the way there and they grasp. With `reach_toward_path_sides` as well,
-  only the configurations on the turret side a usable start path of the goal slot leaves from count: the window
-  opening at y = +0.85 pays its reach toward the +pi side, the other two toward -pi.
+  only the configurations on the turret sides usable start paths of the goal slot leave from count.
 - Reach starts (`reach_start_share`) pose the arm on the way to the table from the side the goal slot's paths leave
   from, the element untouched.
 - With `carry_counts_lag` the carry distance also counts how far a jammed element trails its plate.
@@ -198,69 +197,88 @@ def test_the_joint_space_reach_leads_to_configurations_that_grasp_and_pays_on_th
     env.close()
 
 
+def _path_sides(kind: str, slot: int) -> list[int]:
+    """The turret sides (0: +pi, 1: -pi) a usable start path of the goal slot leaves the table from."""
+    from ms_construction.goal_configurations import start_paths
+
+    return [side for side in (0, 1) if start_paths().usable[ELEMENT_KINDS.index(kind), slot, :, side].any()]
+
+
 def test_the_reach_toward_path_sides_pays_for_the_turret_side_the_goal_slot_s_start_paths_leave_from():
-    """The window openings' start paths leave the table from one turret side each (goal_configurations.start_paths:
-    +pi for the opening at y = +0.85, slot 2; -pi for the others); with `reach_toward_path_sides` the reach distance
-    is 0 at that side's table grasp configuration and the full joint move away at the other one, so the dense
-    reward pays more for arriving at the side the carry can go on from. Without it both sides count alike."""
+    """With `reach_toward_path_sides` the reach distance is 0 at the table grasp configuration of a turret side a
+    usable start path of the goal slot leaves from and the full joint move away at a side none does, so the dense
+    reward pays more for arriving where the carry can go on (the ceiling openings beside the wall only from +pi, the
+    floor recesses only from -pi); without it both sides count alike. It needs `reach_in_joint_space`."""
     with pytest.raises(ValueError, match="reach_in_joint_space"):
         make_env("WindowInstallation-v1", reach_toward_path_sides=True)
-    env = make_env("WindowInstallation-v1", control_mode="pd_joint_delta_pos", reward_mode="dense", reach_in_joint_space=True,
-                   reach_toward_path_sides=True)
-    plain = make_env("WindowInstallation-v1", control_mode="pd_joint_delta_pos", reward_mode="dense", reach_in_joint_space=True)
-    table = lift_configurations(0.0)[ELEMENT_KINDS.index("window")]  # [side: +pi, -pi, 6]
-    apart = float(np.abs(table[0, :5] - table[1, :5]).sum())
-    for slot, good in ((0, 1), (1, 1), (2, 0)):
-        reach, reward = {}, {}
-        for e in (env, plain):
-            e.reset(seed=0)
-        for side in (0, 1):
+    one_sided = {side: 0 for side in (0, 1)}
+    for kind in ("ceiling", "flooring"):
+        env = make_env(TASK_ENVS[kind], control_mode="pd_joint_delta_pos", reward_mode="dense", reach_in_joint_space=True,
+                       reach_toward_path_sides=True)
+        plain = make_env(TASK_ENVS[kind], control_mode="pd_joint_delta_pos", reward_mode="dense", reach_in_joint_space=True)
+        table = lift_configurations(0.0)[ELEMENT_KINDS.index(kind)]  # [side: +pi, -pi, 6]
+        apart = float(np.abs(table[0, :5] - table[1, :5]).sum())
+        for slot in range(3):
+            sides = _path_sides(kind, slot)
+            if len(sides) == 1:
+                one_sided[sides[0]] += 1
+            reach, reward = {}, {}
             for e in (env, plain):
-                u = e.unwrapped
-                u.goal_slot[:] = slot
-                u.agent.robot.set_qpos(torch.tensor(table[side][None], dtype=torch.float32))
-            u = env.unwrapped
-            reach[side] = float(u.reach_distance()[0])
-            reward[side] = float(u.compute_dense_reward(None, torch.zeros(1, 6), u.evaluate())[0])
-            assert float(plain.unwrapped.reach_distance()[0]) < 1e-4, "without the option either side counts"
-        assert reach[good] < 1e-4 and reach[1 - good] == pytest.approx(apart, rel=1e-4), (slot, reach)
-        assert reward[good] > reward[1 - good], (slot, reward)
-    env.close()
-    plain.close()
+                e.reset(seed=0)
+            for side in (0, 1):
+                for e in (env, plain):
+                    e.unwrapped.goal_slot[:] = slot
+                    e.unwrapped.agent.robot.set_qpos(torch.tensor(table[side][None], dtype=torch.float32))
+                u = env.unwrapped
+                reach[side] = float(u.reach_distance()[0])
+                reward[side] = float(u.compute_dense_reward(None, torch.zeros(1, 6), u.evaluate())[0])
+                assert float(plain.unwrapped.reach_distance()[0]) < 1e-4, "without the option either side counts"
+            for side in (0, 1):
+                assert reach[side] < 1e-4 if side in sides else reach[side] == pytest.approx(apart, rel=1e-4), (kind, slot, reach)
+            if len(sides) == 1:
+                assert reward[sides[0]] > reward[1 - sides[0]], (kind, slot, reward)
+        env.close()
+        plain.close()
+    assert one_sided[0] > 0 and one_sided[1] > 0, "slots reached from one side only, of each side"
 
 
 def test_reach_starts_pose_the_arm_on_the_way_to_the_turret_side_of_the_goal_slot_s_paths_and_leave_the_element():
-    """`reach_start_share=1`: every reset starts with the arm part of the way from its start configuration to the table
-    grasp configuration on the side the goal slot's start paths leave from (+pi for the window opening at y = +0.85,
-    -pi for the others): the turret turned that way, the reach distance shorter than at rest, the element lying on
-    the table where an ordinary reset puts it, untouched by a still step and not grasped. A share out of [0, 1] is
-    refused."""
+    """`reach_start_share=1`: every reset starts with the arm part of the way from its start configuration to a table
+    grasp configuration on a side the goal slot's start paths leave from (the ceiling openings beside the wall: +pi;
+    the floor recesses: -pi): the turret turned that way, the reach distance shorter than at rest, the element lying
+    on the table where an ordinary reset puts it, untouched by a still step and not grasped. A share out of [0, 1]
+    is refused."""
     with pytest.raises(ValueError, match="reach_start_share"):
         make_env("WindowInstallation-v1", reach_start_share=1.5)
-    env = make_env("WindowInstallation-v1", control_mode="pd_joint_delta_pos", reach_start_share=1.0,
-                   reach_in_joint_space=True, reach_toward_path_sides=True)
-    plain = make_env("WindowInstallation-v1", control_mode="pd_joint_delta_pos", reach_in_joint_space=True,
-                     reach_toward_path_sides=True)
-    u, p = env.unwrapped, plain.unwrapped
-    slots = set()
-    for seed in range(12):
-        env.reset(seed=seed)
-        plain.reset(seed=seed)
-        slot = int(u.goal_slot[0])
-        slots.add(slot)
-        assert slot == int(p.goal_slot[0])
-        q, rest = u.agent.robot.get_qpos()[0], p.agent.robot.get_qpos()[0]
-        turned = float(q[0] - rest[0])
-        assert (turned >= 0) if slot == 2 else (turned <= 0), (slot, turned)
-        assert float(u.reach_distance()[0]) <= float(p.reach_distance()[0]) + 1e-5
-        before = u.obj.pose.raw_pose[0].clone()
-        assert torch.allclose(before, p.obj.pose.raw_pose[0], atol=1e-5), "the element lies where an ordinary reset puts it"
-        _, _, _, _, info = env.step(torch.zeros(1, 6))
-        assert not bool(info["is_grasped"][0]) and not bool(info["near_goal_start"][0])
-        assert float(torch.linalg.norm(u.obj.pose.raw_pose[0, :3] - before[:3])) < 0.01, "nothing hit the element"
-    assert slots == {0, 1, 2}
-    env.close()
-    plain.close()
+    for kind in ("ceiling", "flooring"):
+        env = make_env(TASK_ENVS[kind], control_mode="pd_joint_delta_pos", reach_start_share=1.0,
+                       reach_in_joint_space=True, reach_toward_path_sides=True)
+        plain = make_env(TASK_ENVS[kind], control_mode="pd_joint_delta_pos", reach_in_joint_space=True,
+                         reach_toward_path_sides=True)
+        u, p = env.unwrapped, plain.unwrapped
+        checked = 0
+        for seed in range(8):
+            env.reset(seed=seed)
+            plain.reset(seed=seed)
+            slot = int(u.goal_slot[0])
+            assert slot == int(p.goal_slot[0])
+            sides = _path_sides(kind, slot)
+            q, rest = u.agent.robot.get_qpos()[0], p.agent.robot.get_qpos()[0]
+            turned = float(q[0] - rest[0])
+            if sides == [0]:
+                assert turned >= 0, (kind, slot, turned)
+            elif sides == [1]:
+                assert turned <= 0, (kind, slot, turned)
+            checked += len(sides) == 1
+            assert float(u.reach_distance()[0]) <= float(p.reach_distance()[0]) + 1e-5
+            before = u.obj.pose.raw_pose[0].clone()
+            assert torch.allclose(before, p.obj.pose.raw_pose[0], atol=1e-5), "the element lies where an ordinary reset puts it"
+            _, _, _, _, info = env.step(torch.zeros(1, 6))
+            assert not bool(info["is_grasped"][0]) and not bool(info["near_goal_start"][0])
+            assert float(torch.linalg.norm(u.obj.pose.raw_pose[0, :3] - before[:3])) < 0.01, "nothing hit the element"
+        assert checked > 0
+        env.close()
+        plain.close()
 
 
 def test_progress_pays_each_step_s_fall_of_the_carry_distance_and_nothing_for_going_back_and_forth():
@@ -422,3 +440,24 @@ def test_the_path_offset_observation_leads_along_the_start_path_into_the_goal():
     assert placed >= 3, placed
     plain.close()
     env.close()
+
+
+def test_the_window_opening_beside_the_staging_side_is_reached_from_both_sides_along_its_planned_vias():
+    """The IK paths leave the window opening at y = +0.85 only from the turret's +pi side, while the other two
+    openings' leave only from -pi, the side the general agent grasps windows from. `plan_vias` finds exactly that
+    slot's missing side and plans a via for it (a path clear at every turn); with the shipped vias
+    (assets/start_path_vias.json) its paths from -pi are usable and clear, and no other path changed."""
+    from ms_construction.goal_configurations import _start_paths, plan_vias, start_paths
+
+    w = ELEMENT_KINDS.index("window")
+    without, shipped = _start_paths("{}"), start_paths()
+    assert without.usable[w, 2, :, 0].any() and not without.usable[w, 2, :, 1].any()
+    assert without.usable[w, :2, :, 1].any(-1).all() and not without.usable[w, :2, :, 0].any()
+    assert shipped.usable[w, 2, :, 1].all() and (shipped.free[w, 2, :, 1] == 1.0).all()
+    same = np.ones(without.free.shape, dtype=bool)
+    same[w, 2, :, 1] = False
+    assert np.array_equal(shipped.waypoints[same], without.waypoints[same])
+    assert np.array_equal(shipped.usable[same], without.usable[same])
+    planned = plan_vias(without)
+    assert list(planned) == ["window"] and list(planned["window"]) == ["2"] and list(planned["window"]["2"]) == ["1"]
+    assert len(planned["window"]["2"]["1"]) == without.free.shape[2]

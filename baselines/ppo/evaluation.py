@@ -122,7 +122,7 @@ def finished_episodes(infos: dict) -> dict:
     return dict(ended=infos["_final_info"], success=fin["episode"]["success_once"], picked=fin["picked"],
                 ep_return=fin["episode"]["return"], ep_length=fin["episode"]["episode_len"],
                 end_place_dist=fin["place_dist"], end_place_angle_deg=fin["place_angle_deg"], held_at_end=fin["is_grasped"],
-                task_id=fin["task_id"], near_goal_start=fin.get("near_goal_start", torch.zeros_like(fin["task_id"], dtype=torch.bool)))
+                task_id=fin["task_id"], goal_slot=fin["goal_slot"], near_goal_start=fin.get("near_goal_start", torch.zeros_like(fin["task_id"], dtype=torch.bool)))
 
 
 def run_episodes(agent, envs, num_steps: int, seed: int, deterministic: bool = True) -> list[dict]:
@@ -145,7 +145,8 @@ def run_episodes(agent, envs, num_steps: int, seed: int, deterministic: bool = T
         ep = {k: v.cpu() for k, v in finished_episodes(infos).items()}
         for i in map(int, ep["ended"].nonzero()[:, 0]):
             if records[i] is None:
-                records[i] = dict(seed=seed + i, task_id=int(ep["task_id"][i]), picked=bool(ep["picked"][i]),
+                records[i] = dict(seed=seed + i, task_id=int(ep["task_id"][i]), goal_slot=int(ep["goal_slot"][i]),
+                                  picked=bool(ep["picked"][i]),
                                   placed=bool(ep["success"][i]), ret=float(ep["ep_return"][i]), length=int(ep["ep_length"][i]),
                                   policy_time_s=policy_time, final_place_dist=float(ep["end_place_dist"][i]),
                                   final_place_angle_deg=float(ep["end_place_angle_deg"][i]), held_at_end=bool(ep["held_at_end"][i]))
@@ -377,6 +378,17 @@ def read_labelled(specs: tuple[str, ...], option: str) -> dict[str, dict]:
 def read_beside(specs: tuple[str, ...]) -> dict[str, dict]:
     """--beside LABEL=JSON ...: each label's per-task results (`read_labelled`)."""
     return read_labelled(specs, "--beside")
+
+
+def by_goal_slot(episodes: list[dict]) -> str:
+    """'105/106, 104/109, 1/128': placed of the episodes per goal slot of the task (slot 0 first; "-" for records
+    from before 2026-11-27, which lack the slot). Where one slot fails while its neighbours place, the policy has
+    not learnt that slot's way in."""
+    if not episodes or any("goal_slot" not in e for e in episodes):
+        return "-"
+    slots = sorted({e["goal_slot"] for e in episodes})
+    return ", ".join(f"{sum(e['placed'] for e in episodes if e['goal_slot'] == s)}/"
+                     f"{sum(e['goal_slot'] == s for e in episodes)}" for s in slots)
 
 
 def beside_table(beside: dict[str, dict]) -> str:

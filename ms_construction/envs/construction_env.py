@@ -536,6 +536,7 @@ class ConstructionTaskEnv(BaseEnv):
             place_dist=place_dist,
             place_angle_deg=place_angle,
             task_id=self.task_id.clone(),
+            goal_slot=self.goal_slot.clone(),
             near_goal_start=self.near_goal_start.clone(),
         )
 
