@@ -101,6 +101,9 @@ STARTS = {
     "start_17250k": ("runs/campaign_17250k.pt", "066f2d2", "the campaign's fifth start at 17,250,000 env steps"),
     "start_17500k": ("runs/campaign_17500k.pt", "0a742fe",
                      "the campaign's sixth start at 17,500,000 env steps (probe U adopted)"),
+    "start_17540k": ("runs/campaign_17540k.pt", "26307e7", "the campaign's sixth start at 17,540,000 env steps"),
+    "start_17676k": ("runs/campaign_17676k.pt", "ADOPTED_W", "the campaign's seventh start at 17,676,000 env steps "
+                     "(probe W adopted)"),
 }
 """name: (where its checkpoint is put, the commit whose campaign/scratch_general_agent/checkpoint.pt it is, what it
 is): the campaign checkpoints the continuation probes of a round start from."""
@@ -179,7 +182,20 @@ CONTINUATIONS = {
                               "0.5`): U's shaping alone did not turn the policy's reach, which went to -pi for every window",
                               _recipe(exp_name="probeV_reach_starts05", checkpoint=STARTS["start_17500k"][0],
                                       near_goal_radius=1.0, eval_freq=1000, reach_start_share=0.5,
-                                      total_timesteps=250_000), "start_17500k"),
+                                      total_timesteps=250_000) + " (stopped at 110,000 steps)", "start_17500k"),
+    "start_17540k": (*_start("start_17540k"), None),
+    "probeW_vias_share08": ("the start paths gain the planned via of the window opening at y = +0.85 from -pi (a code "
+                            "and asset change: assets/start_path_vias.json), and 80% of the episodes from near-goal "
+                            "starts again; the campaign's seventh start went on from it",
+                            _recipe(exp_name="probeW_vias_share08", checkpoint=STARTS["start_17540k"][0],
+                                    near_goal_radius=1.0, eval_freq=1000, near_goal_share=0.8, total_timesteps=250_000)
+                            + " (stopped at 136,000 steps)", "start_17540k"),
+    "start_17676k": (*_start("start_17676k"), None),
+    "probeX_window_weights": ("W's recipe (the seventh start) with windows sampled twice as often as either other task "
+                              "(`--task-weights 1 2 1`): windows are the task below the paper's rate",
+                              _recipe(exp_name="probeX_window_weights", checkpoint=STARTS["start_17676k"][0],
+                                      near_goal_radius=1.0, eval_freq=1000, task_weights=(1.0, 2.0, 1.0),
+                                      total_timesteps=1_500_000), "start_17676k"),
 }
 """name: (what it changed, how its policy came to be, the start it went on from: its steps count after that start's);
 each evaluated with `python -m experiments.probes --evaluate <name> --checkpoint <its checkpoint>` (EVAL into
