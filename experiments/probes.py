@@ -102,7 +102,7 @@ STARTS = {
     "start_17500k": ("runs/campaign_17500k.pt", "0a742fe",
                      "the campaign's sixth start at 17,500,000 env steps (probe U adopted)"),
     "start_17540k": ("runs/campaign_17540k.pt", "26307e7", "the campaign's sixth start at 17,540,000 env steps"),
-    "start_17676k": ("runs/campaign_17676k.pt", "ADOPTED_W", "the campaign's seventh start at 17,676,000 env steps "
+    "start_17676k": ("runs/campaign_17676k.pt", "afb2635", "the campaign's seventh start at 17,676,000 env steps "
                      "(probe W adopted)"),
 }
 """name: (where its checkpoint is put, the commit whose campaign/scratch_general_agent/checkpoint.pt it is, what it
