@@ -14,6 +14,8 @@ when no joint differs by more than --tol.
 
 from __future__ import annotations
 
+import functools
+
 import json
 import shlex
 import sys
@@ -79,28 +81,39 @@ def modes(path: Path, tol: float) -> dict:
             for slot, s in sorted(slots.items())}
 
 
+@functools.lru_cache(maxsize=None)
+def goal_slots(env_id: str, seeds: tuple[int, ...]) -> tuple[int, ...]:
+    """The goal slot a reset of `env_id` with each seed draws (for episode records from before 2026-11-27, which do
+    not name theirs)."""
+    import gymnasium as gym
+
+    import ms_construction  # noqa: F401  (registers the tasks)
+
+    env = gym.make(env_id, obs_mode="state", num_envs=1, sim_backend="physx_cpu")
+    slots = []
+    for seed in seeds:
+        env.reset(seed=seed)
+        slots.append(int(env.unwrapped.goal_slot.item()))
+    env.close()
+    return tuple(slots)
+
+
 def failures_by_slot(env_id: str, episodes: list[dict]) -> dict[str, list[int]]:
-    """Per goal slot: [episodes, failed] of an agent's evaluated episodes (the slot its record names, or, in records
-    from before 2026-11-27, the one a reset with its seed draws)."""
-    if all("goal_slot" in e for e in episodes):
-        slots = [e["goal_slot"] for e in episodes]
-    else:
-        import gymnasium as gym
-
-        import ms_construction  # noqa: F401  (registers the tasks)
-
-        env = gym.make(env_id, obs_mode="state", num_envs=1, sim_backend="physx_cpu")
-        slots = []
-        for e in episodes:
-            env.reset(seed=e["seed"])
-            slots.append(int(env.unwrapped.goal_slot.item()))
-        env.close()
+    """Per goal slot: [episodes, failed] of an agent's evaluated episodes (the slot its record names, or `goal_slots`)."""
+    slots = [e["goal_slot"] for e in episodes] if all("goal_slot" in e for e in episodes) else \
+        goal_slots(env_id, tuple(e["seed"] for e in episodes))
     counts: dict[str, list[int]] = {}
     for slot, e in zip(slots, episodes):
         c = counts.setdefault(str(slot), [0, 0])
         c[0] += 1
         c[1] += not e["placed"]
     return dict(sorted(counts.items()))
+
+
+def placed_per_slot(env_id: str, episodes: list[dict]) -> str:
+    """'105/106, 104/109, 1/128': placed/episodes per goal slot, slot 0 first. Where one slot fails while its
+    neighbours place, the policy has not learnt that slot's way in."""
+    return ", ".join(f"{n - failed}/{n}" for n, failed in failures_by_slot(env_id, episodes).values())
 
 
 def report(env_id: str, result: dict, failed: dict[str, dict], tol: float) -> str:

@@ -44,8 +44,9 @@ import tyro
 from baselines.ppo import ppo
 from baselines.ppo.args import command_line
 from baselines.ppo.checkpoints import load_checkpoint
-from baselines.ppo.evaluation import PAPER_TABLE_II, by_goal_slot, failures, kinds, pct
+from baselines.ppo.evaluation import PAPER_TABLE_II, failures, kinds, pct
 from experiments.campaign import CAMPAIGN_DIR, SHIPPED_DIR, Run, checkpoint_of, describe, ship, training_wall_s
+from experiments.expert_modes import placed_per_slot
 from experiments.refine import (CONFIRMATION_SEED, VALIDATION_SEED, best_snapshot, content_tag, ranked_snapshots,
                                validate)
 from ms_construction.parameters import ELEMENT_KINDS
@@ -191,7 +192,7 @@ def report(run: Run, results: Path = Path("docs/RESULTS.md")) -> str:
             paper = PAPER_TABLE_II[env_id]
             lines.append(f"| {env_id} | {pct(r['pick_success'], r['pick_success_ci95'])} | "
                          f"{pct(r['place_success'], r['place_success_ci95'])} | {paper[0]:.2f} / {paper[1]:.2f} | "
-                         f"{by_goal_slot(r['episode_results'])} | {text} |")
+                         f"{placed_per_slot(env_id, r['episode_results'])} | {text} |")
     else:
         lines.append(f"Not shipped yet: `{COMMAND} --ship-now` ships the policy where the run stands, then "
                      f"`python scripts/evaluate.py --checkpoint {run.shipped} --all --steps 50000 --json {EVAL_JSON}`.")

@@ -206,11 +206,14 @@ runs/probes/<name>/checkpoint.pt). The campaign run on from each start is that r
 def continuation_table() -> str:
     import json
 
+    from experiments.expert_modes import placed_per_slot
+
     from baselines.ppo.evaluation import pct
 
     lines = ["| policy | what it changed | env steps in all | pick: ceiling / window / flooring | "
-             "placed: ceiling / window / flooring | training episodes of its last 200,000 steps placed, ordinary "
-             "resets: ceiling / window / flooring (episodes) |", "|---|---|---|---|---|---|"]
+             "placed: ceiling / window / flooring | windows placed per opening (y = -0.85, 0, +0.85) | training "
+             "episodes of its last 200,000 steps placed, ordinary resets: ceiling / window / flooring (episodes) |",
+             "|---|---|---|---|---|---|---|"]
     for name, (what, _, _) in CONTINUATIONS.items():
         path = PROBE_DIR / f"{name}_eval.json"
         if not path.is_file():
@@ -221,6 +224,7 @@ def continuation_table() -> str:
         lines.append(f"| {name} | {what} | {'-' if steps is None else f'{steps:,}'} | "
                      + " / ".join(f"{100 * t['pick_success']:.0f}%" for t in tasks) + " | "
                      + " / ".join(pct(t["place_success"], t["place_success_ci95"]) for t in tasks) + " | "
+                     + placed_per_slot("WindowInstallation-v1", result["tasks"]["WindowInstallation-v1"]["episode_results"]) + " | "
                      + _late_training(PROBE_DIR / f"{name}.csv") + " |")
     commands = "\n".join(f"- {name}: `{how}`, then `python -m experiments.probes --evaluate {name} --checkpoint <its checkpoint>` "
                          f"(`{EVAL}`)" for name, (_, how, _) in CONTINUATIONS.items())

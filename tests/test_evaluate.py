@@ -83,12 +83,6 @@ def test_training_and_scripts_evaluate_py_run_the_same_episode_loop(tmp_path):
     env.close()
 
 
-def test_placed_per_goal_slot_counts_each_slot_s_episodes():
-    episodes = [dict(goal_slot=s, placed=p) for s, p in ((2, False), (0, True), (2, True), (0, True), (1, False))]
-    assert evaluation.by_goal_slot(episodes) == "2/2, 0/1, 1/2"
-    assert evaluation.by_goal_slot([dict(placed=True)]) == "-", "records from before the slot was kept"
-
-
 def test_the_recorded_episode_is_one_video_named_by_task_and_seed(tmp_path):
     """`--video-dir`: the first episode of the task as one video, every frame of it and no more."""
     import imageio.v2 as iio

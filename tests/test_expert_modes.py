@@ -65,3 +65,18 @@ def test_an_agent_s_failures_are_counted_per_goal_slot_and_written_beside_the_ex
     assert "<!-- begin expert-modes (generated) -->" in text and "| goal slot |" in text and "| agent |" in text
     with pytest.raises(SystemExit, match="LABEL=JSON"):
         expert_modes.main(expert_modes.Args(traj=(traj,), agent=("no-such-file",)))
+
+
+def test_placed_per_slot_reads_the_record_s_slot_or_the_reset_s():
+    """Records that name their goal slot are counted by it; older ones by the slot a reset with their seed draws."""
+    named = [dict(seed=0, goal_slot=s, placed=p) for s, p in ((2, False), (0, True), (2, True), (0, True), (1, False))]
+    assert expert_modes.placed_per_slot("WindowInstallation-v1", named) == "2/2, 0/1, 1/2"
+    env = gym.make("WindowInstallation-v1", obs_mode="state", num_envs=1, sim_backend="physx_cpu")
+    slots = []
+    for seed in range(1_000_000, 1_000_006):
+        env.reset(seed=seed)
+        slots.append(int(env.unwrapped.goal_slot.item()))
+    env.close()
+    unnamed = [dict(seed=1_000_000 + i, placed=True) for i in range(6)]
+    expected = ", ".join(f"{slots.count(s)}/{slots.count(s)}" for s in sorted(set(slots)))
+    assert expert_modes.placed_per_slot("WindowInstallation-v1", unnamed) == expected

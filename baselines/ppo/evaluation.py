@@ -380,17 +380,6 @@ def read_beside(specs: tuple[str, ...]) -> dict[str, dict]:
     return read_labelled(specs, "--beside")
 
 
-def by_goal_slot(episodes: list[dict]) -> str:
-    """'105/106, 104/109, 1/128': placed of the episodes per goal slot of the task (slot 0 first; "-" for records
-    from before 2026-11-27, which lack the slot). Where one slot fails while its neighbours place, the policy has
-    not learnt that slot's way in."""
-    if not episodes or any("goal_slot" not in e for e in episodes):
-        return "-"
-    slots = sorted({e["goal_slot"] for e in episodes})
-    return ", ".join(f"{sum(e['placed'] for e in episodes if e['goal_slot'] == s)}/"
-                     f"{sum(e['goal_slot'] == s for e in episodes)}" for s in slots)
-
-
 def beside_table(beside: dict[str, dict]) -> str:
     """Each earlier agent's row per task, pick and place with 95% intervals."""
     lines = ["| agent | task | episodes | pick success % [95% CI] | place success % [95% CI] |", "|---|---|---|---|---|"]
