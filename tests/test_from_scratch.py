@@ -153,14 +153,16 @@ def test_the_continuation_table_compares_each_probe_s_evaluation_with_the_contro
     from experiments import probes
 
     monkeypatch.setattr(probes, "PROBE_DIR", tmp_path)
-    task = lambda pick, place: dict(pick_success=pick, place_success=place, place_success_ci95=[0.0, 0.5])  # noqa: E731
+    windows = [dict(seed=i, goal_slot=i % 3, placed=i % 3 < 2) for i in range(6)]  # the third opening lost
+    task = lambda pick, place: dict(pick_success=pick, place_success=place, place_success_ci95=[0.0, 0.5],  # noqa: E731
+                                    episode_results=windows)
     for name, placed in (("control_campaign", 0.1), ("probeM_paths", 0.2)):
         (tmp_path / f"{name}_eval.json").write_text(json.dumps(dict(global_step=2_012_000, tasks={
             "CeilingInstallation-v1": task(1.0, 0.0), "WindowInstallation-v1": task(0.5, 0.0), "Flooring-v1": task(0.9, placed)})))
     table = probes.continuation_table()
     rows = [line for line in table.splitlines() if line.startswith("| control") or line.startswith("| probe")]
     assert [r.split(" | ")[0] for r in rows] == ["| control_campaign", "| probeM_paths"], "in CONTINUATIONS' order, evaluated ones only"
-    assert "| 2,012,000 | 100% / 50% / 90% | 0.0 [0.0, 50.0] / 0.0 [0.0, 50.0] / 20.0 [0.0, 50.0] |" in rows[1]
+    assert "| 2,012,000 | 100% / 50% / 90% | 0.0 [0.0, 50.0] / 0.0 [0.0, 50.0] / 20.0 [0.0, 50.0] | 2/2, 2/2, 0/2 |" in rows[1]
     assert "--carry-along-paths" in table and "python -m experiments.probes --evaluate probeM_paths" in table
 
 
