@@ -354,11 +354,7 @@ class ConstructionTaskEnv(BaseEnv):
         q[:, 5] += torch.deg2rad(turn)
         qpos = self.agent.robot.get_qpos()[env_idx].clone()
         qpos[chosen] = q
-        self.agent.reset(qpos)
-        if self.gpu_sim_enabled:  # link poses follow the new joint positions only after a kinematics update
-            self.scene._gpu_apply_all()
-            self.scene.px.gpu_update_articulation_kinematics()
-            self.scene._gpu_fetch_all()
+        self._pose_arm(qpos)
         tcp = self.agent.tcp.pose.raw_pose[idx]
         grasp = self._grasp_in_el[task]
         hold = pose_inv(torch.cat([grasp[:, :3], qmul(grasp[:, 3:], quat_z(turn))], -1))
@@ -369,6 +365,15 @@ class ConstructionTaskEnv(BaseEnv):
         self.gripper.hold_pose_in_tcp[idx] = hold
         self.picked[idx] = True
         self.near_goal_start[idx] = True
+
+    def _pose_arm(self, qpos: torch.Tensor) -> None:
+        """Set the arm of the envs being reset to `qpos`, its links posed at once (on the GPU they follow the new
+        joint positions only after a kinematics update)."""
+        self.agent.reset(qpos)
+        if self.gpu_sim_enabled:
+            self.scene._gpu_apply_all()
+            self.scene.px.gpu_update_articulation_kinematics()
+            self.scene._gpu_fetch_all()
 
     REACH_START_MAX = 0.75
     """a reach start poses the arm at most this fraction of the way to the table: the last stretch of the joint line
@@ -392,11 +397,7 @@ class ConstructionTaskEnv(BaseEnv):
         target = self._table_q[self.task_id[idx], torch.multinomial(sides, 1)[:, 0]]
         qpos = self.agent.robot.get_qpos()[env_idx].clone()
         qpos[chosen] += torch.rand(len(idx), 1) * self.REACH_START_MAX * (target - qpos[chosen])
-        self.agent.reset(qpos)
-        if self.gpu_sim_enabled:
-            self.scene._gpu_apply_all()
-            self.scene.px.gpu_update_articulation_kinematics()
-            self.scene._gpu_fetch_all()
+        self._pose_arm(qpos)
 
     def _place_goal_markers(self, env_idx: torch.Tensor) -> None:
         task, goal = self.task_id[env_idx], self._goal_table[self.task_id[env_idx], self.goal_slot[env_idx]]
