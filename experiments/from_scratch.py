@@ -62,7 +62,8 @@ STARTS = {1_682_000: "fifth start: carry along the start paths, reach in joint s
           10_010_000: "observation mended: each reset sets the nominal hold (a8d32d8)",
           17_250_000: "sixth start: reach toward the path sides, a fifth of the episodes from near-goal starts (probe U)",
           17_540_000: "seventh start: the window opening at y = +0.85 reached from -pi along a planned via, 80% near-goal "
-                      "starts again (probe W)"}
+                      "starts again (probe W)",
+          17_676_000: "windows sampled twice as often (probe X)"}
 """env step: the change the campaign went on with there, of the recipe or of the tasks (the fourth start's steps before
 the first; the experiment page says how each came to be)."""
 
@@ -77,7 +78,7 @@ def scratch_args(num_envs: Optional[int] = None, **overrides) -> ppo.Args:
         num_envs=num_envs, num_steps=2000 // num_envs, update_epochs=8, num_minibatches=8, target_kl=0.1,
         near_goal_share=0.8, near_goal_radius=0.1, near_goal_step=0.1, near_goal_promote=0.6, near_goal_window=20,
         near_goal_max_steps=80, obs_install_offset=True, bounded_mean=True, carry_along_paths=True, reach_in_joint_space=True,
-        reach_toward_path_sides=True,
+        reach_toward_path_sides=True, task_weights=(1.0, 2.0, 1.0),
         eval_freq=25, checkpoint_freq=10, log_dir=str(CAMPAIGN_DIR),
     )
     return args.replace(**overrides)

@@ -104,6 +104,8 @@ STARTS = {
     "start_17540k": ("runs/campaign_17540k.pt", "26307e7", "the campaign's sixth start at 17,540,000 env steps"),
     "start_17676k": ("runs/campaign_17676k.pt", "afb2635", "the campaign's seventh start at 17,676,000 env steps "
                      "(probe W adopted)"),
+    "start_18062k": ("runs/campaign_18062k.pt", "ADOPTED_X", "the campaign's eighth start at 18,062,000 env steps "
+                     "(probe X adopted)"),
 }
 """name: (where its checkpoint is put, the commit whose campaign/scratch_general_agent/checkpoint.pt it is, what it
 is): the campaign checkpoints the continuation probes of a round start from."""
@@ -195,7 +197,15 @@ CONTINUATIONS = {
                               "(`--task-weights 1 2 1`): windows are the task below the paper's rate",
                               _recipe(exp_name="probeX_window_weights", checkpoint=STARTS["start_17676k"][0],
                                       near_goal_radius=1.0, eval_freq=1000, task_weights=(1.0, 2.0, 1.0),
-                                      total_timesteps=1_500_000), "start_17676k"),
+                                      total_timesteps=1_500_000) + " (stopped at 386,000 steps)", "start_17676k"),
+    "start_18062k": (*_start("start_18062k"), None),
+    "probeY_path_offset": ("X's recipe (the eighth start, which went on from X) + the joint move a little ahead along the "
+                           "start path in the observation (`--obs-path-offset`, zero weights on it at the start): X's "
+                           "policy still carried that opening's windows to the neighbouring one, where the straight "
+                           "move to the installation leads, away from the via",
+                           _recipe(exp_name="probeY_path_offset", checkpoint=STARTS["start_18062k"][0],
+                                   near_goal_radius=1.0, eval_freq=1000, obs_path_offset=True,
+                                   total_timesteps=1_500_000), "start_18062k"),
 }
 """name: (what it changed, how its policy came to be, the start it went on from: its steps count after that start's);
 each evaluated with `python -m experiments.probes --evaluate <name> --checkpoint <its checkpoint>` (EVAL into
