@@ -104,7 +104,7 @@ STARTS = {
     "start_17540k": ("runs/campaign_17540k.pt", "26307e7", "the campaign's sixth start at 17,540,000 env steps"),
     "start_17676k": ("runs/campaign_17676k.pt", "afb2635", "the campaign's seventh start at 17,676,000 env steps "
                      "(probe W adopted)"),
-    "start_18062k": ("runs/campaign_18062k.pt", "ADOPTED_X", "the campaign's eighth start at 18,062,000 env steps "
+    "start_18062k": ("runs/campaign_18062k.pt", "f8a700d", "the campaign's eighth start at 18,062,000 env steps "
                      "(probe X adopted)"),
 }
 """name: (where its checkpoint is put, the commit whose campaign/scratch_general_agent/checkpoint.pt it is, what it
