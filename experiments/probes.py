@@ -205,7 +205,7 @@ CONTINUATIONS = {
                            "move to the installation leads, away from the via",
                            _recipe(exp_name="probeY_path_offset", checkpoint=STARTS["start_18062k"][0],
                                    near_goal_radius=1.0, eval_freq=1000, obs_path_offset=True,
-                                   total_timesteps=1_500_000), "start_18062k"),
+                                   total_timesteps=1_500_000) + " (stopped at 680,000 steps)", "start_18062k"),
 }
 """name: (what it changed, how its policy came to be, the start it went on from: its steps count after that start's);
 each evaluated with `python -m experiments.probes --evaluate <name> --checkpoint <its checkpoint>` (EVAL into
