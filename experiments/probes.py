@@ -106,6 +106,8 @@ STARTS = {
                      "(probe W adopted)"),
     "start_18062k": ("runs/campaign_18062k.pt", "f8a700d", "the campaign's eighth start at 18,062,000 env steps "
                      "(probe X adopted)"),
+    "start_18742k": ("runs/campaign_18742k.pt", "8ffe853", "the campaign's ninth start at 18,742,000 env steps "
+                     "(probe Y adopted)"),
 }
 """name: (where its checkpoint is put, the commit whose campaign/scratch_general_agent/checkpoint.pt it is, what it
 is): the campaign checkpoints the continuation probes of a round start from."""
@@ -206,6 +208,14 @@ CONTINUATIONS = {
                            _recipe(exp_name="probeY_path_offset", checkpoint=STARTS["start_18062k"][0],
                                    near_goal_radius=1.0, eval_freq=1000, obs_path_offset=True,
                                    total_timesteps=1_500_000) + " (stopped at 680,000 steps)", "start_18062k"),
+    "start_18742k": (*_start("start_18742k"), None),
+    "probeZ_slot_weights": ("Y's recipe (the ninth start) with the window opening at y = +0.85 drawn four times as often "
+                            "as either other opening (`--goal-slot-weights 1 1 1 1 1 4 1 1 1`): the via path's near-goal "
+                            "starts were 4% of the episodes",
+                            _recipe(exp_name="probeZ_slot_weights", checkpoint=STARTS["start_18742k"][0],
+                                    near_goal_radius=1.0, eval_freq=1000,
+                                    goal_slot_weights=(1.0, 1.0, 1.0, 1.0, 1.0, 4.0, 1.0, 1.0, 1.0),
+                                    total_timesteps=1_000_000), "start_18742k"),
 }
 """name: (what it changed, how its policy came to be, the start it went on from: its steps count after that start's);
 each evaluated with `python -m experiments.probes --evaluate <name> --checkpoint <its checkpoint>` (EVAL into

@@ -461,3 +461,25 @@ def test_the_window_opening_beside_the_staging_side_is_reached_from_both_sides_a
     planned = plan_vias(without)
     assert list(planned) == ["window"] and list(planned["window"]) == ["2"] and list(planned["window"]["2"]) == ["1"]
     assert len(planned["window"]["2"]["1"]) == without.free.shape[2]
+
+
+def test_goal_slot_weights_draw_the_weighted_slot_more_and_leave_the_draws_alone_without_them():
+    """`goal_slot_weights={"window": (0, 0, 1)}` draws only the window opening at y = +0.85; (1, 1, 4) draws it most;
+    without the kwarg the slots are drawn as before (the same slot per seed); bad weights are refused."""
+    with pytest.raises(ValueError, match="goal_slot_weights"):
+        make_env("WindowInstallation-v1", goal_slot_weights={"window": (1, 1)})
+    with pytest.raises(ValueError, match="goal_slot_weights"):
+        make_env("WindowInstallation-v1", goal_slot_weights={"door": (1, 1, 1)})
+    only = make_env("WindowInstallation-v1", goal_slot_weights={"window": (0, 0, 1)})
+    most = make_env("WindowInstallation-v1", goal_slot_weights={"window": (1, 1, 4), "ceiling": (1, 0, 0)})
+    plain, again = make_env("WindowInstallation-v1"), make_env("WindowInstallation-v1")
+    drawn = {"only": [], "most": [], "plain": [], "again": []}
+    for seed in range(30):
+        for name, e in (("only", only), ("most", most), ("plain", plain), ("again", again)):
+            e.reset(seed=seed)
+            drawn[name].append(int(e.unwrapped.goal_slot[0]))
+    assert set(drawn["only"]) == {2}
+    assert drawn["most"].count(2) > max(drawn["most"].count(0), drawn["most"].count(1))
+    assert drawn["plain"] == drawn["again"] and set(drawn["plain"]) == {0, 1, 2}
+    for e in (only, most, plain, again):
+        e.close()

@@ -273,6 +273,10 @@ class StartStateArgs:
     """near-goal episodes of a task type whose success decides a widening."""
     near_goal_max_steps: Optional[int] = None
     """a near-goal episode that has not placed within this many steps is truncated (None: the task's step limit)."""
+    goal_slot_weights: Optional[tuple[float, ...]] = None
+    """nine weights >= 0: the goal slots' sampling weights in training, three per task type (ceiling, window,
+    flooring; the tasks' `goal_slot_weights`), e.g. 1 1 1 1 1 4 1 1 1 to train the window opening at y = +0.85 more;
+    evaluation always draws them uniformly."""
     reach_start_share: float = 0.0
     """this share of the training episodes start with the arm part of the way from its start configuration to a table
     grasp configuration on a turret side the goal slot's start paths leave from, the element lying on the table (the
@@ -361,6 +365,10 @@ def validate(args: Args) -> None:
                                                                       or args.env_id != "ConstructionPickPlace-v1")):
         raise SystemExit(f"--failure-task-weights {args.failure_task_weights}: a window of episodes (> 0; 0: off), of the "
                          "general task ConstructionPickPlace-v1 only, without --task-weights")
+    gsw = args.starts.goal_slot_weights
+    if gsw is not None and (len(gsw) != 9 or min(gsw) < 0 or any(sum(gsw[i:i + 3]) <= 0 for i in (0, 3, 6))):
+        raise SystemExit(f"--goal-slot-weights {' '.join(map(str, gsw))}: nine weights >= 0, three per task type "
+                         "(ceiling, window, flooring), not all 0 within a type")
     if args.reach_toward_path_sides and not args.reach_in_joint_space:
         raise SystemExit("--reach-toward-path-sides narrows the joint-space reach: give --reach-in-joint-space too")
     for name in ("near_goal_share", "near_goal_radius", "near_goal_promote", "reach_start_share"):

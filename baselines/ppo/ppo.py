@@ -78,6 +78,9 @@ def make_envs(args: Args, num_envs: int, device: torch.device, eval_mode: bool =
             kwargs[reward_option] = True
     if args.task_weights is not None and not eval_mode:
         kwargs["task_weights"] = dict(zip(ELEMENT_KINDS, args.task_weights))
+    if args.starts.goal_slot_weights is not None and not eval_mode:
+        w = args.starts.goal_slot_weights
+        kwargs["goal_slot_weights"] = {kind: w[3 * k:3 * k + 3] for k, kind in enumerate(ELEMENT_KINDS)}
     if args.starts.reach_start_share and not eval_mode:
         kwargs["reach_start_share"] = args.starts.reach_start_share
     # near-goal starts are set (and left off in evaluation) by set_near_goal_starts; this applies their time limit

@@ -100,6 +100,7 @@ class ConstructionTaskEnv(BaseEnv):
         tolerances: Optional[dict] = None,
         tasks: Optional[Sequence[str]] = None,
         task_weights: Optional[Mapping[str, float]] = None,
+        goal_slot_weights: Optional[Mapping[str, Sequence[float]]] = None,
         obs_elapsed_time: bool = False,
         obs_install_offset: bool = False,
         obs_path_offset: bool = False,
@@ -121,6 +122,7 @@ class ConstructionTaskEnv(BaseEnv):
                 raise ValueError(f"tasks={tasks!r}: give distinct task types from {ELEMENT_KINDS}")
             self.TASKS = tuple(t for t in ELEMENT_KINDS if t in tasks)
         self._task_weights = self._check_task_weights(task_weights)
+        self._goal_slot_weights_kwarg = goal_slot_weights
         self.obs_elapsed_time = bool(obs_elapsed_time)
         self.obs_install_offset = bool(obs_install_offset)
         self.obs_path_offset = bool(obs_path_offset)
@@ -151,6 +153,22 @@ class ConstructionTaskEnv(BaseEnv):
         if bad or min(w) < 0 or sum(w) <= 0:
             raise ValueError(f"task_weights={dict(weights)!r}: give weights >= 0, not all 0, for task types of {self.TASKS}")
         return torch.tensor(w) / sum(w)
+
+    def _check_goal_slot_weights(self, weights: Optional[Mapping[str, Sequence[float]]]) -> Optional[torch.Tensor]:
+        """`goal_slot_weights` as per-task-type sampling probabilities of the goal slots [3 kinds, slots] (None: uniform).
+        A task type not named draws its slots uniformly, so {"window": (1, 1, 4)} draws the window opening at
+        y = +0.85 two times in three."""
+        if weights is None:
+            return None
+        slots = self._goal_table.shape[1]
+        table = torch.ones(len(ELEMENT_KINDS), slots)
+        for kind, w in weights.items():
+            w = [float(x) for x in w]
+            if kind not in ELEMENT_KINDS or len(w) != slots or min(w) < 0 or sum(w) <= 0:
+                raise ValueError(f"goal_slot_weights={dict(weights)!r}: give, per task type of {ELEMENT_KINDS}, {slots} "
+                                 "weights >= 0, not all 0")
+            table[ELEMENT_KINDS.index(kind)] = torch.tensor(w)
+        return (table / table.sum(-1, keepdim=True)).to(self.device)
 
     def set_task_weights(self, weights: Optional[Mapping[str, float]]) -> None:
         """From the next reset on, sample the general task's task types with these weights (as the `task_weights`
@@ -207,6 +225,7 @@ class ConstructionTaskEnv(BaseEnv):
         f32 = dict(dtype=torch.float32, device=dev)
         # per task type (indexed by task_id): goals [3, slots, 7], grasp pose [3, 7], sizes [3, 3]
         self._goal_table = torch.tensor([m["goal_poses"][k] for k in kinds], **f32)
+        self._goal_slot_weights = self._check_goal_slot_weights(self._goal_slot_weights_kwarg)
         self._grasp_in_el = torch.tensor([m["elements"][k]["grasp_pose"] for k in kinds], **f32)
         self._el_size = torch.tensor([m["elements"][k]["size"] for k in kinds], **f32)
         syms = [list(SYMMETRIES_DEG[k]) + [0.0] * (4 - len(SYMMETRIES_DEG[k])) for k in kinds]
@@ -261,7 +280,10 @@ class ConstructionTaskEnv(BaseEnv):
                 self.task_id[env_idx] = self._task_choices[pick]
                 self._select_active_elements()
             task = self.task_id[env_idx]
-            self.goal_slot[env_idx] = torch.randint(self._goal_table.shape[1], (b,))
+            if self._goal_slot_weights is None:
+                self.goal_slot[env_idx] = torch.randint(self._goal_table.shape[1], (b,))
+            else:  # one draw per env from its task type's row
+                self.goal_slot[env_idx] = torch.multinomial(self._goal_slot_weights[task], 1)[:, 0]
 
             xyz = self._staging_xyz.repeat(b, 1)
             xyz[:, :2] += (torch.rand(b, 2) * 2 - 1) * START_XY_NOISE
