@@ -79,7 +79,7 @@ def test_the_recipe_changes_the_policy_and_a_stopped_run_resumes_in_the_uninterr
 
 def test_a_tiny_run_ships_before_its_end_with_a_record_that_says_where_it_stands(tmp_path):
     small = dict(num_envs=2, num_steps=20, num_minibatches=2, update_epochs=1, num_eval_envs=1, eval_freq=100,
-                 checkpoint_freq=1, env_id="Flooring-v1", log_dir=str(tmp_path), exp_name="tiny", total_timesteps=80)
+                 checkpoint_freq=1, env_id="Flooring-v1", task_weights=None, log_dir=str(tmp_path), exp_name="tiny", total_timesteps=80)
     [run] = fs.scratch_runs(num_envs=2)
     run = dataclasses.replace(run, args=fs.scratch_args(**small), shipped=tmp_path / "scratch.pt")
     campaign.run_or_resume(dataclasses.replace(run, shipped=None))
@@ -171,7 +171,7 @@ def test_the_campaign_keeps_snapshots_and_ships_the_one_that_validates_best(tmp_
     the best of them again on fresh episodes, and ships the one that places most there on its worst task, with a
     record that says so; a shipped policy that confirms better than every snapshot stays."""
     small = dict(num_envs=2, num_steps=20, num_minibatches=2, update_epochs=1, num_eval_envs=1, eval_freq=100,
-                 checkpoint_freq=1, env_id="Flooring-v1", log_dir=str(tmp_path), exp_name="tiny", total_timesteps=80)
+                 checkpoint_freq=1, env_id="Flooring-v1", task_weights=None, log_dir=str(tmp_path), exp_name="tiny", total_timesteps=80)
     [run] = fs.scratch_runs(num_envs=2)
     run = dataclasses.replace(run, args=fs.scratch_args(**small), shipped=tmp_path / "scratch.pt")
     screening = {"checkpoint_40": dict(ceiling=0.5, window=0.4), "checkpoint_80": dict(ceiling=0.9, window=0.1),
@@ -219,7 +219,7 @@ def test_the_campaign_goes_on_from_a_probe_of_its_recipe_with_its_steps_counted_
     args) and its CSV rows follow the campaign's, counted on; the campaign then resumes from there. A probe of another
     recipe, or one that started elsewhere, is refused."""
     small = dict(num_envs=2, num_steps=20, num_minibatches=2, update_epochs=1, num_eval_envs=1, eval_freq=100,
-                 checkpoint_freq=1, env_id="Flooring-v1", log_dir=str(tmp_path))
+                 checkpoint_freq=1, env_id="Flooring-v1", task_weights=None, log_dir=str(tmp_path))
     [run] = fs.scratch_runs(num_envs=2)
     run = dataclasses.replace(run, args=fs.scratch_args(**small, exp_name="campaign", total_timesteps=80), shipped=None)
     campaign.run_or_resume(run)
