@@ -215,7 +215,8 @@ CONTINUATIONS = {
                             _recipe(exp_name="probeZ_slot_weights", checkpoint=STARTS["start_18742k"][0],
                                     near_goal_radius=1.0, eval_freq=1000,
                                     goal_slot_weights=(1.0, 1.0, 1.0, 1.0, 1.0, 4.0, 1.0, 1.0, 1.0),
-                                    total_timesteps=1_000_000), "start_18742k"),
+                                    total_timesteps=1_000_000) + " (stopped at 242,000 steps; not adopted)",
+                            "start_18742k"),
 }
 """name: (what it changed, how its policy came to be, the start it went on from: its steps count after that start's);
 each evaluated with `python -m experiments.probes --evaluate <name> --checkpoint <its checkpoint>` (EVAL into
