@@ -414,9 +414,8 @@ class ConstructionTaskEnv(BaseEnv):
         if self._table_q is None:
             self._table_q = torch.tensor(lift_configurations(0.0), dtype=torch.float32, device=self.device)
         idx = env_idx[chosen]
-        usable = self._load_start_paths()["usable"][self.task_id[idx], self.goal_slot[idx]]
-        sides = usable.view(len(idx), -1, 2).amax(1) + 1e-6  # a slot without usable paths: either side
-        target = self._table_q[self.task_id[idx], torch.multinomial(sides, 1)[:, 0]]
+        side = torch.multinomial(self._path_sides(self.task_id[idx], self.goal_slot[idx]).float(), 1)[:, 0]
+        target = self._table_q[self.task_id[idx], side]
         qpos = self.agent.robot.get_qpos()[env_idx].clone()
         qpos[chosen] += torch.rand(len(idx), 1) * self.REACH_START_MAX * (target - qpos[chosen])
         self._pose_arm(qpos)
@@ -723,11 +722,15 @@ class ConstructionTaskEnv(BaseEnv):
         q = self.agent.robot.get_qpos()
         distance = (self._table_q[self.task_id][..., :5] - q[:, None, :5]).abs().sum(-1)  # [n, 2 turret sides]
         if self.reach_toward_path_sides:
-            usable = self._load_start_paths()["usable"][self.task_id, self.goal_slot]  # [n, configurations x sides]
-            side_used = usable.view(len(q), -1, 2).amax(1) > 0
-            side_used |= ~side_used.any(-1, keepdim=True)  # a slot without usable paths: either side, as without the option
-            distance = torch.where(side_used, distance, torch.full_like(distance, torch.inf))
+            distance = torch.where(self._path_sides(self.task_id, self.goal_slot), distance, torch.full_like(distance, torch.inf))
         return distance.amin(-1)
+
+    def _path_sides(self, task: torch.Tensor, slot: torch.Tensor) -> torch.Tensor:
+        """[n, 2] bool: the turret sides (+pi, -pi) a usable start path of each goal slot leaves the table from; both for
+        a slot without usable paths."""
+        usable = self._load_start_paths()["usable"][task, slot]  # [n, configurations x sides]
+        sides = usable.view(len(task), -1, 2).amax(1) > 0
+        return sides | ~sides.any(-1, keepdim=True)
 
     def install_offset(self) -> torch.Tensor:
         """[n, 6] rad; the joint move from the arm's configuration to the nearest one that holds its element
