@@ -217,6 +217,15 @@ CONTINUATIONS = {
                                     goal_slot_weights=(1.0, 1.0, 1.0, 1.0, 1.0, 4.0, 1.0, 1.0, 1.0),
                                     total_timesteps=1_000_000) + " (stopped at 242,000 steps; not adopted)",
                             "start_18742k"),
+    "probeAA_keeps_to_vias": ("Y's recipe (the ninth start) with the carry kept to the via path "
+                              "(`--carry-keeps-to-vias`: measured only along the paths from the side the window was "
+                              "grasped from, each radian off a planned via's path counting 25 times) and that opening "
+                              "drawn three times as often (`--goal-slot-weights 1 1 1 1 1 3 1 1 1`): at the old "
+                              "weight a window stopped in the neighbouring opening measured nearer its goal than the via",
+                              _recipe(exp_name="probeAA_keeps_to_vias", checkpoint=STARTS["start_18742k"][0],
+                                      near_goal_radius=1.0, eval_freq=1000, carry_keeps_to_vias=True,
+                                      goal_slot_weights=(1.0, 1.0, 1.0, 1.0, 1.0, 3.0, 1.0, 1.0, 1.0),
+                                      total_timesteps=1_258_000), "start_18742k"),
 }
 """name: (what it changed, how its policy came to be, the start it went on from: its steps count after that start's);
 each evaluated with `python -m experiments.probes --evaluate <name> --checkpoint <its checkpoint>` (EVAL into

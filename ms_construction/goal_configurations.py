@@ -162,6 +162,9 @@ class StartPaths:
     usable: np.ndarray
     """[...] bool: the paths starts are drawn on, those of each goal slot whose clear fraction is at least half
     the slot's best."""
+    planned: np.ndarray
+    """[...] bool: the paths whose corner is a planned via (`plan_vias`): a detour around what the straight joint
+    line and the raised corner run into."""
 
 
 def _clear_fraction(planners: list, waypoints: np.ndarray, turns: list[float]) -> float:
@@ -231,7 +234,7 @@ def _start_paths(vias_json: str) -> StartPaths:
     backoff = backoff_configurations().astype(np.float64)
     site = site_collision_objects(m)
     shape = install.shape[:3] + (2,)
-    waypoints, free = np.zeros(shape + (5, 6)), np.zeros(shape)
+    waypoints, free, planned = np.zeros(shape + (5, 6)), np.zeros(shape), np.zeros(shape, dtype=bool)
     turns = [float(np.deg2rad(t)) for t in START_TURNS_DEG]
     with tempfile.TemporaryDirectory(prefix="ms_construction_paths_") as workdir:
         for k, kind in enumerate(ELEMENT_KINDS):
@@ -252,8 +255,9 @@ def _start_paths(vias_json: str) -> StartPaths:
                 clear = [_clear_fraction(planners, w, turns) for w in options]
                 best = int(np.argmax(clear))
                 waypoints[(k,) + index], free[(k,) + index] = options[best], clear[best]
+                planned[(k,) + index] = best == 2
     best = free.reshape(shape[0], shape[1], -1).max(-1)[:, :, None, None]
-    return StartPaths(waypoints.astype(np.float32), free.astype(np.float32), (free >= 0.5 * best) & (best > 0))
+    return StartPaths(waypoints.astype(np.float32), free.astype(np.float32), (free >= 0.5 * best) & (best > 0), planned)
 
 
 def path_point(waypoints: np.ndarray, fraction: float) -> np.ndarray:

@@ -12,6 +12,9 @@ site's poses alone (ms_construction/goal_configurations.py).
 - Reach starts (`reach_start_share`) pose the arm on the way to the table from the side the goal slot's paths leave
   from, the element untouched.
 - With `carry_counts_lag` the carry distance also counts how far a jammed element trails its plate.
+- With `carry_keeps_to_vias` a carry that cuts across the planned via's detour never pays, and the carry is measured
+  along the paths from the turret side the element was grasped from (set by the grasp or the near-goal start,
+  cleared by a reset, kept in the env state).
 - The path-offset observation points along the start path: following it places the ceiling panel.
 - A near-goal start is a valid state: the element held against the plate, nothing penetrating, still after a
   step; radius 0 starts it installed (placed at the first step), and evaluation-style resets are untouched.
@@ -101,6 +104,9 @@ def test_near_goal_starts_are_valid_held_states(kind):
         assert _penetrations(u) == [], (seed, _penetrations(u))
         assert float(torch.linalg.norm(u.obj.pose.raw_pose[0, :3] - element[0, :3])) < 0.01, "held still"
         dists.append(float(info["place_dist"][0]))
+        # held from the side its start path leaves the table from, one the goal slot has a usable path from
+        side = int(u.carry_side[0])
+        assert side in (0, 1) and u._start_paths["usable"][u.task_id[0], u.goal_slot[0], side::2].any()
     assert max(dists) > 0.3, "radius 1 starts reach well away from the goal"
     # radius 0: installed, placed at the first step
     u.set_near_goal_starts(1.0, 0.0)
@@ -112,6 +118,7 @@ def test_near_goal_starts_are_valid_held_states(kind):
     u.set_near_goal_starts(0.0, 1.0)
     _, info = env.reset(seed=101)
     assert not bool(u.held[0]) and not bool(u.picked[0]) and not bool(u.near_goal_start[0])
+    assert int(u.carry_side[0]) == -1, "a reset clears the side the last episode's element was grasped from"
     with pytest.raises(ValueError, match="radius must lie in"):
         u.set_near_goal_starts(0.5, 1.5)
     env.close()
@@ -483,3 +490,81 @@ def test_goal_slot_weights_draw_the_weighted_slot_more_and_leave_the_draws_alone
     assert drawn["plain"] == drawn["again"] and set(drawn["plain"]) == {0, 1, 2}
     for e in (only, most, plain, again):
         e.close()
+
+
+def test_carry_keeps_to_vias_makes_cutting_across_the_window_detour_never_pay():
+    """The window opening at y = +0.85, grasped from -pi (the side the policy grasps windows from), is reached along
+    planned vias. Its shortcut, the straight joint line from the -pi lift to the back-off out of the opening (into
+    the wall between the openings), measures nearer the goal than the lift 60% of the way across at the paths'
+    deviation weight: cutting across pays, and the policy carried those windows into the neighbouring opening. With
+    `carry_keeps_to_vias` the same point measures farther than the table end of the path: cutting never pays. Along
+    every via path the carry stays within the path's length left and is 0 at the goal."""
+    from ms_construction.goal_configurations import path_point, start_paths
+
+    paths, w = start_paths(), ELEMENT_KINDS.index("window")
+    assert paths.planned[w, 2, :, 1].all() and paths.planned.sum() == paths.planned[w, 2, :, 1].sum(), \
+        "the shipped vias are the -pi paths of that opening, and only they"
+    for keeps in (False, True):
+        env = make_env("WindowInstallation-v1", control_mode="pd_joint_delta_pos", reward_mode="dense",
+                       carry_along_paths=True, carry_keeps_to_vias=keeps)
+        env.reset(seed=0)
+        u = env.unwrapped
+        u.set_held(True)
+        u.goal_slot[:] = 2
+        u.carry_side[:] = 1
+
+        def distance_at(q: np.ndarray) -> float:
+            u.agent.robot.set_qpos(torch.tensor(q[None], dtype=torch.float32))
+            return float(u.carry_distance()[0])
+
+        for c in range(paths.waypoints.shape[2]):
+            wp = paths.waypoints[w, 2, c, 1].astype(np.float64)
+            table, lift, back_off = wp[4], wp[3], wp[1]
+            cut = distance_at(lift + 0.6 * (back_off - lift))
+            if keeps:
+                assert cut > distance_at(table), (c, cut)
+            else:
+                assert cut < distance_at(lift), (c, cut)
+            length = np.abs(np.diff(wp, axis=0)).sum()
+            fractions = np.linspace(1.0, 0.0, 21)
+            dists = np.array([distance_at(path_point(wp, f)) for f in fractions])
+            assert dists[-1] < 1e-3 and np.all(dists <= fractions * length + 1e-3), (keeps, c, np.round(dists, 2))
+        env.close()
+
+
+def test_carry_keeps_to_vias_measures_along_the_grasp_side_s_paths_and_the_grasp_sets_the_side():
+    """`carry_keeps_to_vias`: a point on that opening's +pi path measures its path's length left when the element
+    was grasped from +pi, and farther when it was grasped from -pi (only the via paths count then); before a grasp
+    (side -1) every usable path counts. A grasp sets the side its turret is on; the env state keeps it."""
+    from ms_construction.goal_configurations import path_point, start_paths
+
+    paths, w = start_paths(), ELEMENT_KINDS.index("window")
+    env = make_env("WindowInstallation-v1", control_mode="pd_joint_delta_pos", reward_mode="dense",
+                   carry_along_paths=True, carry_keeps_to_vias=True)
+    env.reset(seed=0)
+    u = env.unwrapped
+    u.set_held(True)
+    u.goal_slot[:] = 2
+    wp = paths.waypoints[w, 2, 0, 0].astype(np.float64)
+    q = path_point(wp, 0.7)
+    u.agent.robot.set_qpos(torch.tensor(q[None], dtype=torch.float32))
+    measured = {}
+    for side in (-1, 0, 1):
+        u.carry_side[:] = side
+        measured[side] = float(u.carry_distance()[0])
+    left = 0.7 * np.abs(np.diff(wp, axis=0)).sum()
+    assert measured[0] <= left + 1e-3 and measured[-1] <= left + 1e-3
+    assert measured[1] > left + 1.0, measured
+    # the state keeps the side; a grasp sets it from the turret's sign (the table lies at +-pi)
+    state = u.get_state_dict()
+    u.carry_side[:] = -1
+    u.set_state_dict(state)
+    assert int(u.carry_side[0]) == 1
+    for turret, side in ((3.0, 0), (-3.0, 1)):
+        qpos = u.agent.robot.get_qpos().clone()
+        qpos[:, 0] = turret
+        u.agent.robot.set_qpos(qpos)
+        u.gripper.grasp = lambda *args: torch.ones(1, dtype=torch.bool)
+        u._update_grasp()
+        assert int(u.carry_side[0]) == side
+    env.close()

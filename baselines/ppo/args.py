@@ -102,6 +102,10 @@ class RunArgs:
     carry_counts_lag: bool = False
     """the dense rewards' carry distance counts how far the held element trails its place on the plate (the tasks'
     `carry_counts_lag`, `hold_lag`: jammed against a slab or wall while the arm goes on), in training."""
+    carry_keeps_to_vias: bool = False
+    """the carry measured along `carry_along_paths`' paths (and the path offset observed) only along those from the
+    turret side the element was grasped from, each radian off a path through a planned via counting much more (the
+    tasks' `carry_keeps_to_vias`), in training and evaluation: it shapes the observation too."""
     task_weights: Optional[tuple[float, float, float]] = None
     """the general task's sampling weights of ceiling, window and flooring in the training envs (None: uniform;
     `1 2 1`: window installation half the episodes); evaluation always samples uniformly."""

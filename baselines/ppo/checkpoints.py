@@ -183,9 +183,11 @@ def with_path_offset_inputs(ckpt: dict, path) -> dict:
 
 def policy_env_kwargs(args: dict) -> dict:
     """The env kwargs that a checkpoint's policy (its saved `args`) acts in, beside obs_mode="state": its control
-    mode, and the observation's optional entries (install offset, path offset, elapsed time) it was trained with."""
+    mode, the observation's optional entries (install offset, path offset, elapsed time) it was trained with, and
+    the path offset's measure (`carry_keeps_to_vias`)."""
     return dict(control_mode=args["control_mode"],
-                **{k: True for k in ("obs_install_offset", "obs_path_offset", "obs_elapsed_time") if args.get(k)})
+                **{k: True for k in ("obs_install_offset", "obs_path_offset", "obs_elapsed_time", "carry_keeps_to_vias")
+                   if args.get(k)})
 
 
 def load_policy(path, env_id: str) -> tuple[Agent, dict]:

@@ -109,6 +109,7 @@ class ConstructionTaskEnv(BaseEnv):
         reach_toward_path_sides: bool = False,
         reach_start_share: float = 0.0,
         carry_counts_lag: bool = False,
+        carry_keeps_to_vias: bool = False,
         **kwargs,
     ):
         self._tol_init = resolve_tolerances(curriculum_stage, tolerances)
@@ -135,6 +136,7 @@ class ConstructionTaskEnv(BaseEnv):
             raise ValueError(f"reach_start_share must lie in [0, 1], got {reach_start_share}")
         self.reach_start_share = float(reach_start_share)
         self.carry_counts_lag = bool(carry_counts_lag)
+        self.carry_keeps_to_vias = bool(carry_keeps_to_vias)
         self.robot_init_qpos_noise = robot_init_qpos_noise
         self._step_grasp_frame, self._in_step_readout = None, False
         self.near_goal_share, self.near_goal_radius, self.near_goal_max_steps = 0.0, None, None
@@ -244,6 +246,8 @@ class ConstructionTaskEnv(BaseEnv):
         self.first_grasp_now = torch.zeros(n, dtype=torch.bool, device=dev)
         self.near_goal_start = torch.zeros(n, dtype=torch.bool, device=dev)
         self.carry_prev = torch.full((n,), -1.0, **f32)  # the carry distance at the last dense reward; -1: none
+        # the turret side (0: +pi, 1: -pi, as StartPaths) the held element was grasped from; -1: none this episode
+        self.carry_side = torch.full((n,), -1, dtype=torch.long, device=dev)
         self._start_paths = None  # the start-state curriculum's paths, loaded when it is first switched on
         self.tolerances = torch.tensor([[self._tol_init[k] for k in TOLERANCE_KEYS]], **f32).repeat(n, 1)
         self.obj = self.elements[self.TASKS[0]]
@@ -306,6 +310,7 @@ class ConstructionTaskEnv(BaseEnv):
             self.first_grasp_now[env_idx] = False
             self.near_goal_start[env_idx] = False
             self.carry_prev[env_idx] = -1.0
+            self.carry_side[env_idx] = -1
             if self.reach_start_share > 0:
                 self._start_on_the_way(env_idx)
             if self.near_goal_share > 0:
@@ -348,7 +353,8 @@ class ConstructionTaskEnv(BaseEnv):
             paths = start_paths()
             f32 = dict(dtype=torch.float32, device=self.device)
             self._start_paths = dict(waypoints=torch.tensor(paths.waypoints, **f32), free=torch.tensor(paths.free, **f32),
-                                     usable=torch.tensor(paths.usable, device=self.device).flatten(2).float())
+                                     usable=torch.tensor(paths.usable, device=self.device).flatten(2).float(),
+                                     planned=torch.tensor(paths.planned, device=self.device).flatten(2).float())
         return self._start_paths
 
     @staticmethod
@@ -386,6 +392,7 @@ class ConstructionTaskEnv(BaseEnv):
         self.gripper.held[idx] = True
         self.gripper.hold_pose_in_tcp[idx] = hold
         self.picked[idx] = True
+        self.carry_side[idx] = side
         self.near_goal_start[idx] = True
 
     def _pose_arm(self, qpos: torch.Tensor) -> None:
@@ -517,6 +524,9 @@ class ConstructionTaskEnv(BaseEnv):
         grasp_now = self.gripper.grasp(self.obj, self._grasp_in_el, self._el_size, self.task_id, self.tau_pick)
         self.first_grasp_now = grasp_now & ~self.picked
         self.picked |= grasp_now
+        # the staging table lies at turret +-pi: the side a grasp's turret is on is the side its carry leaves from
+        turret = self.agent.robot.get_qpos()[:, 0]
+        self.carry_side = torch.where(grasp_now, (turret <= 0).long(), self.carry_side)
 
     def _step_action(self, action):
         action = super()._step_action(action)
@@ -614,6 +624,12 @@ class ConstructionTaskEnv(BaseEnv):
     """`path_distance` counts each radian off the path this many times: cutting across to the goal (or to a later
     point of the path) costs more than going along the path, whose length from a lift above the table to the goal is
     up to about twice the straight joint move's."""
+    VIA_DEVIATION_WEIGHT = 25.0
+    """with `carry_keeps_to_vias`, each radian off a path through a planned via counts this many times: that detour
+    exists because cutting across runs the element into the site. At PATH_DEVIATION_WEIGHT, a window carried from
+    -pi toward the opening at y = +0.85 and stopped in the neighbouring opening (turret -0.42 rad) measured about
+    6 rad from its goal, nearer than the via itself (8-11 rad) and than any point on the way back out to it
+    (docs/experiments/from_scratch.md); at this weight it measures more than the lift the path starts from."""
 
     def plate_turn(self) -> torch.Tensor:
         """[n] rad; how far the held element is turned on the plate about the plate's axis (the grasp keeps the
@@ -658,7 +674,9 @@ class ConstructionTaskEnv(BaseEnv):
         move to the goal runs the element into the slab, the wall and the barriers beside the staging table (the
         fourth start's carries, docs/experiments/from_scratch.md); this distance falls on the way up and over them
         and into the opening along the plate's axis. No demonstrations: the paths come from IK of the goal and
-        the table."""
+        the table. With `carry_keeps_to_vias`, only along the paths that leave the table from the turret side the
+        element was grasped from (where the slot has any: the turret cannot cross to the other side holding it),
+        each radian off a path through a planned via counting VIA_DEVIATION_WEIGHT times."""
         return self._path_projection()[0]
 
     def _path_projection(self) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
@@ -679,8 +697,13 @@ class ConstructionTaskEnv(BaseEnv):
         ts = torch.stack([t_near, torch.zeros_like(t_near), torch.ones_like(t_near)])  # [3, n, M, P - 1]
         diff = rel[None] - ts[..., None] * seg[None]
         off_path = diff[..., :5].abs().sum(-1) + (torch.remainder(diff[..., 5] + period / 2, period) - period / 2).abs()
-        cost = self.PATH_DEVIATION_WEIGHT * off_path + before + ts * length
         usable = sp["usable"][self.task_id, self.goal_slot] > 0  # [n, M]
+        weight = torch.full_like(usable, self.PATH_DEVIATION_WEIGHT, dtype=off_path.dtype)
+        if self.carry_keeps_to_vias:
+            weight = torch.where(sp["planned"][self.task_id, self.goal_slot] > 0, self.VIA_DEVIATION_WEIGHT, weight)
+            side = torch.arange(usable.shape[1], device=usable.device)[None] % 2 == self.carry_side[:, None]  # [n, M]
+            usable = torch.where((usable & side).any(-1, keepdim=True), usable & side, usable)
+        cost = weight[None, :, :, None] * off_path + before + ts * length
         cost = torch.where(usable[None, :, :, None], cost, torch.full_like(cost, torch.inf))
         total, best = cost.permute(1, 0, 2, 3).reshape(n, -1).min(-1)
         k, m, j = torch.unravel_index(best, cost.permute(1, 0, 2, 3).shape[1:])
@@ -793,6 +816,7 @@ class ConstructionTaskEnv(BaseEnv):
             hold_pose_in_tcp=self.hold_pose_in_tcp.clone(),
             tolerances=self.tolerances.clone(),
             carry_prev=self.carry_prev[:, None].clone(),
+            carry_side=self.carry_side[:, None].clone(),
         )
         return state
 
@@ -811,8 +835,8 @@ class ConstructionTaskEnv(BaseEnv):
         task = state.pop("task", None)
         if task is not None:
             idx = slice(None) if env_idx is None else env_idx
-            for key in ("task_id", "goal_slot", "held", "picked", "hold_pose_in_tcp", "tolerances", "carry_prev"):
-                if key not in task:  # a state saved before the key existed (carry_prev: 2026-11-25)
+            for key in ("task_id", "goal_slot", "held", "picked", "hold_pose_in_tcp", "tolerances", "carry_prev", "carry_side"):
+                if key not in task:  # a state saved before the key existed (carry_prev: 2026-11-25, carry_side: 2026-11-27)
                     continue
                 dest = getattr(self, key)
                 k = dest.shape[1] if dest.ndim == 2 else 1

@@ -66,7 +66,10 @@ its limits allow (the bearing term turns it either way); with `reach_toward_path
 those on the turret side(s) that the goal slot's usable start paths leave the table from, so that the element is
 grasped where a collision-free way to its goal begins. `carry_counts_lag=True` adds to the carry distance
 {ConstructionTaskEnv.LAG_WEIGHT:g} rad per metre that the held element trails its place on the plate (`hold_lag`: stopped by a slab
-or wall while the arm goes on), so that pushing a jammed element on does not pay. All four off by default.
+or wall while the arm goes on), so that pushing a jammed element on does not pay. `carry_keeps_to_vias=True`
+measures the carry (and the path offset observed) only along the paths from the turret side the element was
+grasped from, each radian off a path through a planned via counted {ConstructionTaskEnv.VIA_DEVIATION_WEIGHT:g} times, so that a carry cutting
+across that detour into the wall does not measure nearer its goal than the detour. All five off by default.
 
 **Start states:** `set_near_goal_starts(share, radius)` makes a share of the following resets start with the
 element held on a collision-free joint path out of its goal (reverse curriculum generation; IK, no
