@@ -245,3 +245,20 @@ def test_the_campaign_goes_on_from_a_probe_of_its_recipe_with_its_steps_counted_
     longer = dataclasses.replace(run, args=run.args.replace(total_timesteps=240))
     campaign.run_or_resume(longer)
     assert torch.load(start, weights_only=False)["progress"]["global_step"] == 240
+
+
+def test_the_via_landscape_shows_the_cut_across_paying_only_at_the_old_weight():
+    """experiments/via_landscape.py's path table: for every -pi path of the window opening at y = +0.85, the point that
+    cuts across the detour measures nearer the goal than the lift at the paths' deviation weight, and farther than the
+    table end with `carry_keeps_to_vias`; the goal's back-off is nearer than the via under both."""
+    from experiments import via_landscape
+
+    rows = [line.split("|")[1:-1] for line in via_landscape.path_table().splitlines()[2:]]
+    assert len(rows) == 8
+    for cells in rows:
+        table, lift, via, back_off, cut = map(float, cells[2:])
+        assert back_off < via < lift
+        if cells[1].strip() == "carry_keeps_to_vias":
+            assert cut > table
+        else:
+            assert cut < lift
