@@ -225,7 +225,16 @@ CONTINUATIONS = {
                               _recipe(exp_name="probeAA_keeps_to_vias", checkpoint=STARTS["start_18742k"][0],
                                       near_goal_radius=1.0, eval_freq=1000, carry_keeps_to_vias=True,
                                       goal_slot_weights=(1.0, 1.0, 1.0, 1.0, 1.0, 3.0, 1.0, 1.0, 1.0),
-                                      total_timesteps=1_258_000), "start_18742k"),
+                                      total_timesteps=1_258_000) + " (stopped at 568,000 steps; not adopted)",
+                              "start_18742k"),
+    "probeAB_keeps_to_vias_from_lift": ("AA with the table's segment of the via paths at the paths' own deviation weight "
+                                        "(the via weight from the lift in): AA's policy turned its grasp toward the "
+                                        "path's table end and missed half that opening's windows at the pick",
+                                        _recipe(exp_name="probeAB_keeps_to_vias_from_lift",
+                                                checkpoint=STARTS["start_18742k"][0], near_goal_radius=1.0,
+                                                eval_freq=1000, carry_keeps_to_vias=True,
+                                                goal_slot_weights=(1.0, 1.0, 1.0, 1.0, 1.0, 3.0, 1.0, 1.0, 1.0),
+                                                total_timesteps=1_258_000), "start_18742k"),
 }
 """name: (what it changed, how its policy came to be, the start it went on from: its steps count after that start's);
 each evaluated with `python -m experiments.probes --evaluate <name> --checkpoint <its checkpoint>` (EVAL into

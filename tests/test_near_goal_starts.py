@@ -497,13 +497,15 @@ def test_carry_keeps_to_vias_makes_cutting_across_the_window_detour_never_pay():
     planned vias. Its shortcut, the straight joint line from the -pi lift to the back-off out of the opening (into
     the wall between the openings), measures nearer the goal than the lift 60% of the way across at the paths'
     deviation weight: cutting across pays, and the policy carried those windows into the neighbouring opening. With
-    `carry_keeps_to_vias` the same point measures farther than the table end of the path: cutting never pays. Along
-    every via path the carry stays within the path's length left and is 0 at the goal."""
+    `carry_keeps_to_vias` the same point measures farther than the table end of the path: cutting never pays. Near
+    the table (off the path between its table end and its lift, where a grasp's posture need not match the path's)
+    both measure alike. Along every via path the carry stays within the path's length left and is 0 at the goal."""
     from ms_construction.goal_configurations import path_point, start_paths
 
     paths, w = start_paths(), ELEMENT_KINDS.index("window")
     assert paths.planned[w, 2, :, 1].all() and paths.planned.sum() == paths.planned[w, 2, :, 1].sum(), \
         "the shipped vias are the -pi paths of that opening, and only they"
+    near_table = {}
     for keeps in (False, True):
         env = make_env("WindowInstallation-v1", control_mode="pd_joint_delta_pos", reward_mode="dense",
                        carry_along_paths=True, carry_keeps_to_vias=keeps)
@@ -529,7 +531,10 @@ def test_carry_keeps_to_vias_makes_cutting_across_the_window_detour_never_pay():
             fractions = np.linspace(1.0, 0.0, 21)
             dists = np.array([distance_at(path_point(wp, f)) for f in fractions])
             assert dists[-1] < 1e-3 and np.all(dists <= fractions * length + 1e-3), (keeps, c, np.round(dists, 2))
+            near_table[keeps, c] = distance_at((table + lift) / 2 + np.array([0, 0.2, 0, -0.3, 0.2, 0.4]))
         env.close()
+    for c in range(paths.waypoints.shape[2]):
+        assert near_table[True, c] == pytest.approx(near_table[False, c], abs=1e-4), c
 
 
 def test_carry_keeps_to_vias_measures_along_the_grasp_side_s_paths_and_the_grasp_sets_the_side():

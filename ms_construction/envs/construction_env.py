@@ -625,8 +625,8 @@ class ConstructionTaskEnv(BaseEnv):
     point of the path) costs more than going along the path, whose length from a lift above the table to the goal is
     up to about twice the straight joint move's."""
     VIA_DEVIATION_WEIGHT = 25.0
-    """with `carry_keeps_to_vias`, each radian off a path through a planned via counts this many times: that detour
-    exists because cutting across runs the element into the site. At PATH_DEVIATION_WEIGHT, a window carried from
+    """with `carry_keeps_to_vias`, each radian off a path through a planned via, from the lift above the table in,
+    counts this many times: that detour exists because cutting across runs the element into the site. At PATH_DEVIATION_WEIGHT, a window carried from
     -pi toward the opening at y = +0.85 and stopped in the neighbouring opening (turret -0.42 rad) measured about
     6 rad from its goal, nearer than the via itself (8-11 rad) and than any point on the way back out to it
     (docs/experiments/from_scratch.md); at this weight it measures more than the lift the path starts from."""
@@ -676,7 +676,7 @@ class ConstructionTaskEnv(BaseEnv):
         and into the opening along the plate's axis. No demonstrations: the paths come from IK of the goal and
         the table. With `carry_keeps_to_vias`, only along the paths that leave the table from the turret side the
         element was grasped from (where the slot has any: the turret cannot cross to the other side holding it),
-        each radian off a path through a planned via counting VIA_DEVIATION_WEIGHT times."""
+        each radian off a path through a planned via, from its lift in, counting VIA_DEVIATION_WEIGHT times."""
         return self._path_projection()[0]
 
     def _path_projection(self) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
@@ -698,12 +698,15 @@ class ConstructionTaskEnv(BaseEnv):
         diff = rel[None] - ts[..., None] * seg[None]
         off_path = diff[..., :5].abs().sum(-1) + (torch.remainder(diff[..., 5] + period / 2, period) - period / 2).abs()
         usable = sp["usable"][self.task_id, self.goal_slot] > 0  # [n, M]
-        weight = torch.full_like(usable, self.PATH_DEVIATION_WEIGHT, dtype=off_path.dtype)
+        weight = torch.full_like(length, self.PATH_DEVIATION_WEIGHT)  # [n, M, P - 1]
         if self.carry_keeps_to_vias:
-            weight = torch.where(sp["planned"][self.task_id, self.goal_slot] > 0, self.VIA_DEVIATION_WEIGHT, weight)
+            # from the lift in: the table's segment keeps the lenient weight, where the grasp's posture need not match
+            # the path's and nothing lies across
+            detour = (sp["planned"][self.task_id, self.goal_slot] > 0)[..., None] & (torch.arange(length.shape[-1]) < length.shape[-1] - 1)
+            weight = torch.where(detour, self.VIA_DEVIATION_WEIGHT, weight)
             side = torch.arange(usable.shape[1], device=usable.device)[None] % 2 == self.carry_side[:, None]  # [n, M]
             usable = torch.where((usable & side).any(-1, keepdim=True), usable & side, usable)
-        cost = weight[None, :, :, None] * off_path + before + ts * length
+        cost = weight[None] * off_path + before + ts * length
         cost = torch.where(usable[None, :, :, None], cost, torch.full_like(cost, torch.inf))
         total, best = cost.permute(1, 0, 2, 3).reshape(n, -1).min(-1)
         k, m, j = torch.unravel_index(best, cost.permute(1, 0, 2, 3).shape[1:])

@@ -68,7 +68,7 @@ grasped where a collision-free way to its goal begins. `carry_counts_lag=True` a
 {ConstructionTaskEnv.LAG_WEIGHT:g} rad per metre that the held element trails its place on the plate (`hold_lag`: stopped by a slab
 or wall while the arm goes on), so that pushing a jammed element on does not pay. `carry_keeps_to_vias=True`
 measures the carry (and the path offset observed) only along the paths from the turret side the element was
-grasped from, each radian off a path through a planned via counted {ConstructionTaskEnv.VIA_DEVIATION_WEIGHT:g} times, so that a carry cutting
+grasped from, each radian off a path through a planned via (from its lift in) counted {ConstructionTaskEnv.VIA_DEVIATION_WEIGHT:g} times, so that a carry cutting
 across that detour into the wall does not measure nearer its goal than the detour. All five off by default.
 
 **Start states:** `set_near_goal_starts(share, radius)` makes a share of the following resets start with the
