@@ -15,7 +15,7 @@ assets/checkpoints/scratch_general_agent.pt with its campaign record. The recipe
 | setting | value | why |
 |---|---|---|
 | reward | normalized_dense: the tasks' dense reward / 10 (placing pays 10, a held step at most 4.5) | its carry term is linear in the arm's joint-space distance from the installation configuration (IK of the goal, ms_construction/goal_configurations.py), so it pulls from the pick, the way the turret's limits allow; its progress term pays each step's fall of that distance at once (probe G) |
-| reward options | the carry measured along the start paths (`carry_along_paths`), the reach toward the element half in joint space (`reach_in_joint_space`), since 17,250,000 steps toward the turret side the goal slot's start paths leave from (`reach_toward_path_sides`) | the fourth start's policy carried elements straight into the slab, the wall and the barriers beside the staging table and stopped there, and turned the turret the wrong way to its limit on the way to the table (its `--diagnose`); probe N (both) placed the most of the continuations from its 1,682,000-step checkpoint. The window opening at y = +0.85 is reached along its paths only from the turret's +pi side, and every policy grasped windows from -pi: it placed 0-2 of its 17 test episodes in every evaluation |
+| reward options | the carry measured along the start paths (`carry_along_paths`), the reach toward the element half in joint space (`reach_in_joint_space`), since 17,250,000 steps toward the turret side the goal slot's start paths leave from (`reach_toward_path_sides`); since 18,742,000 steps the carry measured only along the grasp side's paths, each radian off a planned via's path from its lift in counting 25 times (`carry_keeps_to_vias`) | the fourth start's policy carried elements straight into the slab, the wall and the barriers beside the staging table and stopped there, and turned the turret the wrong way to its limit on the way to the table (its `--diagnose`); probe N (both) placed the most of the continuations from its 1,682,000-step checkpoint. The window opening at y = +0.85 is reached along its paths only from the turret's +pi side, and every policy grasped windows from -pi: it placed 0-2 of its 17 test episodes in every evaluation. Once it had a way in from -pi (a planned via), the measure still paid for cutting across that detour into the neighbouring opening, where the policy carried those windows (`python -m experiments.via_landscape`) |
 | success | absorbing: bootstrapped with its reward for ever | the critic never trains on a state after success; its guess let hovering near the goal outvalue placing |
 | start states | 80% of the training episodes (20% from 17,250,000 to 17,540,000 steps) start held on a collision-free joint path out of the goal (`set_near_goal_starts`; IK, and since 17,540,000 steps one planned via for the window opening at y = +0.85 from -pi), each task type's radius widening from 0.1 of the path by 0.1 once 60% of its last 20 such episodes placed; such an episode that has not placed in 80 steps is cut | reverse curriculum generation (Florensa et al. 2017) from resets the env computes by IK: no demonstrations; evaluation always resets as usual. One radius for all three types widened on lucky iterations of the easy type (probe F); with half the episodes and no cut, a failed start wandered for 250 steps and an update held a handful of near-goal episodes (probes I-L) |
 | observation | the tasks' state + the joint move to the installation configuration (`obs_install_offset`); since 18,062,000 steps + the joint move a little ahead along the start path (`obs_path_offset`) | what the carry term measures, from IK of the goal pose: following it places from near-goal starts (a test); without it the policy must learn IK of nine goal slots itself |
@@ -24,7 +24,7 @@ assets/checkpoints/scratch_general_agent.pt with its campaign record. The recipe
 | updates | 2,000 samples (2 envs x 1,000 steps), 8 epochs of 8 minibatches, KL stop 0.1 | more gradient steps per env step: env steps are the cost on a CPU |
 | curiosity | none | the dense reward explores |
 | curriculum | cp4 from the first step | the target is judged at cp4 |
-| task sampling | since 17,676,000 steps windows twice as often as either other task (`task_weights` 1 2 1) | windows are the task below the paper's rate |
+| task sampling | since 17,676,000 steps windows twice as often as either other task (`task_weights` 1 2 1); since 18,742,000 steps the window opening at y = +0.85 three times as often as either other opening (`goal_slot_weights`) | windows are the task below the paper's rate, and that opening holds them back |
 """
 
 from __future__ import annotations
@@ -65,7 +65,8 @@ STARTS = {1_682_000: "fifth start: carry along the start paths, reach in joint s
           17_540_000: "seventh start: the window opening at y = +0.85 reached from -pi along a planned via, 80% near-goal "
                       "starts again (probe W)",
           17_676_000: "windows sampled twice as often (probe X)",
-          18_062_000: "the path offset in the observation (probe Y)"}
+          18_062_000: "path offset in the observation (probe Y)",
+          18_742_000: "carry kept to the planned via's path, its window opening drawn three times as often (probe AB)"}
 """env step: the change the campaign went on with there, of the recipe or of the tasks (the fourth start's steps before
 the first; the experiment page says how each came to be)."""
 
@@ -81,6 +82,7 @@ def scratch_args(num_envs: Optional[int] = None, **overrides) -> ppo.Args:
         near_goal_share=0.8, near_goal_radius=0.1, near_goal_step=0.1, near_goal_promote=0.6, near_goal_window=20,
         near_goal_max_steps=80, obs_install_offset=True, obs_path_offset=True, bounded_mean=True, carry_along_paths=True, reach_in_joint_space=True,
         reach_toward_path_sides=True, task_weights=(1.0, 2.0, 1.0),
+        carry_keeps_to_vias=True, goal_slot_weights=(1.0, 1.0, 1.0, 1.0, 1.0, 3.0, 1.0, 1.0, 1.0),
         eval_freq=25, checkpoint_freq=10, log_dir=str(CAMPAIGN_DIR),
     )
     return args.replace(**overrides)

@@ -234,7 +234,9 @@ CONTINUATIONS = {
                                                 checkpoint=STARTS["start_18742k"][0], near_goal_radius=1.0,
                                                 eval_freq=1000, carry_keeps_to_vias=True,
                                                 goal_slot_weights=(1.0, 1.0, 1.0, 1.0, 1.0, 3.0, 1.0, 1.0, 1.0),
-                                                total_timesteps=1_258_000), "start_18742k"),
+                                                total_timesteps=1_258_000)
+                                        + " (adopted: the campaign's last 1,258,000 steps, to its 20,000,000 budget)",
+                                        "start_18742k"),
 }
 """name: (what it changed, how its policy came to be, the start it went on from: its steps count after that start's);
 each evaluated with `python -m experiments.probes --evaluate <name> --checkpoint <its checkpoint>` (EVAL into

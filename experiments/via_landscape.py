@@ -142,7 +142,8 @@ def main(args: Args) -> None:
     if not Path(ckpt).is_file():
         raise SystemExit(f"--checkpoint {ckpt}: no such file")
     step = load_checkpoint(ckpt)["progress"]["global_step"]
-    command = "python -m experiments.via_landscape" + (f" --checkpoint {args.checkpoint}" if args.checkpoint else "")
+    command = ("python -m experiments.via_landscape" + (f" --checkpoint {args.checkpoint}" if args.checkpoint else "")
+               + (f" --episodes {args.episodes}" if args.episodes != Args.episodes else ""))
     body = (f"Command: `{command}` (IK and the planned via alone; then the policy at {ckpt} "
             f"(its run's {step:,} env steps), its mean, from ordinary resets, seeds {SEED:,} on).\n\n"
             + path_table() + "\n\n" + policy_table(Path(ckpt), args.episodes))
