@@ -492,6 +492,25 @@ def test_goal_slot_weights_draw_the_weighted_slot_more_and_leave_the_draws_alone
         e.close()
 
 
+def _held_window_for_the_via_opening(keeps: bool, side: int = -1):
+    """A WindowInstallation-v1 env holding its window for the opening at y = +0.85 (goal slot 2), the carry measured
+    along the start paths (`carry_keeps_to_vias=keeps`), grasped from `side`; and the carry distance at a joint
+    configuration."""
+    env = make_env("WindowInstallation-v1", control_mode="pd_joint_delta_pos", reward_mode="dense",
+                   carry_along_paths=True, carry_keeps_to_vias=keeps)
+    env.reset(seed=0)
+    u = env.unwrapped
+    u.set_held(True)
+    u.goal_slot[:] = 2
+    u.carry_side[:] = side
+
+    def distance_at(q: np.ndarray) -> float:
+        u.agent.robot.set_qpos(torch.tensor(q[None], dtype=torch.float32))
+        return float(u.carry_distance()[0])
+
+    return env, u, distance_at
+
+
 def test_carry_keeps_to_vias_makes_cutting_across_the_window_detour_never_pay():
     """The window opening at y = +0.85, grasped from -pi (the side the policy grasps windows from), is reached along
     planned vias. Its shortcut, the straight joint line from the -pi lift to the back-off out of the opening (into
@@ -507,18 +526,7 @@ def test_carry_keeps_to_vias_makes_cutting_across_the_window_detour_never_pay():
         "the shipped vias are the -pi paths of that opening, and only they"
     near_table = {}
     for keeps in (False, True):
-        env = make_env("WindowInstallation-v1", control_mode="pd_joint_delta_pos", reward_mode="dense",
-                       carry_along_paths=True, carry_keeps_to_vias=keeps)
-        env.reset(seed=0)
-        u = env.unwrapped
-        u.set_held(True)
-        u.goal_slot[:] = 2
-        u.carry_side[:] = 1
-
-        def distance_at(q: np.ndarray) -> float:
-            u.agent.robot.set_qpos(torch.tensor(q[None], dtype=torch.float32))
-            return float(u.carry_distance()[0])
-
+        env, _, distance_at = _held_window_for_the_via_opening(keeps, side=1)
         for c in range(paths.waypoints.shape[2]):
             wp = paths.waypoints[w, 2, c, 1].astype(np.float64)
             table, lift, back_off = wp[4], wp[3], wp[1]
@@ -544,19 +552,12 @@ def test_carry_keeps_to_vias_measures_along_the_grasp_side_s_paths_and_the_grasp
     from ms_construction.goal_configurations import path_point, start_paths
 
     paths, w = start_paths(), ELEMENT_KINDS.index("window")
-    env = make_env("WindowInstallation-v1", control_mode="pd_joint_delta_pos", reward_mode="dense",
-                   carry_along_paths=True, carry_keeps_to_vias=True)
-    env.reset(seed=0)
-    u = env.unwrapped
-    u.set_held(True)
-    u.goal_slot[:] = 2
+    env, u, distance_at = _held_window_for_the_via_opening(True)
     wp = paths.waypoints[w, 2, 0, 0].astype(np.float64)
-    q = path_point(wp, 0.7)
-    u.agent.robot.set_qpos(torch.tensor(q[None], dtype=torch.float32))
     measured = {}
     for side in (-1, 0, 1):
         u.carry_side[:] = side
-        measured[side] = float(u.carry_distance()[0])
+        measured[side] = distance_at(path_point(wp, 0.7))
     left = 0.7 * np.abs(np.diff(wp, axis=0)).sum()
     assert measured[0] <= left + 1e-3 and measured[-1] <= left + 1e-3
     assert measured[1] > left + 1.0, measured

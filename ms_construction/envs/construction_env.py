@@ -626,10 +626,10 @@ class ConstructionTaskEnv(BaseEnv):
     up to about twice the straight joint move's."""
     VIA_DEVIATION_WEIGHT = 25.0
     """with `carry_keeps_to_vias`, each radian off a path through a planned via, from the lift above the table in,
-    counts this many times: that detour exists because cutting across runs the element into the site. At PATH_DEVIATION_WEIGHT, a window carried from
-    -pi toward the opening at y = +0.85 and stopped in the neighbouring opening (turret -0.42 rad) measured about
-    6 rad from its goal, nearer than the via itself (8-11 rad) and than any point on the way back out to it
-    (docs/experiments/from_scratch.md); at this weight it measures more than the lift the path starts from."""
+    counts this many times: that detour exists because cutting across runs the element into the site. At
+    PATH_DEVIATION_WEIGHT a window for the opening at y = +0.85 carried from -pi into the neighbouring opening
+    measured about as near its goal as the via, and the cut across nearer than the lift; at this weight both measure
+    farther than the path's table end (`python -m experiments.via_landscape`, docs/experiments/from_scratch.md)."""
 
     def plate_turn(self) -> torch.Tensor:
         """[n] rad; how far the held element is turned on the plate about the plate's axis (the grasp keeps the
@@ -702,7 +702,8 @@ class ConstructionTaskEnv(BaseEnv):
         if self.carry_keeps_to_vias:
             # from the lift in: the table's segment keeps the lenient weight, where the grasp's posture need not match
             # the path's and nothing lies across
-            detour = (sp["planned"][self.task_id, self.goal_slot] > 0)[..., None] & (torch.arange(length.shape[-1]) < length.shape[-1] - 1)
+            not_table = torch.arange(length.shape[-1], device=length.device) < length.shape[-1] - 1  # [P - 1]
+            detour = (sp["planned"][self.task_id, self.goal_slot] > 0)[..., None] & not_table
             weight = torch.where(detour, self.VIA_DEVIATION_WEIGHT, weight)
             side = torch.arange(usable.shape[1], device=usable.device)[None] % 2 == self.carry_side[:, None]  # [n, M]
             usable = torch.where((usable & side).any(-1, keepdim=True), usable & side, usable)
