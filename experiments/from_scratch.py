@@ -71,6 +71,26 @@ STARTS = {1_682_000: "fifth start: carry along the start paths, reach in joint s
 the first; the experiment page says how each came to be)."""
 
 
+RECIPE_BEFORE = {1_682_000: dict(carry_along_paths=False, reach_in_joint_space=False),
+                 17_250_000: dict(reach_toward_path_sides=False, near_goal_share=0.8),
+                 17_540_000: dict(near_goal_share=0.2),
+                 17_676_000: dict(task_weights=None),
+                 18_062_000: dict(obs_path_offset=False),
+                 18_742_000: dict(carry_keeps_to_vias=False, goal_slot_weights=None)}
+"""env step of STARTS: the recipe's settings as they were before the change the campaign went on with there (the
+fourth start's recipe before the first)."""
+
+
+def recipe_before(step: int) -> dict:
+    """The settings that turn the recipe now into the one the campaign ran just before env step `step` (what a probe
+    from a checkpoint at `step` went on from): every change at `step` or later undone, the earliest last."""
+    undo = {}
+    for at in sorted(RECIPE_BEFORE, reverse=True):
+        if at >= step:
+            undo.update(RECIPE_BEFORE[at])
+    return undo
+
+
 def scratch_args(num_envs: Optional[int] = None, **overrides) -> ppo.Args:
     """ppo.Args of the from-scratch recipe (see the module docstring); `overrides` replace any field afterwards."""
     num_envs = num_envs or os.cpu_count() or 1

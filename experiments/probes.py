@@ -30,20 +30,16 @@ COMMON = ("python baselines/ppo/ppo.py --env-id Flooring-v1 --curiosity none --c
           "--log-dir runs/probes --eval-freq 5")
 
 
-def _recipe(**overrides) -> str:
-    """The ppo.py command of the from-scratch recipe (experiments/from_scratch.py, 2 envs) with `overrides`, as a probe
-    (each probe names the recipe's settings it ran without, so that its command stays its own as the recipe moves on)."""
+def _recipe(at: int, **overrides) -> str:
+    """The ppo.py command of the from-scratch recipe (experiments/from_scratch.py, 2 envs) as the campaign ran it just
+    before env step `at` (where the probe went on from; 0: before the campaign's fifth start), with `overrides`: the
+    probe's own change, so that its command stays what it ran as the recipe moves on."""
     from baselines.ppo.args import command_line
-    from experiments.from_scratch import scratch_args
+    from experiments.from_scratch import recipe_before, scratch_args
 
-    args = scratch_args(2, **{"log_dir": "runs/probes", "eval_freq": 50, "total_timesteps": 600_000, **overrides})
+    args = scratch_args(2, **{"log_dir": "runs/probes", "eval_freq": 50, "total_timesteps": 600_000,
+                              **recipe_before(at), **overrides})
     return "python baselines/ppo/ppo.py " + shlex.join(command_line(args))
-
-
-def _fifth_recipe(**overrides) -> str:
-    """`_recipe` as the campaign's fifth start ran it (to 17,250,000 env steps): 80% of the episodes from near-goal
-    starts, the reach toward either turret side."""
-    return _recipe(**{"near_goal_share": 0.8, "reach_toward_path_sides": False, **overrides})
 
 
 PROBES = {
@@ -74,19 +70,19 @@ PROBES = {
                                 "git checkout 9115d4e && python -m experiments.from_scratch (stopped at 514,000 steps)"),
     "probeI_general_install_offset": ("the campaign's recipe (H, placing paying 10) + the joint move to the "
                                       "installation configuration in the observation (`--obs-install-offset`)",
-                                      _fifth_recipe(obs_install_offset=True, near_goal_share=0.5, near_goal_max_steps=None, bounded_mean=False,
+                                      _recipe(0, obs_install_offset=True, near_goal_share=0.5, near_goal_max_steps=None, bounded_mean=False,
                                               exp_name="probeI_general_install_offset", carry_along_paths=False, reach_in_joint_space=False)
                                       + " (stopped at 190,000 steps)"),
     "probeJ_offset_ng_limit80": ("I + near-goal episodes cut at 80 steps (`--near-goal-max-steps 80`)",
-                                 _fifth_recipe(obs_install_offset=True, near_goal_share=0.5, near_goal_max_steps=80, bounded_mean=False,
+                                 _recipe(0, obs_install_offset=True, near_goal_share=0.5, near_goal_max_steps=80, bounded_mean=False,
                                          exp_name="probeJ_offset_ng_limit80", carry_along_paths=False, reach_in_joint_space=False)
                                  + " (stopped at 48,000 steps, to start K)"),
     "probeK_offset_limit80_tanh": ("J + the policy's mean bounded by tanh (`--bounded-mean`)",
-                                   _fifth_recipe(obs_install_offset=True, near_goal_share=0.5, near_goal_max_steps=80, bounded_mean=True,
+                                   _recipe(0, obs_install_offset=True, near_goal_share=0.5, near_goal_max_steps=80, bounded_mean=True,
                                            exp_name="probeK_offset_limit80_tanh", carry_along_paths=False, reach_in_joint_space=False) + " (stopped at 174,000 steps)"),
     "probeL_share08": ("K + 80% of the episodes from near-goal starts (`--near-goal-share 0.8`): the recipe of the "
                        "campaign's fourth start, which went on from this probe's checkpoint",
-                       _fifth_recipe(exp_name="probeL_share08", carry_along_paths=False, reach_in_joint_space=False) + " (then the campaign: python -m experiments.from_scratch)"),
+                       _recipe(0, exp_name="probeL_share08", carry_along_paths=False, reach_in_joint_space=False) + " (then the campaign: python -m experiments.from_scratch)"),
 }
 """name: (what it changed, its arguments beyond COMMON or its whole command), in the order they ran."""
 
@@ -126,17 +122,17 @@ CONTINUATIONS = {
     "control_campaign": ("the campaign run on (the recipe unchanged, its optimizer and start radii kept)",
                          "python -m experiments.from_scratch (resumed at 1,682,000 steps, stopped at 2,022,000)", None),
     "probeM_paths": ("the dense reward's carry measured along the start paths (`--carry-along-paths`)",
-                     _fifth_recipe(exp_name="probeM_paths", checkpoint=STARTS["start_1682k"][0], near_goal_radius=0.8,
+                     _recipe(1_682_000, exp_name="probeM_paths", checkpoint=STARTS["start_1682k"][0], near_goal_radius=0.8,
                              eval_freq=1000, carry_along_paths=True, reach_in_joint_space=False)
                      + " (stopped at 330,000 steps)", "start_1682k"),
     "probeN_paths_joint_reach": ("M + the reach toward the element in joint space (`--reach-in-joint-space`)",
-                                 _fifth_recipe(exp_name="probeN_paths_joint_reach", checkpoint=STARTS["start_1682k"][0],
+                                 _recipe(1_682_000, exp_name="probeN_paths_joint_reach", checkpoint=STARTS["start_1682k"][0],
                                          near_goal_radius=0.8, eval_freq=1000, carry_along_paths=True,
                                          reach_in_joint_space=True) + " (stopped at 344,000 steps)", "start_1682k"),
     "start_4092k": (*_start("start_4092k"), None),
     "probeO_share05_weights": ("half the episodes from near-goal starts instead of 80% (`--near-goal-share 0.5`) and "
                                "ceiling panels and windows sampled twice as often as floor panels (`--task-weights 2 2 1`)",
-                               _fifth_recipe(exp_name="probeO_share05_weights", checkpoint=STARTS["start_4092k"][0],
+                               _recipe(4_092_000, exp_name="probeO_share05_weights", checkpoint=STARTS["start_4092k"][0],
                                        near_goal_radius=1.0, eval_freq=1000, near_goal_share=0.5,
                                        task_weights=(2.0, 2.0, 1.0)) + " (ran its 600,000 steps)", "start_4092k"),
     "start_6782k": (*_start("start_6782k"), None),
@@ -144,11 +140,11 @@ CONTINUATIONS = {
                            "python -m experiments.from_scratch (resumed at 6,782,000 steps, stopped at 7,168,000)", None),
     "probeP_lag": ("the carry distance counts how far the held element trails its place on the plate, jammed against a slab "
                    "or wall (`--carry-counts-lag`)",
-                   _fifth_recipe(exp_name="probeP_lag", checkpoint=STARTS["start_6782k"][0], near_goal_radius=1.0,
+                   _recipe(6_782_000, exp_name="probeP_lag", checkpoint=STARTS["start_6782k"][0], near_goal_radius=1.0,
                            eval_freq=1000, carry_counts_lag=True, total_timesteps=400_000) + " (ran its 400,000 steps)", "start_6782k"),
     "probeQ_path_offset": ("the observation gains the joint move to a point a little ahead along the start path "
                            "(`--obs-path-offset`; zero weights on it at the start)",
-                           _fifth_recipe(exp_name="probeQ_path_offset", checkpoint=STARTS["start_6782k"][0], near_goal_radius=1.0,
+                           _recipe(6_782_000, exp_name="probeQ_path_offset", checkpoint=STARTS["start_6782k"][0], near_goal_radius=1.0,
                                    eval_freq=1000, obs_path_offset=True, total_timesteps=400_000), "start_6782k"),
     "start_10558k": (*_start("start_10558k"), None),
     "control_from_10558k": ("the campaign run on (the recipe unchanged)",
@@ -156,7 +152,7 @@ CONTINUATIONS = {
                             "--total-timesteps 11058000 --curriculum cp4 (the campaign resumed at 10,558,000 steps)", None),
     "probeR_path_offset": ("Q again, from the later start with the hold reset (`--obs-path-offset`; zero weights on it "
                            "at the start)",
-                           _fifth_recipe(exp_name="probeR_path_offset", checkpoint=STARTS["start_10558k"][0], near_goal_radius=1.0,
+                           _recipe(10_558_000, exp_name="probeR_path_offset", checkpoint=STARTS["start_10558k"][0], near_goal_radius=1.0,
                                    eval_freq=1000, obs_path_offset=True, total_timesteps=500_000), "start_10558k"),
     "start_12948k": (*_start("start_12948k"), None),
     "control_from_12948k": ("the campaign run on (the recipe unchanged)",
@@ -164,11 +160,11 @@ CONTINUATIONS = {
                             "--total-timesteps 13448000 --curriculum cp4 (the campaign resumed at 12,948,000 steps)", None),
     "probeS_share02": ("a fifth of the episodes from near-goal starts instead of 80% (`--near-goal-share 0.2`): every "
                        "radius is 1 and those starts all place, so most episodes trained what the policy already does",
-                       _fifth_recipe(exp_name="probeS_share02", checkpoint=STARTS["start_12948k"][0], near_goal_radius=1.0,
+                       _recipe(12_948_000, exp_name="probeS_share02", checkpoint=STARTS["start_12948k"][0], near_goal_radius=1.0,
                                eval_freq=1000, near_goal_share=0.2, total_timesteps=500_000), "start_12948k"),
     "probeT_share02_failure_weights": ("S + task types sampled by their recent failures (`--failure-task-weights 100`: "
                                        "0.1 + the failure rate of each one's last 100 ordinary episodes)",
-                                       _fifth_recipe(exp_name="probeT_share02_failure_weights",
+                                       _recipe(12_948_000, exp_name="probeT_share02_failure_weights",
                                                checkpoint=STARTS["start_12948k"][0], near_goal_radius=1.0, eval_freq=1000,
                                                near_goal_share=0.2, failure_task_weights=100, total_timesteps=500_000),
                                        "start_12948k"),
@@ -178,26 +174,26 @@ CONTINUATIONS = {
                                   "policy before grasped from -pi and placed 0-2 of its 17 test episodes) + S's fifth "
                                   "of the episodes from near-goal starts; no control run: the recipe run on placed 0-2 "
                                   "there in every evaluation since 1,682,000 steps",
-                                  _recipe(exp_name="probeU_path_sides_share02", checkpoint=STARTS["start_17250k"][0],
+                                  _recipe(17_250_000, exp_name="probeU_path_sides_share02", checkpoint=STARTS["start_17250k"][0],
                                           near_goal_radius=1.0, eval_freq=1000, near_goal_share=0.2,
                                           reach_toward_path_sides=True, total_timesteps=250_000), "start_17250k"),
     "probeV_reach_starts05": ("U's recipe (the campaign's sixth start, which went on from U) + half the episodes start "
                               "with the arm part of the way to the table from the goal slot's side (`--reach-start-share "
                               "0.5`): U's shaping alone did not turn the policy's reach, which went to -pi for every window",
-                              _recipe(exp_name="probeV_reach_starts05", checkpoint=STARTS["start_17500k"][0],
+                              _recipe(17_500_000, exp_name="probeV_reach_starts05", checkpoint=STARTS["start_17500k"][0],
                                       near_goal_radius=1.0, eval_freq=1000, reach_start_share=0.5,
                                       total_timesteps=250_000) + " (stopped at 110,000 steps)", "start_17500k"),
     "start_17540k": (*_start("start_17540k"), None),
     "probeW_vias_share08": ("the start paths gain the planned via of the window opening at y = +0.85 from -pi (a code "
                             "and asset change: assets/start_path_vias.json), and 80% of the episodes from near-goal "
                             "starts again; the campaign's seventh start went on from it",
-                            _recipe(exp_name="probeW_vias_share08", checkpoint=STARTS["start_17540k"][0],
+                            _recipe(17_540_000, exp_name="probeW_vias_share08", checkpoint=STARTS["start_17540k"][0],
                                     near_goal_radius=1.0, eval_freq=1000, near_goal_share=0.8, total_timesteps=250_000)
                             + " (stopped at 136,000 steps)", "start_17540k"),
     "start_17676k": (*_start("start_17676k"), None),
     "probeX_window_weights": ("W's recipe (the seventh start) with windows sampled twice as often as either other task "
                               "(`--task-weights 1 2 1`): windows are the task below the paper's rate",
-                              _recipe(exp_name="probeX_window_weights", checkpoint=STARTS["start_17676k"][0],
+                              _recipe(17_676_000, exp_name="probeX_window_weights", checkpoint=STARTS["start_17676k"][0],
                                       near_goal_radius=1.0, eval_freq=1000, task_weights=(1.0, 2.0, 1.0),
                                       total_timesteps=1_500_000) + " (stopped at 386,000 steps)", "start_17676k"),
     "start_18062k": (*_start("start_18062k"), None),
@@ -205,14 +201,14 @@ CONTINUATIONS = {
                            "start path in the observation (`--obs-path-offset`, zero weights on it at the start): X's "
                            "policy still carried that opening's windows to the neighbouring one, where the straight "
                            "move to the installation leads, away from the via",
-                           _recipe(exp_name="probeY_path_offset", checkpoint=STARTS["start_18062k"][0],
+                           _recipe(18_062_000, exp_name="probeY_path_offset", checkpoint=STARTS["start_18062k"][0],
                                    near_goal_radius=1.0, eval_freq=1000, obs_path_offset=True,
                                    total_timesteps=1_500_000) + " (stopped at 680,000 steps)", "start_18062k"),
     "start_18742k": (*_start("start_18742k"), None),
     "probeZ_slot_weights": ("Y's recipe (the ninth start) with the window opening at y = +0.85 drawn four times as often "
                             "as either other opening (`--goal-slot-weights 1 1 1 1 1 4 1 1 1`): the via path's near-goal "
                             "starts were 4% of the episodes",
-                            _recipe(exp_name="probeZ_slot_weights", checkpoint=STARTS["start_18742k"][0],
+                            _recipe(18_742_000, exp_name="probeZ_slot_weights", checkpoint=STARTS["start_18742k"][0],
                                     near_goal_radius=1.0, eval_freq=1000,
                                     goal_slot_weights=(1.0, 1.0, 1.0, 1.0, 1.0, 4.0, 1.0, 1.0, 1.0),
                                     total_timesteps=1_000_000) + " (stopped at 242,000 steps; not adopted)",
@@ -222,7 +218,7 @@ CONTINUATIONS = {
                               "grasped from, each radian off a planned via's path counting 25 times) and that opening "
                               "drawn three times as often (`--goal-slot-weights 1 1 1 1 1 3 1 1 1`): at the old "
                               "weight a window stopped in the neighbouring opening measured nearer its goal than the via",
-                              _recipe(exp_name="probeAA_keeps_to_vias", checkpoint=STARTS["start_18742k"][0],
+                              _recipe(18_742_000, exp_name="probeAA_keeps_to_vias", checkpoint=STARTS["start_18742k"][0],
                                       near_goal_radius=1.0, eval_freq=1000, carry_keeps_to_vias=True,
                                       goal_slot_weights=(1.0, 1.0, 1.0, 1.0, 1.0, 3.0, 1.0, 1.0, 1.0),
                                       total_timesteps=1_258_000) + " (stopped at 568,000 steps; not adopted)",
@@ -230,15 +226,51 @@ CONTINUATIONS = {
     "probeAB_keeps_to_vias_from_lift": ("AA with the table's segment of the via paths at the paths' own deviation weight "
                                         "(the via weight from the lift in): AA's policy turned its grasp toward the "
                                         "path's table end and missed half that opening's windows at the pick",
-                                        _recipe(exp_name="probeAB_keeps_to_vias_from_lift",
+                                        _recipe(18_742_000, exp_name="probeAB_keeps_to_vias_from_lift",
                                                 checkpoint=STARTS["start_18742k"][0], near_goal_radius=1.0,
                                                 eval_freq=1000, carry_keeps_to_vias=True,
                                                 goal_slot_weights=(1.0, 1.0, 1.0, 1.0, 1.0, 3.0, 1.0, 1.0, 1.0),
                                                 total_timesteps=1_258_000)
                                         + " (adopted: the campaign's last 1,258,000 steps, to its 20,000,000 budget)",
                                         "start_18742k"),
+    "probeAC_reach_avoids_vias": ("AB with the reach toward the turret side of the direct paths only (`--reach-avoids-vias`: "
+                                  "since the planned via (the seventh start) the reach paid for grasping windows for the "
+                                  "opening at y = +0.85 from -pi as much as from +pi, from where the policy places them on "
+                                  "near-goal starts) and half the other episodes starting on the way to the table on that "
+                                  "side (`--reach-start-share 0.5`: U and V, which had that reach, saw a few dozen such "
+                                  "episodes of that opening)",
+                                  _recipe(18_742_000, exp_name="probeAC_reach_avoids_vias", checkpoint=STARTS["start_18742k"][0],
+                                          carry_keeps_to_vias=True, goal_slot_weights=(1.0, 1.0, 1.0, 1.0, 1.0, 3.0, 1.0, 1.0, 1.0),
+                                          near_goal_radius=1.0, eval_freq=1000, reach_avoids_vias=True,
+                                          reach_start_share=0.5, total_timesteps=1_258_000)
+                                  + " (stopped at 404,000 steps; not adopted)",
+                                  "start_18742k"),
+    "probeAD_unsaturated_mean": ("AC with the bounded mean kept off tanh's flat ends (`--mean-saturation-coef 0.01`): "
+                                 "AC's policy turned those windows to -pi from reach starts at +1.5 to +2.3 rad, its "
+                                 "turret mean's value before tanh at -7 to -12, where tanh's slope is 1e-8 and no "
+                                 "reward moves it",
+                                 _recipe(18_742_000, exp_name="probeAD_unsaturated_mean", checkpoint=STARTS["start_18742k"][0],
+                                         carry_keeps_to_vias=True, goal_slot_weights=(1.0, 1.0, 1.0, 1.0, 1.0, 3.0, 1.0, 1.0, 1.0),
+                                         near_goal_radius=1.0, eval_freq=1000, reach_avoids_vias=True,
+                                         reach_start_share=0.5, mean_saturation_coef=0.01, total_timesteps=1_258_000)
+                                 + " (stopped at 788,000 steps; not adopted)",
+                                 "start_18742k"),
+    "probeAE_reach_starts_to_lift": ("AD went on with the reach starts anywhere up to the lift right above the element "
+                                     "(`--reach-starts-to-lift`), every episode that is not a near-goal start one "
+                                     "(`--reach-start-share 1`): AD turned back from most of the way to +pi; from "
+                                     "right above the element, a grasp at +pi is a few steps away",
+                                     _recipe(18_742_000, exp_name="probeAE_reach_starts_to_lift",
+                                             checkpoint="runs/probes/probeAD_unsaturated_mean/checkpoint.pt",
+                                             carry_keeps_to_vias=True,
+                                             goal_slot_weights=(1.0, 1.0, 1.0, 1.0, 1.0, 3.0, 1.0, 1.0, 1.0),
+                                             near_goal_radius=1.0, eval_freq=1000, reach_avoids_vias=True,
+                                             reach_start_share=1.0, reach_starts_to_lift=True, mean_saturation_coef=0.01,
+                                             total_timesteps=470_000)
+                                     + " (stopped at 318,000 steps; not adopted)",
+                                     "probeAD_unsaturated_mean"),
 }
-"""name: (what it changed, how its policy came to be, the start it went on from: its steps count after that start's);
+"""name: (what it changed, how its policy came to be, the start it went on from, or the probe whose end it went on from:
+its steps count after that one's);
 each evaluated with `python -m experiments.probes --evaluate <name> --checkpoint <its checkpoint>` (EVAL into
 PROBE_DIR/<name>_eval.json; a start's and a control's checkpoints as their commands say, the probes' their
 runs/probes/<name>/checkpoint.pt). The campaign run on from each start is that round's control."""
@@ -304,8 +336,10 @@ def evaluate_continuation(name: str, checkpoint: Path) -> None:
     result = json.loads(out.read_text())
     result["global_step"] = int(load_checkpoint(checkpoint)["progress"]["global_step"])
     start = CONTINUATIONS[name][2]
-    if start is not None:  # a probe counts from 0 again: after its start's steps
+    if start in STARTS:  # a probe counts from 0 again: after its start's steps
         result["global_step"] += int(load_checkpoint(Path(STARTS[start][0]))["progress"]["global_step"])
+    elif start is not None:  # a probe that went on from another's end: after that one's, as its evaluation counted them
+        result["global_step"] += json.loads((PROBE_DIR / f"{start}_eval.json").read_text())["global_step"]
     out.write_text(json.dumps(result, indent=1))
 
 

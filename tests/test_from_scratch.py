@@ -166,6 +166,32 @@ def test_the_continuation_table_compares_each_probe_s_evaluation_with_the_contro
     assert "--carry-along-paths" in table and "python -m experiments.probes --evaluate probeM_paths" in table
 
 
+def test_each_probe_s_command_is_the_recipe_its_start_ran_with_its_own_change_and_the_adopted_one_is_the_recipe():
+    """A probe's documented command is the recipe as the campaign ran it before the probe's start (RECIPE_BEFORE
+    undoes each later change: a probe of the fifth start shows none of the flags the recipe gained since) with the
+    probe's change; the continuation the campaign went on from last ran the recipe as it is now (what `adopt`
+    demands), and each change of RECIPE_BEFORE is at a start of STARTS."""
+    from experiments import probes
+
+    def ran(name: str) -> dict:
+        command = probes.CONTINUATIONS[name][1].split(" (")[0]
+        return tyro.cli(ppo.Args, args=command.split()[2:]).flat()
+
+    assert set(fs.RECIPE_BEFORE) <= set(fs.STARTS)
+    assert fs.recipe_before(fs.BUDGET) == {}
+    now = fs.scratch_args(2).flat()
+    for step, before in fs.RECIPE_BEFORE.items():
+        assert all(now[k] != v or k == "near_goal_share" for k, v in before.items()), (step, before)
+    fifth = ran("probeP_lag")
+    assert fifth["carry_along_paths"] and not fifth["obs_path_offset"] and not fifth["carry_keeps_to_vias"]
+    assert fifth["task_weights"] is None and fifth["goal_slot_weights"] is None and fifth["carry_counts_lag"]
+    sixth = ran("probeV_reach_starts05")
+    assert sixth["near_goal_share"] == 0.2 and sixth["reach_toward_path_sides"] and sixth["reach_start_share"] == 0.5
+    adopted = [name for name, (_, how, _start) in probes.CONTINUATIONS.items() if "(adopted" in how][-1]
+    differ = {k for k, v in ran(adopted).items() if v != now[k]}
+    assert differ <= set(fs.ADOPT_MAY_DIFFER) | {"checkpoint", "num_eval_envs"}, (adopted, differ)
+
+
 def test_the_campaign_keeps_snapshots_and_ships_the_one_that_validates_best(tmp_path, monkeypatch):
     """`train` runs in parts, a snapshot at the end of each; it then screens the snapshots on validation, validates
     the best of them again on fresh episodes, and ships the one that places most there on its worst task, with a

@@ -8,7 +8,8 @@ site's poses alone (ms_construction/goal_configurations.py).
   and a shortcut straight from the lift to the goal pays less than the path.
 - With `reach_in_joint_space` the reach toward the element is measured in joint space to the configurations that
   grasp it on the staging table: it falls on the way there and they grasp. With `reach_toward_path_sides` as well,
-  only the configurations on the turret sides usable start paths of the goal slot leave from count.
+  only the configurations on the turret sides usable start paths of the goal slot leave from count; with
+  `reach_avoids_vias`, only those of the paths without a planned via, where there are such.
 - Reach starts (`reach_start_share`) pose the arm on the way to the table from the side the goal slot's paths leave
   from, the element untouched.
 - With `carry_counts_lag` the carry distance also counts how far a jammed element trails its plate.
@@ -249,17 +250,58 @@ def test_the_reach_toward_path_sides_pays_for_the_turret_side_the_goal_slot_s_st
     assert one_sided[0] > 0 and one_sided[1] > 0, "slots reached from one side only, of each side"
 
 
-def test_reach_starts_pose_the_arm_on_the_way_to_the_turret_side_of_the_goal_slot_s_paths_and_leave_the_element():
+def test_reach_avoids_vias_pays_only_for_the_side_of_the_direct_paths_of_a_slot_also_reached_through_a_via():
+    """The window opening at y = +0.85 is reached directly from the turret's +pi side and, through a planned via, from
+    -pi: `reach_toward_path_sides` counts both, `reach_avoids_vias` only +pi (the reach distance 0 there and the full
+    joint move away at -pi, so the dense reward pays more at +pi). Slots without a via keep their sides. It needs
+    `reach_toward_path_sides`."""
+    from ms_construction.goal_configurations import start_paths
+
+    with pytest.raises(ValueError, match="reach_toward_path_sides"):
+        make_env("WindowInstallation-v1", reach_in_joint_space=True, reach_avoids_vias=True)
+    paths, k = start_paths(), ELEMENT_KINDS.index("window")
+    via_slots = [slot for slot in range(3) if paths.planned[k, slot].any()]
+    assert via_slots, "a window slot is reached through a planned via"
+    options = dict(control_mode="pd_joint_delta_pos", reward_mode="dense", reach_in_joint_space=True,
+                   reach_toward_path_sides=True)
+    avoiding, both = make_env("WindowInstallation-v1", reach_avoids_vias=True, **options), make_env("WindowInstallation-v1", **options)
+    table = lift_configurations(0.0)[k]  # [side: +pi, -pi, 6]
+    apart = float(np.abs(table[0, :5] - table[1, :5]).sum())
+    for slot in range(3):
+        direct = [side for side in (0, 1) if (paths.usable[k, slot, :, side] & ~paths.planned[k, slot, :, side]).any()]
+        reach, reward = {}, {}
+        for side in (0, 1):
+            for e in (avoiding, both):
+                e.reset(seed=0)
+                e.unwrapped.goal_slot[:] = slot
+                e.unwrapped.agent.robot.set_qpos(torch.tensor(table[side][None], dtype=torch.float32))
+            u = avoiding.unwrapped
+            reach[side] = float(u.reach_distance()[0])
+            reward[side] = float(u.compute_dense_reward(None, torch.zeros(1, 6), u.evaluate())[0])
+            if slot in via_slots:
+                assert float(both.unwrapped.reach_distance()[0]) < 1e-4, "without the option the via's side counts too"
+            else:
+                assert float(both.unwrapped.reach_distance()[0]) == pytest.approx(reach[side], abs=1e-5), (slot, side)
+        for side in (0, 1):
+            assert reach[side] < 1e-4 if side in direct else reach[side] == pytest.approx(apart, rel=1e-4), (slot, reach)
+        if slot in via_slots:
+            assert direct == [0] and reward[0] > reward[1], (slot, direct, reward)
+    avoiding.close()
+    both.close()
+
+
+@pytest.mark.parametrize("to_lift", [False, True])
+def test_reach_starts_pose_the_arm_on_the_way_to_the_turret_side_of_the_goal_slot_s_paths_and_leave_the_element(to_lift):
     """`reach_start_share=1`: every reset starts with the arm part of the way from its start configuration to a table
     grasp configuration on a side the goal slot's start paths leave from (the ceiling openings beside the wall: +pi;
-    the floor recesses: -pi): the turret turned that way, the reach distance shorter than at rest, the element lying
-    on the table where an ordinary reset puts it, untouched by a still step and not grasped. A share out of [0, 1]
-    is refused."""
+    the floor recesses: -pi), or with `reach_starts_to_lift` up to all the way to the lift above the element: the
+    turret turned that way, the reach distance shorter than at rest, the element lying on the table where an ordinary
+    reset puts it, untouched by a still step and not grasped. A share out of [0, 1] is refused."""
     with pytest.raises(ValueError, match="reach_start_share"):
         make_env("WindowInstallation-v1", reach_start_share=1.5)
     for kind in ("ceiling", "flooring"):
         env = make_env(TASK_ENVS[kind], control_mode="pd_joint_delta_pos", reach_start_share=1.0,
-                       reach_in_joint_space=True, reach_toward_path_sides=True)
+                       reach_starts_to_lift=to_lift, reach_in_joint_space=True, reach_toward_path_sides=True)
         plain = make_env(TASK_ENVS[kind], control_mode="pd_joint_delta_pos", reach_in_joint_space=True,
                          reach_toward_path_sides=True)
         u, p = env.unwrapped, plain.unwrapped

@@ -377,6 +377,34 @@ def test_one_update_on_a_fixed_batch_gives_the_losses_and_weights_of_the_origina
         assert got[key] == pytest.approx(value, rel=1e-5, abs=1e-6), key
 
 
+def test_the_saturation_penalty_brings_a_bounded_mean_pinned_past_tanh_s_flat_end_back_where_ppo_can_move_it():
+    """A bounded mean whose first action's value before tanh is pinned at +10 (tanh's slope 1e-8: the from-scratch
+    policy's turret) stays pinned through a plain update; with `mean_saturation_coef` the update pulls it back toward
+    SATURATION_BOUND, where the slope is 0.07, and reports the penalty. The weight needs --bounded-mean."""
+    batch = fixed_batch()
+    pinned = {}
+    for coef in (0.0, 0.01):
+        torch.manual_seed(0)
+        np.random.seed(0)
+        args = ppo.Args.of(hidden_size=64, num_minibatches=8, update_epochs=4, curiosity="none", target_kl=None,
+                           bounded_mean=True, mean_saturation_coef=coef, learning_rate=0.01)
+        agent = ppo.make_agent(args, 43, 6)
+        agent.obs_rms.update(agent.features(batch["obs"]))
+        with torch.no_grad():
+            agent.actor_mean[-2].bias[0] = 10.0  # the last Linear, before the tanh
+            before = agent.mean_before_tanh(batch["obs"])[:, 0].mean().item()
+        optimizer = update.adam(agent.parameters(), lr=args.ppo.learning_rate, eps=1e-5)
+        losses = update.ppo_update(agent, optimizer, batch, args)
+        with torch.no_grad():
+            pinned[coef] = agent.mean_before_tanh(batch["obs"])[:, 0].mean().item()
+        assert ("mean_saturation" in losses) == (coef > 0)
+    assert before > 9
+    assert pinned[0.0] == pytest.approx(before, abs=0.05), "without the penalty nothing moves a pinned mean"
+    assert pinned[0.01] < before - 0.5, pinned
+    with pytest.raises(SystemExit, match="bounded-mean"):
+        ppo.validate(ppo.Args.of(mean_saturation_coef=0.01))
+
+
 def test_a_checkpoint_of_an_earlier_version_loads_through_the_checkpoint_api(tmp_path):
     """Checkpoints written before baselines/ppo/checkpoints.py saved their args under earlier names and meanings
     (`finite_horizon_gae`, a boolean `norm_adv`, `icm` for the normalized variant before ML-Agents' curiosity with

@@ -99,6 +99,9 @@ class RunArgs:
     reach_toward_path_sides: bool = False
     """with `reach_in_joint_space`, the reach measured only to the table grasp configurations on the turret sides that
     the goal slot's usable start paths leave from (the tasks' `reach_toward_path_sides`), in training."""
+    reach_avoids_vias: bool = False
+    """with `reach_toward_path_sides`, only the turret sides a usable start path without a planned via leaves from,
+    where one does (the tasks' `reach_avoids_vias`), in training."""
     carry_counts_lag: bool = False
     """the dense rewards' carry distance counts how far the held element trails its place on the plate (the tasks'
     `carry_counts_lag`, `hold_lag`: jammed against a slab or wall while the arm goes on), in training."""
@@ -176,6 +179,11 @@ class PPOArgs:
     """squash the policy's mean into the action bounds by tanh: an unbounded mean can drift past them, where
     every draw clips to the same action, the advantages cannot tell draws apart and the mean stays there (the
     from-scratch runs' joints driven to their limits)."""
+    mean_saturation_coef: float = 0.0
+    """with `bounded_mean`, a penalty of this weight on the square of how far each of the mean's values before tanh
+    lies beyond +-SATURATION_BOUND (update.py): where it is far past, tanh's slope is nil and PPO cannot move the mean
+    (the from-scratch policy's turret, pinned at -10 there, turned every window toward the same side of the table
+    whatever the reward said); 0: off."""
 
 
 @dataclass
@@ -285,6 +293,9 @@ class StartStateArgs:
     """this share of the training episodes start with the arm part of the way from its start configuration to a table
     grasp configuration on a turret side the goal slot's start paths leave from, the element lying on the table (the
     tasks' `reach_start_share`: the start-state curriculum's first stretch); evaluation always resets as usual."""
+    reach_starts_to_lift: bool = False
+    """reach starts anywhere on the joint line to the lift above the element, up to right above it (the tasks'
+    `reach_starts_to_lift`), instead of at most REACH_START_MAX of the way to the grasp."""
 
 
 _GROUP = tyro.conf.OmitArgPrefixes  # a group's fields keep their flat flags: --gamma, not --ppo.gamma
@@ -375,6 +386,11 @@ def validate(args: Args) -> None:
                          "(ceiling, window, flooring), not all 0 within a type")
     if args.reach_toward_path_sides and not args.reach_in_joint_space:
         raise SystemExit("--reach-toward-path-sides narrows the joint-space reach: give --reach-in-joint-space too")
+    if args.ppo.mean_saturation_coef < 0 or (args.ppo.mean_saturation_coef > 0 and not args.ppo.bounded_mean):
+        raise SystemExit(f"--mean-saturation-coef {args.ppo.mean_saturation_coef}: a weight >= 0 on the mean's values "
+                         "before tanh, with --bounded-mean")
+    if args.reach_avoids_vias and not args.reach_toward_path_sides:
+        raise SystemExit("--reach-avoids-vias narrows the sides the reach counts: give --reach-toward-path-sides too")
     for name in ("near_goal_share", "near_goal_radius", "near_goal_promote", "reach_start_share"):
         if not 0 <= values[name] <= 1:
             raise SystemExit(f"--{name.replace('_', '-')} must lie in [0, 1], got {values[name]}")

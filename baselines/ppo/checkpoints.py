@@ -239,7 +239,7 @@ CSV_FIELDS = [
     "end_place_angle_deg", "held_at_end", "near_goal_radius", "near_goal_episodes", "near_goal_place_success",
     "ordinary_place_success", "ordinary_place_ceiling", "ordinary_place_window", "ordinary_place_flooring",
     "near_goal_radius_ceiling", "near_goal_radius_window", "near_goal_radius_flooring",
-    "task_weight_ceiling", "task_weight_window", "task_weight_flooring",
+    "task_weight_ceiling", "task_weight_window", "task_weight_flooring", "mean_saturation",
 ]
 """`end_*` and `held_at_end`: where the iteration's training episodes ended (mean place distance in m and
 angle error in degrees to the goal at the last step, share with the element held), what a run that
@@ -247,7 +247,8 @@ places nothing still shows. `near_goal_*`: the start-state curriculum's radius (
 (--near-goal-share);
 `ordinary_place_success`: the place success of the other training episodes, those from ordinary resets, and
 `ordinary_place_<task>` the same per task type; `task_weight_<task>`: the training envs' sampling probability of each
-task type from the next iteration on (--failure-task-weights)."""
+task type from the next iteration on (--failure-task-weights); `mean_saturation`: the penalty of
+--mean-saturation-coef before its weight (the bounded mean's squared excess before tanh, summed over the action)."""
 
 
 class CSVLog:

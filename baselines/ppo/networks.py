@@ -102,6 +102,10 @@ class Agent(nn.Module):
     def get_value(self, x):
         return self.critic(self.normalize(x))
 
+    def mean_before_tanh(self, x):
+        """The bounded mean's values before its tanh (x: observations)."""
+        return self.actor_mean[:-1](self.normalize(x))
+
     def get_action(self, x, deterministic=False):
         """The policy's mean, or a draw from it (the draw `get_action_and_value` makes, without building a
         Normal: its argument checks cost more than the networks at a rollout step's batch of a few envs)."""

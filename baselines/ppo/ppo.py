@@ -73,7 +73,8 @@ def make_envs(args: Args, num_envs: int, device: torch.device, eval_mode: bool =
     physx_cpu (one env each), ManiSkillVectorEnv on physx_cuda. With `video_dir`, evaluation videos."""
     kwargs = dict(obs_mode="state", reward_mode=args.reward_mode, render_mode="rgb_array" if video_dir else None)
     kwargs.update(policy_env_kwargs(args.flat()))
-    for reward_option in ("carry_along_paths", "reach_in_joint_space", "reach_toward_path_sides", "carry_counts_lag"):  # the training envs' dense reward
+    for reward_option in ("carry_along_paths", "reach_in_joint_space", "reach_toward_path_sides", "reach_avoids_vias",
+                          "carry_counts_lag"):  # the training envs' dense reward
         if getattr(args, reward_option) and not eval_mode:
             kwargs[reward_option] = True
     if args.task_weights is not None and not eval_mode:
@@ -83,6 +84,7 @@ def make_envs(args: Args, num_envs: int, device: torch.device, eval_mode: bool =
         kwargs["goal_slot_weights"] = {kind: w[3 * k:3 * k + 3] for k, kind in enumerate(ELEMENT_KINDS)}
     if args.starts.reach_start_share and not eval_mode:
         kwargs["reach_start_share"] = args.starts.reach_start_share
+        kwargs["reach_starts_to_lift"] = args.starts.reach_starts_to_lift
     # near-goal starts are set (and left off in evaluation) by set_near_goal_starts; this applies their time limit
     wrappers = (NearGoalTimeLimit,) if args.starts.near_goal_max_steps is not None and not eval_mode else ()
     if args.sim_backend == "physx_cpu":

@@ -64,6 +64,11 @@ def signal_advantages(args, rewards: torch.Tensor, intrinsic: torch.Tensor, valu
     return advantages.mean(-1), advantages + values
 
 
+SATURATION_BOUND = 2.0
+"""where `mean_saturation_coef`'s penalty begins on the policy mean's values before tanh: tanh(2) = 0.96 of the action
+bound, its slope 0.07 there (1e-8 at 10)."""
+
+
 def ppo_update(agent: Agent, optimizer: optim.Optimizer, batch: dict, args, icm: Optional[ICM] = None,
                icm_optimizer: Optional[optim.Optimizer] = None, demos: Optional[tuple] = None,
                value_only: bool = False) -> dict[str, float]:
@@ -72,7 +77,8 @@ def ppo_update(agent: Agent, optimizer: optim.Optimizer, batch: dict, args, icm:
     value heads] (the value loss is the mean of the heads'). `args.ppo.update_epochs` epochs of
     `args.ppo.num_minibatches` shuffled minibatches (numpy's RNG), stopping after an epoch whose last minibatch's approximate KL
     exceeds `args.ppo.target_kl`; ICM learns on the same minibatches. `demos` (obs, actions) add a
-    behaviour-cloning term, `args.warm.residual_l2_coef` a pull of a residual agent's correction towards zero;
+    behaviour-cloning term, `args.warm.residual_l2_coef` a pull of a residual agent's correction towards zero,
+    `args.ppo.mean_saturation_coef` a pull of the bounded mean's values before tanh back within +-SATURATION_BOUND;
     `value_only` trains the critic alone (the warm-up). The mean of each loss."""
     batch_size = len(batch["obs"])
     minibatch_size = batch_size // args.ppo.num_minibatches
@@ -104,6 +110,11 @@ def ppo_update(agent: Agent, optimizer: optim.Optimizer, batch: dict, args, icm:
                 v_loss = 0.5 * ((newvalue - mb_ret) ** 2).mean()
             entropy_loss = entropy.mean()
             loss = pg_loss - args.ppo.ent_coef * entropy_loss + v_loss * args.ppo.vf_coef
+            if args.ppo.mean_saturation_coef > 0:
+                beyond = (agent.mean_before_tanh(obs).abs() - SATURATION_BOUND).clamp(min=0)
+                saturation = beyond.pow(2).sum(-1).mean()
+                loss = loss + args.ppo.mean_saturation_coef * saturation
+                losses["mean_saturation"].append(saturation.detach())
             if demos is not None and args.warm.bc_coef > 0:
                 d = torch.randint(len(demos[0]), (len(mb),), device=mb.device)
                 bc_loss = ((agent.actor_mean(agent.normalize(demos[0][d])) - demos[1][d]) ** 2).mean()

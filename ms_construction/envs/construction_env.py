@@ -107,7 +107,9 @@ class ConstructionTaskEnv(BaseEnv):
         carry_along_paths: bool = False,
         reach_in_joint_space: bool = False,
         reach_toward_path_sides: bool = False,
+        reach_avoids_vias: bool = False,
         reach_start_share: float = 0.0,
+        reach_starts_to_lift: bool = False,
         carry_counts_lag: bool = False,
         carry_keeps_to_vias: bool = False,
         **kwargs,
@@ -132,9 +134,13 @@ class ConstructionTaskEnv(BaseEnv):
         if reach_toward_path_sides and not reach_in_joint_space:
             raise ValueError("reach_toward_path_sides=True narrows the joint-space reach: give reach_in_joint_space=True too")
         self.reach_toward_path_sides = bool(reach_toward_path_sides)
+        if reach_avoids_vias and not reach_toward_path_sides:
+            raise ValueError("reach_avoids_vias=True narrows the sides the reach counts: give reach_toward_path_sides=True too")
+        self.reach_avoids_vias = bool(reach_avoids_vias)
         if not 0 <= reach_start_share <= 1:
             raise ValueError(f"reach_start_share must lie in [0, 1], got {reach_start_share}")
         self.reach_start_share = float(reach_start_share)
+        self.reach_starts_to_lift = bool(reach_starts_to_lift)
         self.carry_counts_lag = bool(carry_counts_lag)
         self.carry_keeps_to_vias = bool(carry_keeps_to_vias)
         self.robot_init_qpos_noise = robot_init_qpos_noise
@@ -257,6 +263,7 @@ class ConstructionTaskEnv(BaseEnv):
         # first needed) and joint 6's period per kind
         self._install_q: Optional[torch.Tensor] = None
         self._table_q: Optional[torch.Tensor] = None
+        self._lift_q: Optional[torch.Tensor] = None
         self._sym_period = torch.tensor([symmetry_period(k) for k in kinds], **f32)
 
     def _build_goal_marker(self, kind: str, manifest: dict) -> Actor:
@@ -414,17 +421,23 @@ class ConstructionTaskEnv(BaseEnv):
         configuration (`reach_distance`'s) on a turret side that a usable start path of the goal slot leaves from, the
         element lying on the table: the start-state curriculum's first stretch, which near-goal starts (the element
         already held) leave out. Without it a policy that grasps every element from one turret side never learns
-        that a goal slot is reached only from the other one (the window opening at y = +0.85)."""
+        that a goal slot is reached only from the other one (the window opening at y = +0.85). With
+        `reach_starts_to_lift`, along the joint line to the lift LIFT_HEIGHT above the element instead, any fraction
+        of the way up to all of it (the arm above the element, about to grasp it): a policy that turns back from
+        most of the way to a side it never grasps from may still grasp from right above the element."""
         chosen = torch.rand(len(env_idx)) < self.reach_start_share
         if not bool(chosen.any()):
             return
         if self._table_q is None:
             self._table_q = torch.tensor(lift_configurations(0.0), dtype=torch.float32, device=self.device)
+        if self._lift_q is None:
+            self._lift_q = torch.tensor(lift_configurations(), dtype=torch.float32, device=self.device)
         idx = env_idx[chosen]
         side = torch.multinomial(self._path_sides(self.task_id[idx], self.goal_slot[idx]).float(), 1)[:, 0]
-        target = self._table_q[self.task_id[idx], side]
+        target = (self._lift_q if self.reach_starts_to_lift else self._table_q)[self.task_id[idx], side]
+        most = 1.0 if self.reach_starts_to_lift else self.REACH_START_MAX
         qpos = self.agent.robot.get_qpos()[env_idx].clone()
-        qpos[chosen] += torch.rand(len(idx), 1) * self.REACH_START_MAX * (target - qpos[chosen])
+        qpos[chosen] += torch.rand(len(idx), 1) * most * (target - qpos[chosen])
         self._pose_arm(qpos)
 
     def _place_goal_markers(self, env_idx: torch.Tensor) -> None:
@@ -741,9 +754,9 @@ class ConstructionTaskEnv(BaseEnv):
         about +pi or -pi). Falls along a joint move to the table the way the turret's limits allow, where the
         bearing around the pedestal turns the turret either way. With `reach_toward_path_sides`, only to those on the
         turret sides that a usable start path of the env's goal slot leaves the table from: an element grasped
-        from the other side has no collision-free way to its goal along them (the window opening at y = +0.85 is
-        reached only from the turret's +pi side, the other two only from -pi), and the carry measured along them
-        pulls it nowhere."""
+        from the other side has no collision-free way to its goal along them (the two window openings at y <= 0 only
+        from -pi), and the carry measured along them pulls it nowhere; `reach_avoids_vias` (`_path_sides`) leaves out
+        the side reached only through a planned via (the opening at y = +0.85 from -pi)."""
         if self._table_q is None:
             self._table_q = torch.tensor(lift_configurations(0.0), dtype=torch.float32, device=self.device)
         q = self.agent.robot.get_qpos()
@@ -754,9 +767,15 @@ class ConstructionTaskEnv(BaseEnv):
 
     def _path_sides(self, task: torch.Tensor, slot: torch.Tensor) -> torch.Tensor:
         """[n, 2] bool: the turret sides (+pi, -pi) a usable start path of each goal slot leaves the table from; both for
-        a slot without usable paths."""
-        usable = self._load_start_paths()["usable"][task, slot]  # [n, configurations x sides]
+        a slot without usable paths. With `reach_avoids_vias`, only the sides a usable path without a planned via
+        leaves from, where there is one: the way in through a via is a detour of the turret's whole turn past the
+        neighbouring openings (the window opening at y = +0.85 from -pi), the direct way from the other side a short one."""
+        sp = self._load_start_paths()
+        usable = sp["usable"][task, slot]  # [n, configurations x sides]
         sides = usable.view(len(task), -1, 2).amax(1) > 0
+        if self.reach_avoids_vias:
+            direct = (usable * (1 - sp["planned"][task, slot])).view(len(task), -1, 2).amax(1) > 0
+            sides = torch.where(direct.any(-1, keepdim=True), direct, sides)
         return sides | ~sides.any(-1, keepdim=True)
 
     def install_offset(self) -> torch.Tensor:

@@ -64,12 +64,14 @@ makes half the reach term joint-space too: 1 - d / {ConstructionTaskEnv.REACH_RA
 configuration that grasps the element on the staging table (`reach_distance`), so that the turret turns the way
 its limits allow (the bearing term turns it either way); with `reach_toward_path_sides=True` as well, only to
 those on the turret side(s) that the goal slot's usable start paths leave the table from, so that the element is
-grasped where a collision-free way to its goal begins. `carry_counts_lag=True` adds to the carry distance
+grasped where a collision-free way to its goal begins; with `reach_avoids_vias=True` too, only to the side(s) of
+the paths without a planned via where a slot has such (the window opening at y = +0.85: +pi, not the via's long
+way round from -pi). `carry_counts_lag=True` adds to the carry distance
 {ConstructionTaskEnv.LAG_WEIGHT:g} rad per metre that the held element trails its place on the plate (`hold_lag`: stopped by a slab
 or wall while the arm goes on), so that pushing a jammed element on does not pay. `carry_keeps_to_vias=True`
 measures the carry (and the path offset observed) only along the paths from the turret side the element was
 grasped from, each radian off a path through a planned via (from its lift in) counted {ConstructionTaskEnv.VIA_DEVIATION_WEIGHT:g} times, so that a carry cutting
-across that detour into the wall does not measure nearer its goal than the detour. All five off by default.
+across that detour into the wall does not measure nearer its goal than the detour. All six off by default.
 
 **Start states:** `set_near_goal_starts(share, radius)` makes a share of the following resets start with the
 element held on a collision-free joint path out of its goal (reverse curriculum generation; IK, no
