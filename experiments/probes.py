@@ -117,6 +117,12 @@ def _start(name: str) -> tuple[str, str]:
         f"git show {commit}:campaign/scratch_general_agent/checkpoint.pt > {path}"
 
 
+VIA_ROUND = dict(checkpoint=STARTS["start_18742k"][0], near_goal_radius=1.0, eval_freq=1000, carry_keeps_to_vias=True,
+                 goal_slot_weights=(1.0, 1.0, 1.0, 1.0, 1.0, 3.0, 1.0, 1.0, 1.0), total_timesteps=1_258_000)
+"""the settings of the probes from the ninth start that carry the window kept to the via path (AA on): the rest of the
+budget, the via opening drawn three times as often."""
+
+
 CONTINUATIONS = {
     "start_1682k": (*_start("start_1682k"), None),
     "control_campaign": ("the campaign run on (the recipe unchanged, its optimizer and start radii kept)",
@@ -218,19 +224,13 @@ CONTINUATIONS = {
                               "grasped from, each radian off a planned via's path counting 25 times) and that opening "
                               "drawn three times as often (`--goal-slot-weights 1 1 1 1 1 3 1 1 1`): at the old "
                               "weight a window stopped in the neighbouring opening measured nearer its goal than the via",
-                              _recipe(18_742_000, exp_name="probeAA_keeps_to_vias", checkpoint=STARTS["start_18742k"][0],
-                                      near_goal_radius=1.0, eval_freq=1000, carry_keeps_to_vias=True,
-                                      goal_slot_weights=(1.0, 1.0, 1.0, 1.0, 1.0, 3.0, 1.0, 1.0, 1.0),
-                                      total_timesteps=1_258_000) + " (stopped at 568,000 steps; not adopted)",
+                              _recipe(18_742_000, exp_name="probeAA_keeps_to_vias", **VIA_ROUND)
+                              + " (stopped at 568,000 steps; not adopted)",
                               "start_18742k"),
     "probeAB_keeps_to_vias_from_lift": ("AA with the table's segment of the via paths at the paths' own deviation weight "
                                         "(the via weight from the lift in): AA's policy turned its grasp toward the "
                                         "path's table end and missed half that opening's windows at the pick",
-                                        _recipe(18_742_000, exp_name="probeAB_keeps_to_vias_from_lift",
-                                                checkpoint=STARTS["start_18742k"][0], near_goal_radius=1.0,
-                                                eval_freq=1000, carry_keeps_to_vias=True,
-                                                goal_slot_weights=(1.0, 1.0, 1.0, 1.0, 1.0, 3.0, 1.0, 1.0, 1.0),
-                                                total_timesteps=1_258_000)
+                                        _recipe(18_742_000, exp_name="probeAB_keeps_to_vias_from_lift", **VIA_ROUND)
                                         + " (adopted: the campaign's last 1,258,000 steps, to its 20,000,000 budget)",
                                         "start_18742k"),
     "probeAC_reach_avoids_vias": ("AB with the reach toward the turret side of the direct paths only (`--reach-avoids-vias`: "
@@ -239,20 +239,16 @@ CONTINUATIONS = {
                                   "near-goal starts) and half the other episodes starting on the way to the table on that "
                                   "side (`--reach-start-share 0.5`: U and V, which had that reach, saw a few dozen such "
                                   "episodes of that opening)",
-                                  _recipe(18_742_000, exp_name="probeAC_reach_avoids_vias", checkpoint=STARTS["start_18742k"][0],
-                                          carry_keeps_to_vias=True, goal_slot_weights=(1.0, 1.0, 1.0, 1.0, 1.0, 3.0, 1.0, 1.0, 1.0),
-                                          near_goal_radius=1.0, eval_freq=1000, reach_avoids_vias=True,
-                                          reach_start_share=0.5, total_timesteps=1_258_000)
+                                  _recipe(18_742_000, exp_name="probeAC_reach_avoids_vias", **VIA_ROUND,
+                                          reach_avoids_vias=True, reach_start_share=0.5)
                                   + " (stopped at 404,000 steps; not adopted)",
                                   "start_18742k"),
     "probeAD_unsaturated_mean": ("AC with the bounded mean kept off tanh's flat ends (`--mean-saturation-coef 0.01`): "
                                  "AC's policy turned those windows to -pi from reach starts at +1.5 to +2.3 rad, its "
                                  "turret mean's value before tanh at -7 to -12, where tanh's slope is 1e-8 and no "
                                  "reward moves it",
-                                 _recipe(18_742_000, exp_name="probeAD_unsaturated_mean", checkpoint=STARTS["start_18742k"][0],
-                                         carry_keeps_to_vias=True, goal_slot_weights=(1.0, 1.0, 1.0, 1.0, 1.0, 3.0, 1.0, 1.0, 1.0),
-                                         near_goal_radius=1.0, eval_freq=1000, reach_avoids_vias=True,
-                                         reach_start_share=0.5, mean_saturation_coef=0.01, total_timesteps=1_258_000)
+                                 _recipe(18_742_000, exp_name="probeAD_unsaturated_mean", **VIA_ROUND,
+                                         reach_avoids_vias=True, reach_start_share=0.5, mean_saturation_coef=0.01)
                                  + " (stopped at 788,000 steps; not adopted)",
                                  "start_18742k"),
     "probeAE_reach_starts_to_lift": ("AD went on with the reach starts anywhere up to the lift right above the element "
@@ -260,12 +256,10 @@ CONTINUATIONS = {
                                      "(`--reach-start-share 1`): AD turned back from most of the way to +pi; from "
                                      "right above the element, a grasp at +pi is a few steps away",
                                      _recipe(18_742_000, exp_name="probeAE_reach_starts_to_lift",
-                                             checkpoint="runs/probes/probeAD_unsaturated_mean/checkpoint.pt",
-                                             carry_keeps_to_vias=True,
-                                             goal_slot_weights=(1.0, 1.0, 1.0, 1.0, 1.0, 3.0, 1.0, 1.0, 1.0),
-                                             near_goal_radius=1.0, eval_freq=1000, reach_avoids_vias=True,
-                                             reach_start_share=1.0, reach_starts_to_lift=True, mean_saturation_coef=0.01,
-                                             total_timesteps=470_000)
+                                             **{**VIA_ROUND, "checkpoint": "runs/probes/probeAD_unsaturated_mean/checkpoint.pt",
+                                                "total_timesteps": 470_000},
+                                             reach_avoids_vias=True, reach_start_share=1.0, reach_starts_to_lift=True,
+                                             mean_saturation_coef=0.01)
                                      + " (stopped at 318,000 steps; not adopted)",
                                      "probeAD_unsaturated_mean"),
 }
