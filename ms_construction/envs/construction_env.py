@@ -420,8 +420,9 @@ class ConstructionTaskEnv(BaseEnv):
         fraction in [0, REACH_START_MAX) of the way along the joint line from its start configuration to a table grasp
         configuration (`reach_distance`'s) on a turret side that a usable start path of the goal slot leaves from, the
         element lying on the table: the start-state curriculum's first stretch, which near-goal starts (the element
-        already held) leave out. Without it a policy that grasps every element from one turret side never learns
-        that a goal slot is reached only from the other one (the window opening at y = +0.85). With
+        already held) leave out, meant for a policy that grasps every element from one turret side where a goal slot
+        is reached from the other one (the window opening at y = +0.85; it did not turn the from-scratch policy's
+        reach there: docs/experiments/from_scratch.md, rounds 6 and 9). With
         `reach_starts_to_lift`, along the joint line to the lift LIFT_HEIGHT above the element instead, any fraction
         of the way up to all of it (the arm above the element, about to grasp it): a policy that turns back from
         most of the way to a side it never grasps from may still grasp from right above the element."""
