@@ -429,14 +429,14 @@ class ConstructionTaskEnv(BaseEnv):
         chosen = torch.rand(len(env_idx)) < self.reach_start_share
         if not bool(chosen.any()):
             return
-        if self._table_q is None:
-            self._table_q = torch.tensor(lift_configurations(0.0), dtype=torch.float32, device=self.device)
-        if self._lift_q is None:
+        if self.reach_starts_to_lift and self._lift_q is None:
             self._lift_q = torch.tensor(lift_configurations(), dtype=torch.float32, device=self.device)
+        elif not self.reach_starts_to_lift and self._table_q is None:
+            self._table_q = torch.tensor(lift_configurations(0.0), dtype=torch.float32, device=self.device)
         idx = env_idx[chosen]
         side = torch.multinomial(self._path_sides(self.task_id[idx], self.goal_slot[idx]).float(), 1)[:, 0]
-        target = (self._lift_q if self.reach_starts_to_lift else self._table_q)[self.task_id[idx], side]
-        most = 1.0 if self.reach_starts_to_lift else self.REACH_START_MAX
+        ends, most = (self._lift_q, 1.0) if self.reach_starts_to_lift else (self._table_q, self.REACH_START_MAX)
+        target = ends[self.task_id[idx], side]
         qpos = self.agent.robot.get_qpos()[env_idx].clone()
         qpos[chosen] += torch.rand(len(idx), 1) * most * (target - qpos[chosen])
         self._pose_arm(qpos)
