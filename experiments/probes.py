@@ -262,6 +262,20 @@ CONTINUATIONS = {
                                              mean_saturation_coef=0.01)
                                      + " (stopped at 318,000 steps; not adopted)",
                                      "probeAD_unsaturated_mean"),
+    "probeAF_grasp_starts": ("AC with the reach starts carried back through the grasp (`--reach-start-radius 0.1`: "
+                             "each goal slot's reach starts on the last tenth of the reach path, down to 0.2 m above "
+                             "the element, widening as they grasp from the side they started on; every window episode "
+                             "that is not a near-goal start one, `--reach-start-tasks window`) and the turret's mean "
+                             "alone kept off tanh's flat ends "
+                             "(`--mean-saturation-coef 0.01 --mean-saturation-joints 0`): from the plate 0.2 m above "
+                             "such a window at +pi the ninth start's policy grasped it there and placed it, and from "
+                             "the lift it turned back, its turret mean pinned at -11; AD, which kept all six means off "
+                             "the flat ends, lost the ceiling panels",
+                             _recipe(18_742_000, exp_name="probeAF_grasp_starts", **VIA_ROUND,
+                                     reach_avoids_vias=True, reach_start_share=1.0, reach_start_radius=0.1,
+                                     reach_start_tasks=("window",), mean_saturation_coef=0.01,
+                                     mean_saturation_joints=(0,)),
+                             "start_18742k"),
 }
 """name: (what it changed, how its policy came to be, the start it went on from, or the probe whose end it went on from:
 its steps count after that one's);

@@ -12,6 +12,9 @@ site's poses alone (ms_construction/goal_configurations.py).
   `reach_avoids_vias`, only those of the paths without a planned via, where there are such.
 - Reach starts (`reach_start_share`) pose the arm on the way to the table from the side the goal slot's paths leave
   from, the element untouched.
+- `set_reach_starts` carries the start-state curriculum back through the grasp: radius 0 starts right above the
+  element on the side of the direct paths, which a still arm grasps at once; wider radii start farther back along
+  the reach path; near-goal starts take the place of reach starts drawn before them.
 - With `carry_counts_lag` the carry distance also counts how far a jammed element trails its plate.
 - With `carry_keeps_to_vias` a carry that cuts across the planned via's detour never pays, and the carry is measured
   along the paths from the turret side the element was grasped from (set by the grasp or the near-goal start,
@@ -328,6 +331,68 @@ def test_reach_starts_pose_the_arm_on_the_way_to_the_turret_side_of_the_goal_slo
         assert checked > 0
         env.close()
         plain.close()
+
+
+def test_set_reach_starts_carries_the_start_curriculum_back_through_the_grasp_on_the_direct_side():
+    """Windows for the opening at y = +0.85 with `reach_avoids_vias`: radius 0 starts with the plate
+    GRASP_START_HEIGHT above the element at turret +pi, the element lying where an ordinary reset puts it; a still
+    step grasps it from that side (`reach_start_grasped`). Radius 1 starts anywhere back along the path to the reset's
+    configuration, on the same side, never farther back than it. A near-goal start drawn after a reach start takes
+    its place (not marked a reach start); bad shares and radii, and `reach_starts_to_lift` beside it, are refused."""
+    kw = dict(control_mode="pd_joint_delta_pos", reach_in_joint_space=True, reach_toward_path_sides=True,
+              reach_avoids_vias=True, goal_slot_weights={"window": (0, 0, 1)})
+    env = make_env("WindowInstallation-v1", **kw)
+    plain = make_env("WindowInstallation-v1", **kw)
+    u, p = env.unwrapped, plain.unwrapped
+    with pytest.raises(ValueError, match="radius"):
+        u.set_reach_starts(1.0, 1.5)
+    with pytest.raises(ValueError, match="radius"):
+        u.set_reach_starts(1.0, (0.1, 0.2))
+    u.set_reach_starts(1.0, (1.0,) * 5 + (0.0,) + (1.0,) * 3)  # per goal slot: this opening's alone at 0
+    with pytest.raises(ValueError, match="share"):
+        u.set_reach_starts(-0.1, 0.5)
+    with pytest.raises(ValueError, match="share"):
+        u.set_reach_starts((1.0, 1.0), 0.5)
+    fixed = make_env("WindowInstallation-v1", reach_starts_to_lift=True, **kw)
+    with pytest.raises(ValueError, match="reach_starts_to_lift"):
+        fixed.unwrapped.set_reach_starts(1.0, 0.5)
+    fixed.close()
+    grasp_start = torch.tensor(lift_configurations(u.GRASP_START_HEIGHT)[ELEMENT_KINDS.index("window"), 0])
+    for seed in range(3):
+        env.reset(seed=seed)
+        plain.reset(seed=seed)
+        assert int(u.goal_slot[0]) == 2
+        q = u.agent.robot.get_qpos()[0]
+        assert torch.allclose(q, grasp_start, atol=1e-4) and float(q[0]) > 3.0, "right above the element at +pi"
+        assert torch.allclose(u.obj.pose.raw_pose[0], p.obj.pose.raw_pose[0], atol=1e-5)
+        _, _, _, _, info = env.step(torch.zeros(1, 6))
+        assert bool(info["reach_start"][0]) and bool(info["is_grasped"][0]) and bool(info["reach_start_grasped"][0])
+    u.set_reach_starts(1.0, (0.0, 1.0, 0.0))  # per task type: windows at 1
+    spread = []
+    for seed in range(6):
+        env.reset(seed=seed)
+        plain.reset(seed=seed)
+        q, rest = u.agent.robot.get_qpos()[0], p.agent.robot.get_qpos()[0]
+        assert float(rest[0]) - 1e-4 <= float(q[0]) <= float(grasp_start[0]) + 1e-4, "on the way round to +pi"
+        spread.append(float(q[0]))
+        _, _, _, _, info = env.step(torch.zeros(1, 6))
+        assert bool(info["reach_start"][0])
+        assert bool(info["reach_start_grasped"][0]) == bool(info["is_grasped"][0])
+    assert max(spread) - min(spread) > 0.5, "wider radii start farther back"
+    u.set_reach_starts((1.0, 0.0, 1.0), 1.0)  # per task type: none for windows
+    env.reset(seed=0)
+    _, _, _, _, info = env.step(torch.zeros(1, 6))
+    assert not bool(info["reach_start"][0])
+    u.set_reach_starts(1.0, 1.0)
+    u.set_near_goal_starts(1.0, 0.5)
+    env.reset(seed=0)
+    _, _, _, _, info = env.step(torch.zeros(1, 6))
+    assert bool(info["near_goal_start"][0]) and not bool(info["reach_start"][0])
+    plain.reset(seed=0)
+    _, _, _, _, info = plain.step(torch.zeros(1, 6))
+    assert not bool(info["reach_start"][0]) and not bool(info["reach_start_grasped"][0]), "ordinary resets untouched"
+    env.close()
+    plain.close()
 
 
 def test_progress_pays_each_step_s_fall_of_the_carry_distance_and_nothing_for_going_back_and_forth():

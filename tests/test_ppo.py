@@ -380,14 +380,16 @@ def test_one_update_on_a_fixed_batch_gives_the_losses_and_weights_of_the_origina
 def test_the_saturation_penalty_brings_a_bounded_mean_pinned_past_tanh_s_flat_end_back_where_ppo_can_move_it():
     """A bounded mean whose first action's value before tanh is pinned at +10 (tanh's slope 1e-8: the from-scratch
     policy's turret) stays pinned through a plain update; with `mean_saturation_coef` the update pulls it back toward
-    SATURATION_BOUND, where the slope is 0.07, and reports the penalty. The weight needs --bounded-mean."""
+    SATURATION_BOUND, where the slope is 0.07, and reports the penalty; `mean_saturation_joints` penalizes only the
+    dimensions named (the turret's, 0, moves; naming another leaves it pinned). The weight needs --bounded-mean, the
+    joints the weight."""
     batch = fixed_batch()
     pinned = {}
-    for coef in (0.0, 0.01):
+    for coef, joints in ((0.0, None), (0.01, None), (0.01, (0,)), (0.01, (1, 2))):
         torch.manual_seed(0)
         np.random.seed(0)
         args = ppo.Args.of(hidden_size=64, num_minibatches=8, update_epochs=4, curiosity="none", target_kl=None,
-                           bounded_mean=True, mean_saturation_coef=coef, learning_rate=0.01)
+                           bounded_mean=True, mean_saturation_coef=coef, mean_saturation_joints=joints, learning_rate=0.01)
         agent = ppo.make_agent(args, 43, 6)
         agent.obs_rms.update(agent.features(batch["obs"]))
         with torch.no_grad():
@@ -396,13 +398,18 @@ def test_the_saturation_penalty_brings_a_bounded_mean_pinned_past_tanh_s_flat_en
         optimizer = update.adam(agent.parameters(), lr=args.ppo.learning_rate, eps=1e-5)
         losses = update.ppo_update(agent, optimizer, batch, args)
         with torch.no_grad():
-            pinned[coef] = agent.mean_before_tanh(batch["obs"])[:, 0].mean().item()
+            pinned[coef, joints] = agent.mean_before_tanh(batch["obs"])[:, 0].mean().item()
         assert ("mean_saturation" in losses) == (coef > 0)
     assert before > 9
-    assert pinned[0.0] == pytest.approx(before, abs=0.05), "without the penalty nothing moves a pinned mean"
-    assert pinned[0.01] < before - 0.5, pinned
+    assert pinned[0.0, None] == pytest.approx(before, abs=0.05), "without the penalty nothing moves a pinned mean"
+    assert pinned[0.01, None] < before - 0.5 and pinned[0.01, (0,)] < before - 0.5, pinned
+    assert pinned[0.01, (1, 2)] == pytest.approx(before, abs=0.05), "a penalty on other joints leaves the turret pinned"
     with pytest.raises(SystemExit, match="bounded-mean"):
         ppo.validate(ppo.Args.of(mean_saturation_coef=0.01))
+    for joints in ((0,), (0, 0), (-1,)):
+        with pytest.raises(SystemExit, match="mean-saturation-joints"):
+            ppo.validate(ppo.Args.of(bounded_mean=True, mean_saturation_coef=0.01 if joints != (0,) else 0.0,
+                                     mean_saturation_joints=joints))
 
 
 def test_a_checkpoint_of_an_earlier_version_loads_through_the_checkpoint_api(tmp_path):
@@ -497,6 +504,61 @@ def test_near_goal_starts_widen_per_task_with_success_and_a_resumed_run_goes_on_
     first = next(c for c in calls if c[0] == "set_near_goal_starts")
     assert first == ("set_near_goal_starts", (1.0, tuple(progress.near_goal_radius), None)), calls
     assert resumed.global_step == 240
+
+
+def test_reach_starts_widen_per_goal_slot_as_they_grasp_from_their_side_and_a_resumed_run_sets_the_radii(tmp_path, monkeypatch):
+    """--reach-start-radius: the iteration's reach-start episodes are counted apart from the ordinary resets (not in
+    `ordinary_place_*`), and a goal slot's reach-start radius widens by --near-goal-step once its last
+    --near-goal-window such episodes grasped from the side they started on often enough (the workers told at once),
+    whatever the other slots of its task type did; --reach-start-tasks gives the share to those task types alone.
+    A run sets the workers' radii from --reach-start-radius, keeps them and their windows in its checkpoint, and a
+    resumed run sets them from there. The flag needs reach starts and refuses the fixed ones' --reach-starts-to-lift."""
+    for bad in (dict(reach_start_radius=1.5, reach_start_share=1.0), dict(reach_start_radius=0.2),
+                dict(reach_start_radius=0.2, reach_start_share=1.0, reach_starts_to_lift=True)):
+        with pytest.raises(SystemExit, match="reach-start-radius"):
+            ppo.validate(Args.of(**bad))
+    for bad in (dict(reach_start_share=1.0, reach_start_tasks=("window",)),
+                dict(reach_start_share=1.0, reach_start_radius=0.1, reach_start_tasks=("windows",))):
+        with pytest.raises(SystemExit, match="reach-start-tasks"):
+            ppo.validate(Args.of(**bad))
+    calls = []
+    original = ppo.call_task
+    monkeypatch.setattr(ppo, "call_task", lambda envs, name, *a: calls.append((name, a)))  # no envs here
+    args = Args.of(env_id="ConstructionPickPlace-v1", reach_start_share=1.0, reach_start_radius=0.1, near_goal_window=4,
+                   near_goal_promote=0.5, near_goal_step=0.1)
+    progress = ppo.Progress(reach_start_radius=[0.1] * 9, reach_start_recent=[[] for _ in range(9)])
+    episodes = {key: [0.0] * 9 for key in ppo.EPISODE_STATS.values()}
+    # windows: slot 0 grasps from its side 3 of 4 times, slot 2 never; a floor panel from an ordinary reset places
+    episodes.update(success=[0.0] * 6 + [1.0, 0.0, 0.0], task_id=[1, 1, 1, 1, 1, 1, 2, 0, 1],
+                    goal_slot=[0, 0, 0, 0, 2, 2, 1, 0, 2], near_goal=[False] * 9,
+                    reach_start=[True] * 6 + [False, True, True], intrinsic_return=[],
+                    reach_start_grasped=[1.0, 1.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0, 0.0])
+    row = ppo.episode_columns(args, progress, episodes, envs=None)
+    assert row["reach_start_episodes"] == 8 and row["reach_start_grasp_success"] == pytest.approx(3 / 8)
+    assert row["ordinary_place_flooring"] == 1.0 and "ordinary_place_window" not in row, "reach starts are not ordinary"
+    widened = [0.1, 0.1, 0.1, 0.2, 0.1, 0.1, 0.1, 0.1, 0.1]
+    assert progress.reach_start_radius == widened, "the slot that never grasps from its side does not widen"
+    assert row["reach_start_radius_window0"] == 0.1, "the row holds the radius its episodes started at"
+    assert progress.reach_start_recent[3] == [] and progress.reach_start_recent[5] == [0.0, 0.0, 0.0]
+    assert calls == [("set_reach_starts", ((1.0, 1.0, 1.0), tuple(widened)))]
+
+    monkeypatch.setattr(ppo, "call_task", lambda envs, name, *a: (calls.append((name, a)), original(envs, name, *a))[1])
+    calls.clear()
+    run = tiny_args(tmp_path, exp_name="reach", reward_mode="normalized_dense", curiosity="none", curriculum=("cp4",),
+                    reach_start_share=1.0, reach_start_radius=0.0, reach_start_tasks=("flooring",), total_timesteps=80)
+    ppo.main(run)
+    assert ("set_reach_starts", ((0.0, 0.0, 1.0), (0.0,) * 9)) in calls, "the share for --reach-start-tasks alone"
+    assert read_csv(tmp_path / "reach" / "progress.csv")[-1]["reach_start_radius_flooring2"] == "0.0"
+    path = tmp_path / "reach" / "checkpoint.pt"
+    ckpt = torch.load(path, weights_only=False)
+    assert ckpt["progress"]["reach_start_radius"] == [0.0] * 9
+    radii, recent = [0.1 * i for i in range(9)], [[1.0]] + [[] for _ in range(8)]
+    ckpt["progress"]["reach_start_radius"], ckpt["progress"]["reach_start_recent"] = radii, recent
+    torch.save(ckpt, path)
+    calls.clear()
+    ppo.main(ppo.Args.of(resume=str(path), extend=True, total_timesteps=120, curriculum=("cp4",)))
+    assert next(a for name, a in calls if name == "set_reach_starts") == ((0.0, 0.0, 1.0), tuple(radii))
+    assert torch.load(path, weights_only=False)["progress"]["reach_start_recent"] == recent
 
 
 def test_failure_task_weights_sample_more_of_what_fails_and_a_resumed_run_sets_them_from_its_checkpoint(tmp_path, monkeypatch):

@@ -18,6 +18,7 @@ import torch
 import tyro
 
 from ms_construction.curriculum import STAGE_NAMES
+from ms_construction.parameters import ELEMENT_KINDS
 from ms_construction.envs import ENV_IDS
 
 ControlMode = Literal["pd_joint_delta_pos", "pd_joint_pos", "pd_joint_target_delta_pos", "pd_ee_delta_pos",
@@ -184,6 +185,10 @@ class PPOArgs:
     lies beyond +-SATURATION_BOUND (update.py): where it is far past, tanh's slope is nil and PPO cannot move the mean
     (the from-scratch policy's turret, pinned at -10 there, turned every window toward the same side of the table
     whatever the reward said); 0: off."""
+    mean_saturation_joints: Optional[tuple[int, ...]] = None
+    """the action dimensions (0-based) `mean_saturation_coef` penalizes; None: all. The turret alone (0) leaves the
+    other joints' means, which a policy drives at full speed on every task, as they are (probe AD, which penalized
+    all six, lost its ceiling panels)."""
 
 
 @dataclass
@@ -296,6 +301,16 @@ class StartStateArgs:
     reach_starts_to_lift: bool = False
     """reach starts anywhere on the joint line to the lift above the element, up to right above it (the tasks'
     `reach_starts_to_lift`), instead of at most REACH_START_MAX of the way to the grasp."""
+    reach_start_radius: Optional[float] = None
+    """reach starts as the start-state curriculum carried back through the grasp (the tasks' `set_reach_starts`):
+    each goal slot's starts on the reach path's last this much of its length (0: right above the element, about to
+    grasp it; 1: anywhere from the reset on), widened by `near_goal_step` once the last `near_goal_window` reach-start
+    episodes of the slot grasped their element from the turret side they started on at least `near_goal_promote` of
+    the time. None: the fixed reach starts above."""
+    reach_start_tasks: Optional[tuple[str, ...]] = None
+    """with `reach_start_radius`, the task types whose resets reach starts draw from (None: all): the others keep
+    their ordinary resets (a task whose policy already grasps from the side its paths leave from learns nothing
+    from them, and its reach from the reset goes untrained)."""
 
 
 _GROUP = tyro.conf.OmitArgPrefixes  # a group's fields keep their flat flags: --gamma, not --ppo.gamma
@@ -389,6 +404,19 @@ def validate(args: Args) -> None:
     if args.ppo.mean_saturation_coef < 0 or (args.ppo.mean_saturation_coef > 0 and not args.ppo.bounded_mean):
         raise SystemExit(f"--mean-saturation-coef {args.ppo.mean_saturation_coef}: a weight >= 0 on the mean's values "
                          "before tanh, with --bounded-mean")
+    joints = args.ppo.mean_saturation_joints
+    if joints is not None and (not joints or min(joints) < 0 or len(set(joints)) != len(joints)
+                               or not args.ppo.mean_saturation_coef):
+        raise SystemExit(f"--mean-saturation-joints {' '.join(map(str, joints or ()))}: distinct action dimensions >= 0 "
+                         "(0: the turret), with --mean-saturation-coef > 0")
+    radius = args.starts.reach_start_radius
+    if radius is not None and (not 0 <= radius <= 1 or not args.starts.reach_start_share or args.starts.reach_starts_to_lift):
+        raise SystemExit(f"--reach-start-radius {radius}: a fraction in [0, 1] of the reach path, with --reach-start-share "
+                         "> 0 and without --reach-starts-to-lift")
+    tasks = args.starts.reach_start_tasks
+    if tasks is not None and (radius is None or not tasks or any(t not in ELEMENT_KINDS for t in tasks)):
+        raise SystemExit(f"--reach-start-tasks {' '.join(tasks)}: task types among {', '.join(ELEMENT_KINDS)}, with "
+                         "--reach-start-radius")
     if args.reach_avoids_vias and not args.reach_toward_path_sides:
         raise SystemExit("--reach-avoids-vias narrows the sides the reach counts: give --reach-toward-path-sides too")
     for name in ("near_goal_share", "near_goal_radius", "near_goal_promote", "reach_start_share"):

@@ -90,6 +90,11 @@ class Progress:
     """per task type, whether each of its latest near-goal episodes placed (the window a widening looks at)."""
     ordinary_recent: Optional[list] = None
     """per task type, whether each of its latest episodes from ordinary resets placed (--failure-task-weights)."""
+    reach_start_radius: Optional[list] = None
+    """the reach starts' radius now per goal slot (task type * 3 + slot; --reach-start-radius); None before they
+    start."""
+    reach_start_recent: Optional[list] = None
+    """per goal slot, whether each of its latest reach-start episodes grasped from the side it started on."""
 
 
 def save_checkpoint(path: Path, args, progress: Progress, agent: Agent, optimizer, icm, icm_optimizer,
@@ -240,15 +245,21 @@ CSV_FIELDS = [
     "ordinary_place_success", "ordinary_place_ceiling", "ordinary_place_window", "ordinary_place_flooring",
     "near_goal_radius_ceiling", "near_goal_radius_window", "near_goal_radius_flooring",
     "task_weight_ceiling", "task_weight_window", "task_weight_flooring", "mean_saturation",
+    "reach_start_episodes", "reach_start_grasp_success",
+    *(f"reach_start_radius_{kind}{slot}" for kind in ("ceiling", "window", "flooring") for slot in range(3)),
 ]
 """`end_*` and `held_at_end`: where the iteration's training episodes ended (mean place distance in m and
 angle error in degrees to the goal at the last step, share with the element held), what a run that
 places nothing still shows. `near_goal_*`: the start-state curriculum's radius (the mean of the task types', and each one's) and its episodes
 (--near-goal-share);
-`ordinary_place_success`: the place success of the other training episodes, those from ordinary resets, and
+`ordinary_place_success`: the place success of the other training episodes, those from ordinary resets (neither
+near-goal nor reach starts; in probes AC to AE the reach starts counted among them), and
 `ordinary_place_<task>` the same per task type; `task_weight_<task>`: the training envs' sampling probability of each
 task type from the next iteration on (--failure-task-weights); `mean_saturation`: the penalty of
---mean-saturation-coef before its weight (the bounded mean's squared excess before tanh, summed over the action)."""
+--mean-saturation-coef before its weight (the bounded mean's squared excess before tanh, summed over the action
+dimensions it penalizes); `reach_start_*`: the reach starts' episodes, the share that grasped from the side they
+started on, and each goal slot's radius (`reach_start_radius_window2`: the window opening at y = +0.85;
+--reach-start-radius)."""
 
 
 class CSVLog:

@@ -122,7 +122,9 @@ def finished_episodes(infos: dict) -> dict:
     return dict(ended=infos["_final_info"], success=fin["episode"]["success_once"], picked=fin["picked"],
                 ep_return=fin["episode"]["return"], ep_length=fin["episode"]["episode_len"],
                 end_place_dist=fin["place_dist"], end_place_angle_deg=fin["place_angle_deg"], held_at_end=fin["is_grasped"],
-                task_id=fin["task_id"], goal_slot=fin["goal_slot"], near_goal_start=fin.get("near_goal_start", torch.zeros_like(fin["task_id"], dtype=torch.bool)))
+                task_id=fin["task_id"], goal_slot=fin["goal_slot"], near_goal_start=fin.get("near_goal_start", torch.zeros_like(fin["task_id"], dtype=torch.bool)),
+                reach_start=fin.get("reach_start", torch.zeros_like(fin["task_id"], dtype=torch.bool)),
+                reach_start_grasped=fin.get("reach_start_grasped", torch.zeros_like(fin["task_id"], dtype=torch.bool)))
 
 
 def run_episodes(agent, envs, num_steps: int, seed: int, deterministic: bool = True) -> list[dict]:

@@ -55,7 +55,7 @@ from baselines.ppo.curiosity import ICM, make_icm
 from baselines.ppo.evaluation import evaluate_envs, finished_episodes, reset
 from baselines.ppo.networks import Agent
 from baselines.ppo.update import adam, ppo_update, signal_advantages
-from baselines.ppo.start_states import StartFromStates, failure_task_weights, widen_near_goal
+from baselines.ppo.start_states import GOAL_SLOTS, StartFromStates, failure_task_weights, widen_near_goal, widen_reach_starts
 from ms_construction.envs.construction_env import NearGoalTimeLimit
 from ms_construction.parameters import ELEMENT_KINDS
 from ms_construction.vector_env import CPUVectorEnv
@@ -320,7 +320,10 @@ def collect(agent: Agent, envs: Envs, buf: Rollout, next_obs: torch.Tensor, args
             for key in EPISODE_STATS.values():
                 episodes[key] += ep[key][ep["ended"]].float().tolist()
             episodes["near_goal"] += ep["near_goal_start"][ep["ended"]].tolist()
+            episodes["reach_start"] += ep["reach_start"][ep["ended"]].tolist()
+            episodes["reach_start_grasped"] += ep["reach_start_grasped"][ep["ended"]].float().tolist()
             episodes["task_id"] += ep["task_id"][ep["ended"]].tolist()
+            episodes["goal_slot"] += ep["goal_slot"][ep["ended"]].tolist()
     return next_obs
 
 
@@ -353,30 +356,48 @@ def update_batch(run: Run, buf: Rollout, next_obs: torch.Tensor, episodes: dict,
 
 def episode_columns(args: Args, progress: Progress, episodes: dict, envs: Envs) -> dict:
     """progress.csv's columns of the iteration's finished episodes: EPISODE_STATS' means, ordinary resets' place
-    success per task type, and the near-goal starts' (whose radii this widens where they placed often enough)."""
+    success per task type, the near-goal starts' and the reach starts' (whose radii this widens where they placed,
+    or grasped from the side they started on, often enough)."""
     row = {}
     if episodes["success"]:
         row.update({column: float(np.mean(episodes[key])) for column, key in EPISODE_STATS.items()})
         if episodes["intrinsic_return"]:
             row["intrinsic_return"] = float(np.mean(episodes["intrinsic_return"]))
-    near = np.asarray(episodes["near_goal"], dtype=bool)
+    near, reach = np.asarray(episodes["near_goal"], dtype=bool), np.asarray(episodes["reach_start"], dtype=bool)
     placed, task = np.asarray(episodes["success"], dtype=float), np.asarray(episodes["task_id"], dtype=int)
+    ordinary = ~near & ~reach
     for k, kind in enumerate(ELEMENT_KINDS):
-        if ((task == k) & ~near).any():
-            row[f"ordinary_place_{kind}"] = float(placed[(task == k) & ~near].mean())
+        if ((task == k) & ordinary).any():
+            row[f"ordinary_place_{kind}"] = float(placed[(task == k) & ordinary].mean())
     if args.failure_task_weights:
-        weights = failure_task_weights(args, progress, task[~near].tolist(), placed[~near].tolist())
+        weights = failure_task_weights(args, progress, task[ordinary].tolist(), placed[ordinary].tolist())
         call_task(envs, "set_task_weights", dict(zip(ELEMENT_KINDS, weights)))
         row.update({f"task_weight_{kind}": w for kind, w in zip(ELEMENT_KINDS, weights)})
     if args.starts.near_goal_share > 0:
         row.update(near_goal_radius=float(np.mean(progress.near_goal_radius)), near_goal_episodes=int(near.sum()),
                    near_goal_place_success=float(placed[near].mean()) if near.any() else float("nan"),
-                   ordinary_place_success=float(placed[~near].mean()) if (~near).any() else float("nan"),
+                   ordinary_place_success=float(placed[ordinary].mean()) if ordinary.any() else float("nan"),
                    **{f"near_goal_radius_{kind}": r for kind, r in zip(ELEMENT_KINDS, progress.near_goal_radius)})
         if widen_near_goal(args, progress, task[near].tolist(), placed[near].tolist()):
             call_task(envs, "set_near_goal_starts", args.starts.near_goal_share, tuple(progress.near_goal_radius),
                       args.starts.near_goal_max_steps)
+    if args.starts.reach_start_radius is not None:
+        grasped = np.asarray(episodes["reach_start_grasped"], dtype=float)
+        slot = task * GOAL_SLOTS + np.asarray(episodes["goal_slot"], dtype=int)
+        row.update(reach_start_episodes=int(reach.sum()),
+                   reach_start_grasp_success=float(grasped[reach].mean()) if reach.any() else float("nan"),
+                   **{f"reach_start_radius_{kind}{s}": progress.reach_start_radius[k * GOAL_SLOTS + s]
+                      for k, kind in enumerate(ELEMENT_KINDS) for s in range(GOAL_SLOTS)})
+        if widen_reach_starts(args, progress, slot[reach].tolist(), grasped[reach].tolist()):
+            call_task(envs, "set_reach_starts", reach_start_shares(args), tuple(progress.reach_start_radius))
     return row
+
+
+def reach_start_shares(args: Args) -> tuple[float, ...]:
+    """The reach starts' share per task type (ELEMENT_KINDS order): --reach-start-share for --reach-start-tasks, 0 for
+    the rest."""
+    tasks = args.starts.reach_start_tasks
+    return tuple(args.starts.reach_start_share if tasks is None or kind in tasks else 0.0 for kind in ELEMENT_KINDS)
 
 
 def promote(run: Run, envs: Envs) -> str:
@@ -416,6 +437,11 @@ def train(run: Run) -> Progress:
             progress.near_goal_recent = [[] for _ in ELEMENT_KINDS]
         call_task(envs, "set_near_goal_starts", args.starts.near_goal_share, tuple(progress.near_goal_radius),
                   args.starts.near_goal_max_steps)
+    if args.starts.reach_start_radius is not None:
+        if progress.reach_start_radius is None:
+            progress.reach_start_radius = [args.starts.reach_start_radius] * (len(ELEMENT_KINDS) * GOAL_SLOTS)
+            progress.reach_start_recent = [[] for _ in progress.reach_start_radius]
+        call_task(envs, "set_reach_starts", reach_start_shares(args), tuple(progress.reach_start_radius))
     if args.failure_task_weights:  # where the run left them (uniform at its start)
         call_task(envs, "set_task_weights", dict(zip(ELEMENT_KINDS, failure_task_weights(args, progress, [], []))))
 

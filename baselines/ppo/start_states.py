@@ -138,15 +138,30 @@ def widen_near_goal(args: PPOArgs, progress: Progress, task_ids: list[int], plac
     """Record the near-goal episodes that ended (their task types and whether they placed) and widen each task
     type's radius whose last --near-goal-window episodes placed often enough (--near-goal-promote); whether any
     radius widened. The windows are part of the progress: a resumed run goes on with them."""
-    widened = set()  # the rest of this iteration's episodes of a widened type started at the old radius
-    for k, ok in zip(task_ids, placed):
+    return _widen(args, progress.near_goal_radius, progress.near_goal_recent, task_ids, placed)
+
+
+GOAL_SLOTS = 3
+"""goal slots per task type (the tasks' goal tables): the reach starts widen per slot."""
+
+
+def widen_reach_starts(args: PPOArgs, progress: Progress, slots: list[int], grasped: list[float]) -> bool:
+    """The same rule for the reach starts' radii (--reach-start-radius), one per goal slot (`slots`: task type *
+    GOAL_SLOTS + goal slot), on whether each reach-start episode grasped its element from the turret side it started
+    on: a slot reached from the side the policy does not grasp from widens on its own grasps alone."""
+    return _widen(args, progress.reach_start_radius, progress.reach_start_recent, slots, grasped)
+
+
+def _widen(args: PPOArgs, radius: list, recent: list, keys: list[int], ok: list[float]) -> bool:
+    widened = set()  # the rest of this iteration's episodes of a widened key started at the old radius
+    for k, good in zip(keys, ok):
         if k in widened:
             continue
-        window = progress.near_goal_recent[k]
-        window.append(float(ok))
+        window = recent[k]
+        window.append(float(good))
         del window[:-args.starts.near_goal_window]
-        if len(window) == args.starts.near_goal_window and np.mean(window) >= args.starts.near_goal_promote and progress.near_goal_radius[k] < 1:
-            progress.near_goal_radius[k] = round(min(1.0, progress.near_goal_radius[k] + args.starts.near_goal_step), 6)
+        if len(window) == args.starts.near_goal_window and np.mean(window) >= args.starts.near_goal_promote and radius[k] < 1:
+            radius[k] = round(min(1.0, radius[k] + args.starts.near_goal_step), 6)
             window.clear()
             widened.add(k)
     return bool(widened)

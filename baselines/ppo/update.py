@@ -112,6 +112,8 @@ def ppo_update(agent: Agent, optimizer: optim.Optimizer, batch: dict, args, icm:
             loss = pg_loss - args.ppo.ent_coef * entropy_loss + v_loss * args.ppo.vf_coef
             if args.ppo.mean_saturation_coef > 0:
                 beyond = (agent.mean_before_tanh(obs).abs() - SATURATION_BOUND).clamp(min=0)
+                if args.ppo.mean_saturation_joints is not None:
+                    beyond = beyond[:, list(args.ppo.mean_saturation_joints)]
                 saturation = beyond.pow(2).sum(-1).mean()
                 loss = loss + args.ppo.mean_saturation_coef * saturation
                 losses["mean_saturation"].append(saturation.detach())

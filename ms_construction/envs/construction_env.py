@@ -139,13 +139,14 @@ class ConstructionTaskEnv(BaseEnv):
         self.reach_avoids_vias = bool(reach_avoids_vias)
         if not 0 <= reach_start_share <= 1:
             raise ValueError(f"reach_start_share must lie in [0, 1], got {reach_start_share}")
-        self.reach_start_share = float(reach_start_share)
+        self.reach_start_share = torch.tensor(float(reach_start_share)).expand(len(ELEMENT_KINDS))  # per task type
         self.reach_starts_to_lift = bool(reach_starts_to_lift)
         self.carry_counts_lag = bool(carry_counts_lag)
         self.carry_keeps_to_vias = bool(carry_keeps_to_vias)
         self.robot_init_qpos_noise = robot_init_qpos_noise
         self._step_grasp_frame, self._in_step_readout = None, False
         self.near_goal_share, self.near_goal_radius, self.near_goal_max_steps = 0.0, None, None
+        self.reach_start_radius: Optional[torch.Tensor] = None  # set_reach_starts: [kinds, slots]; None: the kwargs' way
         kwargs.setdefault("render_backend", default_render_backend())
         super().__init__(*args, robot_uids=robot_uids, **kwargs)
 
@@ -251,6 +252,7 @@ class ConstructionTaskEnv(BaseEnv):
         self.picked = torch.zeros(n, dtype=torch.bool, device=dev)
         self.first_grasp_now = torch.zeros(n, dtype=torch.bool, device=dev)
         self.near_goal_start = torch.zeros(n, dtype=torch.bool, device=dev)
+        self.reach_start_side = torch.full((n,), -1, dtype=torch.long, device=dev)  # a reach start's turret side; -1: none
         self.carry_prev = torch.full((n,), -1.0, **f32)  # the carry distance at the last dense reward; -1: none
         # the turret side (0: +pi, 1: -pi, as StartPaths) the held element was grasped from; -1: none this episode
         self.carry_side = torch.full((n,), -1, dtype=torch.long, device=dev)
@@ -264,6 +266,7 @@ class ConstructionTaskEnv(BaseEnv):
         self._install_q: Optional[torch.Tensor] = None
         self._table_q: Optional[torch.Tensor] = None
         self._lift_q: Optional[torch.Tensor] = None
+        self._grasp_start_q: Optional[torch.Tensor] = None
         self._sym_period = torch.tensor([symmetry_period(k) for k in kinds], **f32)
 
     def _build_goal_marker(self, kind: str, manifest: dict) -> Actor:
@@ -316,9 +319,10 @@ class ConstructionTaskEnv(BaseEnv):
             self.picked[env_idx] = False
             self.first_grasp_now[env_idx] = False
             self.near_goal_start[env_idx] = False
+            self.reach_start_side[env_idx] = -1
             self.carry_prev[env_idx] = -1.0
             self.carry_side[env_idx] = -1
-            if self.reach_start_share > 0:
+            if bool((self.reach_start_share > 0).any()):
                 self._start_on_the_way(env_idx)
             if self.near_goal_share > 0:
                 self._start_near_goal(env_idx)
@@ -401,6 +405,7 @@ class ConstructionTaskEnv(BaseEnv):
         self.picked[idx] = True
         self.carry_side[idx] = side
         self.near_goal_start[idx] = True
+        self.reach_start_side[idx] = -1  # a near-goal start takes the place of a reach start drawn before it
 
     def _pose_arm(self, qpos: torch.Tensor) -> None:
         """Set the arm of the envs being reset to `qpos`, its links posed at once (on the GPU they follow the new
@@ -414,6 +419,41 @@ class ConstructionTaskEnv(BaseEnv):
     REACH_START_MAX = 0.75
     """a reach start poses the arm at most this fraction of the way to the table: the last stretch of the joint line
     passes the plate through the element lying there."""
+    GRASP_START_HEIGHT = 0.2
+    """m; with `set_reach_starts`, the reach path ends with the plate this far above the element's grasp face, inside
+    every stage's tau_pick (0.3-0.4 m): an arm left there grasps at its first step."""
+
+    def set_reach_starts(self, share: float, radius: Union[float, Sequence[float]]) -> None:
+        """From the next reset on, a `share` (one for all task types, or one per type in ELEMENT_KINDS order) of the
+        resets that are not near-goal starts start on the reach path's
+        last `radius` of its length (one for all goal slots, one per task type in ELEMENT_KINDS order, or one per goal
+        slot, those of each type in turn: a slot reached from the turret side the policy does not grasp from widens
+        on its own, not on the other slots' grasps), the element
+        lying on the table: the path runs on the joint line from the reset's configuration to the lift LIFT_HEIGHT
+        above the element, on a turret side the goal slot's start paths leave from (`_path_sides`), then down to
+        GRASP_START_HEIGHT above it. The start-state curriculum carried back through the grasp (reverse curriculum
+        generation): radius 0 starts about to grasp, 1 anywhere from the reset on; everything from IK of the table
+        (`lift_configurations`), no demonstrations. `info["reach_start"]` marks those episodes and
+        `info["reach_start_grasped"]` whether the element was grasped from the side the start was on. A training
+        device: evaluations use ordinary resets (share 0, the default)."""
+        kinds, slots = len(ELEMENT_KINDS), self._goal_table.shape[1]
+        radii = [float(radius)] if np.isscalar(radius) else [float(r) for r in radius]
+        if len(radii) not in (1, kinds, kinds * slots):
+            raise ValueError(f"reach starts: give one radius, {kinds} ({', '.join(ELEMENT_KINDS)}) or {kinds * slots} "
+                             f"(one per goal slot), got {radius}")
+        shares = [float(share)] * kinds if np.isscalar(share) else [float(s) for s in share]
+        if len(shares) != kinds:
+            raise ValueError(f"reach starts: give one share or {kinds} ({', '.join(ELEMENT_KINDS)}), got {share}")
+        for name, value in [("share", s) for s in shares] + [("radius", r) for r in radii]:
+            if not 0 <= value <= 1:
+                raise ValueError(f"reach starts: {name} must lie in [0, 1], got {value}")
+        if self.reach_starts_to_lift:
+            raise ValueError("reach starts: set_reach_starts draws along the path down to the element; "
+                             "reach_starts_to_lift=True is the kwargs' fixed way, give one or the other")
+        self.reach_start_share = torch.tensor(shares)
+        per_slot = torch.tensor(radii, dtype=torch.float32, device=self.device)
+        self.reach_start_radius = per_slot.view(-1, 1).expand(kinds, slots) if len(radii) < kinds * slots \
+            else per_slot.view(kinds, slots)
 
     def _start_on_the_way(self, env_idx: torch.Tensor) -> None:
         """A `reach_start_share` of the resets (before near-goal starts draw theirs) start with the arm a uniform
@@ -425,21 +465,33 @@ class ConstructionTaskEnv(BaseEnv):
         reach there: docs/experiments/from_scratch.md, rounds 6 and 9). With
         `reach_starts_to_lift`, along the joint line to the lift LIFT_HEIGHT above the element instead, any fraction
         of the way up to all of it (the arm above the element, about to grasp it): a policy that turns back from
-        most of the way to a side it never grasps from may still grasp from right above the element."""
-        chosen = torch.rand(len(env_idx)) < self.reach_start_share
+        most of the way to a side it never grasps from may still grasp from right above the element. After
+        `set_reach_starts`, on the last part of the path down to the element instead (its docstring)."""
+        chosen = torch.rand(len(env_idx)) < self.reach_start_share.to(self.device)[self.task_id[env_idx]]
         if not bool(chosen.any()):
             return
-        if self.reach_starts_to_lift and self._lift_q is None:
-            self._lift_q = torch.tensor(lift_configurations(), dtype=torch.float32, device=self.device)
-        elif not self.reach_starts_to_lift and self._table_q is None:
-            self._table_q = torch.tensor(lift_configurations(0.0), dtype=torch.float32, device=self.device)
         idx = env_idx[chosen]
         side = torch.multinomial(self._path_sides(self.task_id[idx], self.goal_slot[idx]).float(), 1)[:, 0]
-        ends, most = (self._lift_q, 1.0) if self.reach_starts_to_lift else (self._table_q, self.REACH_START_MAX)
-        target = ends[self.task_id[idx], side]
         qpos = self.agent.robot.get_qpos()[env_idx].clone()
-        qpos[chosen] += torch.rand(len(idx), 1) * most * (target - qpos[chosen])
+        if self.reach_start_radius is not None:
+            if self._grasp_start_q is None:
+                self._lift_q = torch.tensor(lift_configurations(), dtype=torch.float32, device=self.device)
+                self._grasp_start_q = torch.tensor(lift_configurations(self.GRASP_START_HEIGHT), dtype=torch.float32,
+                                                   device=self.device)
+            task = self.task_id[idx]
+            back = torch.stack([self._grasp_start_q[task, side], self._lift_q[task, side], qpos[chosen]], 1)  # [m, 3, 6]
+            radius = self.reach_start_radius[task, self.goal_slot[idx]]
+            qpos[chosen] = self._path_points(back, torch.rand(len(idx)) * radius)
+        else:
+            if self.reach_starts_to_lift and self._lift_q is None:
+                self._lift_q = torch.tensor(lift_configurations(), dtype=torch.float32, device=self.device)
+            elif not self.reach_starts_to_lift and self._table_q is None:
+                self._table_q = torch.tensor(lift_configurations(0.0), dtype=torch.float32, device=self.device)
+            ends, most = (self._lift_q, 1.0) if self.reach_starts_to_lift else (self._table_q, self.REACH_START_MAX)
+            target = ends[self.task_id[idx], side]
+            qpos[chosen] += torch.rand(len(idx), 1) * most * (target - qpos[chosen])
         self._pose_arm(qpos)
+        self.reach_start_side[idx] = side
 
     def _place_goal_markers(self, env_idx: torch.Tensor) -> None:
         task, goal = self.task_id[env_idx], self._goal_table[self.task_id[env_idx], self.goal_slot[env_idx]]
@@ -584,6 +636,9 @@ class ConstructionTaskEnv(BaseEnv):
             task_id=self.task_id.clone(),
             goal_slot=self.goal_slot.clone(),
             near_goal_start=self.near_goal_start.clone(),
+            reach_start=self.reach_start_side >= 0,
+            # whether a reach start's element was grasped from the turret side the start was on
+            reach_start_grasped=self.picked & (self.carry_side == self.reach_start_side),
         )
 
     def _grasp_frame(self) -> torch.Tensor:

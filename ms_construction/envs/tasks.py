@@ -77,6 +77,10 @@ across that detour into the wall does not measure nearer its goal than the detou
 element held on a collision-free joint path out of its goal (reverse curriculum generation; IK, no
 demonstrations; `info["near_goal_start"]` marks them); for training only, off by default. Its `max_steps`
 truncates such an episode that has not placed by then, in an env wrapped in `NearGoalTimeLimit`.
+`set_reach_starts(share, radius)` carries that curriculum back through the grasp: a share of the other resets
+start on the last `radius` of the reach path (the joint line from the reset's configuration to a lift above the
+element on a turret side the goal slot's start paths leave from, then down to {ConstructionTaskEnv.GRASP_START_HEIGHT:g} m above it), the element
+lying on the table (`info["reach_start"]`, and `info["reach_start_grasped"]`: grasped from the side it started on).
 
 **Observation:** `obs_elapsed_time=True` appends the episode's elapsed steps / {_STEPS} (the step limit) as
 the last entry (`extra/elapsed`): the limit is part of the task (success counts within it), and a policy
