@@ -277,6 +277,13 @@ CONTINUATIONS = {
                                      mean_saturation_joints=(0,))
                              + " (stopped at 676,000 steps; not adopted)",
                              "start_18742k"),
+    "probeAG_turret_entropy": ("AF with an entropy bonus (`--ent-coef 0.005`): AF's turret spread stayed 0.10 around a "
+                               "mean near the penalty's bound, and a turn toward the element at +pi was never drawn",
+                               _recipe(18_742_000, exp_name="probeAG_turret_entropy", **VIA_ROUND,
+                                       reach_avoids_vias=True, reach_start_share=1.0, reach_start_radius=0.1,
+                                       reach_start_tasks=("window",), mean_saturation_coef=0.01,
+                                       mean_saturation_joints=(0,), ent_coef=0.005),
+                               "start_18742k"),
 }
 """name: (what it changed, how its policy came to be, the start it went on from, or the probe whose end it went on from:
 its steps count after that one's);

@@ -246,7 +246,9 @@ CSV_FIELDS = [
     "near_goal_radius_ceiling", "near_goal_radius_window", "near_goal_radius_flooring",
     "task_weight_ceiling", "task_weight_window", "task_weight_flooring", "mean_saturation",
     "reach_start_episodes", "reach_start_grasp_success",
-    *(f"reach_start_radius_{kind}{slot}" for kind in ("ceiling", "window", "flooring") for slot in range(3)),
+    "reach_start_radius_ceiling0", "reach_start_radius_ceiling1", "reach_start_radius_ceiling2",
+    "reach_start_radius_window0", "reach_start_radius_window1", "reach_start_radius_window2",
+    "reach_start_radius_flooring0", "reach_start_radius_flooring1", "reach_start_radius_flooring2",
 ]
 """`end_*` and `held_at_end`: where the iteration's training episodes ended (mean place distance in m and
 angle error in degrees to the goal at the last step, share with the element held), what a run that
