@@ -282,7 +282,8 @@ CONTINUATIONS = {
                                _recipe(18_742_000, exp_name="probeAG_turret_entropy", **VIA_ROUND,
                                        reach_avoids_vias=True, reach_start_share=1.0, reach_start_radius=0.1,
                                        reach_start_tasks=("window",), mean_saturation_coef=0.01,
-                                       mean_saturation_joints=(0,), ent_coef=0.005),
+                                       mean_saturation_joints=(0,), ent_coef=0.005)
+                               + " (stopped at 366,000 steps; not adopted)",
                                "start_18742k"),
 }
 """name: (what it changed, how its policy came to be, the start it went on from, or the probe whose end it went on from:
