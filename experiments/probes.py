@@ -42,6 +42,13 @@ def _recipe(at: int, **overrides) -> str:
     return "python baselines/ppo/ppo.py " + shlex.join(command_line(args))
 
 
+GRASP_STARTS = dict(reach_avoids_vias=True, reach_start_share=1.0, reach_start_radius=0.1,
+                    reach_start_tasks=("window",))
+"""Probe AF's grasp starts: every window episode that is not a near-goal start one starts on the last tenth of the
+reach path toward the turret side of the slot's direct paths, each goal slot's radius widening on its own."""
+TURRET_PENALTY = dict(mean_saturation_coef=0.01, mean_saturation_joints=(0,))
+"""Probe AF's saturation penalty on the turret's mean alone."""
+
 PROBES = {
     "probeA_floor_jointcarry": ("the new dense reward (joint-space carry), ppo.py's dense defaults (gamma 0.99, 4 x 4 "
                                 "minibatches, bootstrap with the critic at success)",
@@ -272,19 +279,53 @@ CONTINUATIONS = {
                              "the lift it turned back, its turret mean pinned at -11; AD, which kept all six means off "
                              "the flat ends, lost the ceiling panels",
                              _recipe(18_742_000, exp_name="probeAF_grasp_starts", **VIA_ROUND,
-                                     reach_avoids_vias=True, reach_start_share=1.0, reach_start_radius=0.1,
-                                     reach_start_tasks=("window",), mean_saturation_coef=0.01,
-                                     mean_saturation_joints=(0,))
+                                     **GRASP_STARTS, **TURRET_PENALTY)
                              + " (stopped at 676,000 steps; not adopted)",
                              "start_18742k"),
     "probeAG_turret_entropy": ("AF with an entropy bonus (`--ent-coef 0.005`): AF's turret spread stayed 0.10 around a "
                                "mean near the penalty's bound, and a turn toward the element at +pi was never drawn",
                                _recipe(18_742_000, exp_name="probeAG_turret_entropy", **VIA_ROUND,
-                                       reach_avoids_vias=True, reach_start_share=1.0, reach_start_radius=0.1,
-                                       reach_start_tasks=("window",), mean_saturation_coef=0.01,
-                                       mean_saturation_joints=(0,), ent_coef=0.005)
+                                       **GRASP_STARTS, **TURRET_PENALTY, ent_coef=0.005)
                                + " (stopped at 366,000 steps; not adopted)",
                                "start_18742k"),
+    "probeAH_turret_spread_floor": ("AF with the turret's spread held at 0.3 or more (`--log-std-floor -1.2 "
+                                    "--log-std-floor-joints 0`): in AF and AG it stayed at 0.10 around a mean at the "
+                                    "penalty's bound, and a turn toward the element at +pi was never drawn",
+                                    _recipe(18_742_000, exp_name="probeAH_turret_spread_floor", **VIA_ROUND,
+                                            **GRASP_STARTS, **TURRET_PENALTY, log_std_floor=-1.2,
+                                            log_std_floor_joints=(0,))
+                                    + " (stopped at 268,000 steps; not adopted)",
+                                    "start_18742k"),
+    "probeAI_turret_mean_bound1": ("AH with the turret's mean pulled within +-1 before tanh "
+                                   "(`--mean-saturation-bound 1 --mean-saturation-coef 0.05`, tanh's slope 0.42 "
+                                   "there): from the lift above those windows at +pi, AH's turret mean sat at -4 "
+                                   "before tanh (slope 0.001), and the opening's radius stopped at 0.4 as AF's had at "
+                                   "0.5",
+                                   _recipe(18_742_000, exp_name="probeAI_turret_mean_bound1", **VIA_ROUND,
+                                           **GRASP_STARTS, **{**TURRET_PENALTY, "mean_saturation_coef": 0.05},
+                                           mean_saturation_bound=1.0, log_std_floor=-1.2, log_std_floor_joints=(0,))
+                                   + " (stopped at 238,000 steps; not adopted)",
+                                   "start_18742k"),
+    "probeAJ_mirror_windows": ("AB's recipe (the ninth start's) with the window opening at y = +0.85 met as the mirror "
+                               "image of the one at -0.85 (`--mirror-windows`): the arm and the window site are "
+                               "symmetric in the plane y = 0, and the policy places the windows of the opening at "
+                               "-0.85 from -pi, the side it turns every reach to; in the mirror the window's head "
+                               "stays up, so it must be installed half a turn about its normal from the way it is "
+                               "there (a goal orientation of its own, learnt from reward)",
+                               _recipe(18_742_000, exp_name="probeAJ_mirror_windows", **VIA_ROUND, mirror_windows=True)
+                               + " (stopped at 466,000 steps; not adopted)",
+                               "start_18742k"),
+    "probeAK_mirror_grasp_starts": ("AJ went on with AF's grasp starts for windows (`--reach-start-share 1 "
+                                    "--reach-start-radius 0.1 --reach-start-tasks window --reach-avoids-vias`): in the "
+                                    "mirror AJ's policy turned those windows' reach the side they place from and "
+                                    "placed 3 of 4 from near-goal starts at radius 0.3, but from ordinary resets it "
+                                    "hovered 0.7 m above the element and grasped none",
+                                    _recipe(18_742_000, exp_name="probeAK_mirror_grasp_starts",
+                                            **{**VIA_ROUND, "total_timesteps": 792_000,
+                                               "checkpoint": "runs/probes/probeAJ_mirror_windows/checkpoint.pt"},
+                                            mirror_windows=True, **GRASP_STARTS)
+                                    + " (stopped at 386,000 steps; not adopted)",
+                                    "probeAJ_mirror_windows"),
 }
 """name: (what it changed, how its policy came to be, the start it went on from, or the probe whose end it went on from:
 its steps count after that one's);

@@ -380,16 +380,18 @@ def test_one_update_on_a_fixed_batch_gives_the_losses_and_weights_of_the_origina
 def test_the_saturation_penalty_brings_a_bounded_mean_pinned_past_tanh_s_flat_end_back_where_ppo_can_move_it():
     """A bounded mean whose first action's value before tanh is pinned at +10 (tanh's slope 1e-8: the from-scratch
     policy's turret) stays pinned through a plain update; with `mean_saturation_coef` the update pulls it back toward
-    SATURATION_BOUND, where the slope is 0.07, and reports the penalty; `mean_saturation_joints` penalizes only the
-    dimensions named (the turret's, 0, moves; naming another leaves it pinned). The weight needs --bounded-mean, the
-    joints the weight."""
+    `mean_saturation_bound` (2: tanh's slope 0.07 there; a lower bound pulls further), and reports the penalty;
+    `mean_saturation_joints` penalizes only the dimensions named (the turret's, 0, moves; naming another leaves it
+    pinned). The weight needs --bounded-mean, the joints the weight, the bound must be > 0."""
     batch = fixed_batch()
     pinned = {}
-    for coef, joints in ((0.0, None), (0.01, None), (0.01, (0,)), (0.01, (1, 2))):
+    for coef, joints, bound in ((0.0, None, 2.0), (0.01, None, 2.0), (0.01, (0,), 2.0), (0.01, (1, 2), 2.0),
+                                (0.01, (0,), 0.5)):
         torch.manual_seed(0)
         np.random.seed(0)
         args = ppo.Args.of(hidden_size=64, num_minibatches=8, update_epochs=4, curiosity="none", target_kl=None,
-                           bounded_mean=True, mean_saturation_coef=coef, mean_saturation_joints=joints, learning_rate=0.01)
+                           bounded_mean=True, mean_saturation_coef=coef, mean_saturation_joints=joints,
+                           mean_saturation_bound=bound, learning_rate=0.01)
         agent = ppo.make_agent(args, 43, 6)
         agent.obs_rms.update(agent.features(batch["obs"]))
         with torch.no_grad():
@@ -398,18 +400,48 @@ def test_the_saturation_penalty_brings_a_bounded_mean_pinned_past_tanh_s_flat_en
         optimizer = update.adam(agent.parameters(), lr=args.ppo.learning_rate, eps=1e-5)
         losses = update.ppo_update(agent, optimizer, batch, args)
         with torch.no_grad():
-            pinned[coef, joints] = agent.mean_before_tanh(batch["obs"])[:, 0].mean().item()
+            pinned[coef, joints, bound] = agent.mean_before_tanh(batch["obs"])[:, 0].mean().item()
         assert ("mean_saturation" in losses) == (coef > 0)
     assert before > 9
-    assert pinned[0.0, None] == pytest.approx(before, abs=0.05), "without the penalty nothing moves a pinned mean"
-    assert pinned[0.01, None] < before - 0.5 and pinned[0.01, (0,)] < before - 0.5, pinned
-    assert pinned[0.01, (1, 2)] == pytest.approx(before, abs=0.05), "a penalty on other joints leaves the turret pinned"
+    assert pinned[0.0, None, 2.0] == pytest.approx(before, abs=0.05), "without the penalty nothing moves a pinned mean"
+    assert pinned[0.01, None, 2.0] < before - 0.5 and pinned[0.01, (0,), 2.0] < before - 0.5, pinned
+    assert pinned[0.01, (1, 2), 2.0] == pytest.approx(before, abs=0.05), \
+        "a penalty on other joints leaves the turret pinned"
+    assert pinned[0.01, (0,), 0.5] < pinned[0.01, (0,), 2.0], "a lower bound pulls the mean further"
     with pytest.raises(SystemExit, match="bounded-mean"):
         ppo.validate(ppo.Args.of(mean_saturation_coef=0.01))
+    with pytest.raises(SystemExit, match="mean-saturation-bound"):
+        ppo.validate(ppo.Args.of(bounded_mean=True, mean_saturation_coef=0.01, mean_saturation_bound=0.0))
     for joints in ((0,), (0, 0), (-1,)):
         with pytest.raises(SystemExit, match="mean-saturation-joints"):
             ppo.validate(ppo.Args.of(bounded_mean=True, mean_saturation_coef=0.01 if joints != (0,) else 0.0,
                                      mean_saturation_joints=joints))
+
+
+def test_the_log_std_floor_holds_the_named_joints_spread_through_an_update_and_leaves_the_others():
+    """With `log_std_floor` the policy's log standard deviation on `log_std_floor_joints` is raised to the floor and
+    stays there through an update whose entropy penalty pushes every spread down; the other joints' spreads fall
+    below it. The joints need the floor, and must be distinct dimensions >= 0."""
+    batch = fixed_batch()
+    torch.manual_seed(0)
+    np.random.seed(0)
+    args = ppo.Args.of(hidden_size=64, num_minibatches=8, update_epochs=4, curiosity="none", target_kl=None,
+                       ent_coef=-1.0, learning_rate=0.05, log_std_floor=-1.2, log_std_floor_joints=(0,))
+    agent = ppo.make_agent(args, 43, 6)
+    agent.obs_rms.update(agent.features(batch["obs"]))
+    with torch.no_grad():
+        agent.actor_logstd.fill_(-2.3)
+    update.hold_log_std_floor(agent, args)
+    assert agent.actor_logstd[0, 0].item() == pytest.approx(-1.2)
+    assert agent.actor_logstd[0, 1].item() == pytest.approx(-2.3)
+    optimizer = update.adam(agent.parameters(), lr=args.ppo.learning_rate, eps=1e-5)
+    update.ppo_update(agent, optimizer, batch, args)
+    log_std = agent.actor_logstd[0].detach()
+    assert log_std[0].item() == pytest.approx(-1.2), "the floor holds the turret's spread"
+    assert (log_std[1:] < -2.3 - 0.1).all(), log_std
+    for joints, floor in (((0,), None), ((0, 0), -1.0), ((-1,), -1.0)):
+        with pytest.raises(SystemExit, match="log-std-floor-joints"):
+            ppo.validate(ppo.Args.of(log_std_floor=floor, log_std_floor_joints=joints))
 
 
 def test_a_checkpoint_of_an_earlier_version_loads_through_the_checkpoint_api(tmp_path):

@@ -176,19 +176,35 @@ class PPOArgs:
     rotation_features: bool = True
     """feed the networks each quaternion of the state (plate, goal, element) as the first two columns
     of its rotation matrix: a quaternion's sign can flip mid-episode, the matrix cannot."""
+    mirror_windows: bool = False
+    """act on a window whose opening lies at y > 0 as on its mirror image in the plane y = 0 (the arm's and the
+    window site's plane of symmetry: the table at y = 0, openings at +-0.85): the networks see the mirrored state
+    (`state_mirror_signs`) and the action is mirrored back (JOINT_MIRROR_SIGNS). The opening at y = +0.85 is reached
+    from +pi only, the one at -0.85 from -pi only; a policy that turns every reach to -pi meets the first as the
+    second. The window's head stays up, so in the mirror it must be installed turned half a turn on the plate:
+    a goal orientation of its own, learnt from reward (probe AJ). Joint control only."""
     bounded_mean: bool = False
     """squash the policy's mean into the action bounds by tanh: an unbounded mean can drift past them, where
     every draw clips to the same action, the advantages cannot tell draws apart and the mean stays there (the
     from-scratch runs' joints driven to their limits)."""
     mean_saturation_coef: float = 0.0
     """with `bounded_mean`, a penalty of this weight on the square of how far each of the mean's values before tanh
-    lies beyond +-SATURATION_BOUND (update.py): where it is far past, tanh's slope is nil and PPO cannot move the mean
+    lies beyond +-`mean_saturation_bound`: where it is far past, tanh's slope is nil and PPO cannot move the mean
     (the from-scratch policy's turret, pinned at -10 there, turned every window toward the same side of the table
     whatever the reward said); 0: off."""
+    mean_saturation_bound: float = 2.0
+    """where `mean_saturation_coef`'s penalty begins on the mean's values before tanh: at 2 tanh is 0.96 of the action
+    bound and its slope 0.07 (1e-8 at 10); at 1, 0.76 and 0.42."""
     mean_saturation_joints: Optional[tuple[int, ...]] = None
     """the action dimensions (0-based) `mean_saturation_coef` penalizes; None: all. The turret alone (0) leaves the
     other joints' means, which a policy drives at full speed on every task, as they are (probe AD, which penalized
     all six, lost its ceiling panels)."""
+    log_std_floor: Optional[float] = None
+    """a floor under the policy's log standard deviation on `log_std_floor_joints`, raised to it at the start and held
+    after every optimizer step (update.py): the from-scratch policy's turret spread shrank to 0.10 around a mean at
+    tanh's end and an entropy bonus on all six joints did not widen it (probes AF, AG); None: off."""
+    log_std_floor_joints: Optional[tuple[int, ...]] = None
+    """the action dimensions (0-based) `log_std_floor` holds; None: all."""
 
 
 @dataclass
@@ -404,11 +420,21 @@ def validate(args: Args) -> None:
     if args.ppo.mean_saturation_coef < 0 or (args.ppo.mean_saturation_coef > 0 and not args.ppo.bounded_mean):
         raise SystemExit(f"--mean-saturation-coef {args.ppo.mean_saturation_coef}: a weight >= 0 on the mean's values "
                          "before tanh, with --bounded-mean")
+    if args.ppo.mirror_windows and (args.control_mode != "pd_joint_delta_pos" or args.warm.residual_of):
+        raise SystemExit("--mirror-windows mirrors the joints' actions of a plain policy: with --control-mode "
+                         "pd_joint_delta_pos and without --residual-of")
+    if args.ppo.mean_saturation_bound <= 0:
+        raise SystemExit(f"--mean-saturation-bound {args.ppo.mean_saturation_bound}: a value > 0 before tanh")
     joints = args.ppo.mean_saturation_joints
     if joints is not None and (not joints or min(joints) < 0 or len(set(joints)) != len(joints)
                                or not args.ppo.mean_saturation_coef):
         raise SystemExit(f"--mean-saturation-joints {' '.join(map(str, joints or ()))}: distinct action dimensions >= 0 "
                          "(0: the turret), with --mean-saturation-coef > 0")
+    joints = args.ppo.log_std_floor_joints
+    if joints is not None and (not joints or min(joints) < 0 or len(set(joints)) != len(joints)
+                               or args.ppo.log_std_floor is None):
+        raise SystemExit(f"--log-std-floor-joints {' '.join(map(str, joints or ()))}: distinct action dimensions >= 0 "
+                         "(0: the turret), with --log-std-floor")
     radius = args.starts.reach_start_radius
     if radius is not None and (not 0 <= radius <= 1 or not args.starts.reach_start_share or args.starts.reach_starts_to_lift):
         raise SystemExit(f"--reach-start-radius {radius}: a fraction in [0, 1] of the reach path, with --reach-start-share "

@@ -23,9 +23,11 @@ import torch
 import torch.nn as nn
 
 from baselines.ppo import curiosity
-from baselines.ppo.networks import Agent
+from baselines.ppo.networks import Agent, Mirror
 from baselines.ppo.residual import ResidualAgent
-from ms_construction.envs.construction_env import STATE_QUATERNION_STARTS
+from ms_construction.envs.construction_env import (JOINT_MIRROR_SIGNS, STATE_GOAL_Y, STATE_QUATERNION_STARTS,
+                                                   STATE_TASK_START, state_mirror_signs)
+from ms_construction.parameters import ELEMENT_KINDS
 
 WHAT_A_CHECKPOINT_IS = ("a checkpoint is the .pt file that baselines/ppo/ppo.py or baselines/ppo/bc.py writes "
                         "(torch.save of a dict with args, obs_dim, act_dim and the agent's weights)")
@@ -49,8 +51,14 @@ def make_agent(args, obs_dim: int, act_dim: int, base_args: Optional[dict] = Non
         return ResidualAgent(base, get("hidden_size"),
                              get("residual_scale"), value_heads=value_heads(args), time_input=time_input)
     starts = STATE_QUATERNION_STARTS if get("rotation_features", False) else ()
+    mirror = None
+    if get("mirror_windows", False):
+        if act_dim != len(JOINT_MIRROR_SIGNS):
+            raise ValueError(f"mirror_windows mirrors joint actions ({len(JOINT_MIRROR_SIGNS)}), not {act_dim}")
+        mirror = Mirror(state_mirror_signs(obs_dim), torch.tensor(JOINT_MIRROR_SIGNS),
+                        STATE_TASK_START + ELEMENT_KINDS.index("window"), STATE_GOAL_Y)
     return Agent(obs_dim, act_dim, get("hidden_size"), starts, value_heads(args), get("num_layers", 3),
-                 bool(get("bounded_mean", False)))
+                 bool(get("bounded_mean", False)), mirror)
 
 
 def upgrade_args(saved: dict) -> dict:

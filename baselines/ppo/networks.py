@@ -3,6 +3,8 @@ normalization, and the MLP they and ICM (baselines/ppo/curiosity.py) are built o
 
 from __future__ import annotations
 
+from typing import Optional
+
 import numpy as np
 import torch
 import torch.nn as nn
@@ -71,16 +73,41 @@ def _feature_layout(quat_starts: tuple[int, ...], obs_dim: int, device: torch.de
     return _layouts[key]
 
 
+class Mirror(nn.Module):
+    """The mirror image of chosen states (a task whose site is symmetric in a plane): `observation` mirrors the
+    observations `applies` to by `obs_signs`, `action` the actions taken in them by `action_signs`. The signs are
+    buffers outside the state dict: they follow from the observation's layout, not from training."""
+
+    def __init__(self, obs_signs: torch.Tensor, action_signs: torch.Tensor, task_index: int, goal_y_index: int):
+        super().__init__()
+        self.register_buffer("obs_signs", obs_signs.float(), persistent=False)
+        self.register_buffer("action_signs", action_signs.float(), persistent=False)
+        self.task_index, self.goal_y_index = task_index, goal_y_index
+
+    def applies(self, x):
+        """[...] bool; the observations of the task (its one-hot entry set) whose goal lies at y > 0."""
+        return (x[..., self.task_index] > 0.5) & (x[..., self.goal_y_index] > 0)
+
+    def observation(self, x):
+        return torch.where(self.applies(x)[..., None], x * self.obs_signs, x)
+
+    def action(self, x, a):
+        """`a` chosen on `observation(x)`, in the env's frame."""
+        return torch.where(self.applies(x)[..., None], a * self.action_signs, a)
+
+
 class Agent(nn.Module):
     """Gaussian policy and value on observation features (`rotation_features` for the quaternions
     at `quat_starts`) normalized by `obs_rms` (running mean and variance, clipped to +-10 as
     gymnasium's NormalizeObservation does; raw until it has seen data). With `bounded_mean` the policy's
-    mean is squashed into the action bounds [-1, 1] by tanh (the draws around it are clipped by the learner)."""
+    mean is squashed into the action bounds [-1, 1] by tanh (the draws around it are clipped by the learner); with
+    `mirror` the networks see the mirror image of the states it applies to, and act in it."""
 
     def __init__(self, obs_dim: int, act_dim: int, hidden: int, quat_starts: tuple[int, ...] = (), value_heads: int = 1,
-                 layers: int = 3, bounded_mean: bool = False):
+                 layers: int = 3, bounded_mean: bool = False, mirror: Optional[Mirror] = None):
         super().__init__()
         self.quat_starts = tuple(quat_starts)
+        self.mirror = mirror
         feature_dim = obs_dim + 2 * len(self.quat_starts)
         self.obs_rms = RunningMeanStd((feature_dim,))
         # one value per reward signal (ML-Agents' value heads): extrinsic, and curiosity's where it has its own
@@ -91,7 +118,13 @@ class Agent(nn.Module):
         self.actor_logstd = nn.Parameter(torch.ones(1, act_dim) * -0.5)
 
     def features(self, x):
+        if self.mirror is not None:
+            x = self.mirror.observation(x)
         return rotation_features(x, self.quat_starts) if self.quat_starts else x
+
+    def _act(self, x, mean):
+        """The policy's mean in the env's frame (mirrored back where `mirror` mirrored the state)."""
+        return mean if self.mirror is None else self.mirror.action(x, mean)
 
     def normalize(self, x):
         x = self.features(x)
@@ -103,21 +136,21 @@ class Agent(nn.Module):
         return self.critic(self.normalize(x))
 
     def mean_before_tanh(self, x):
-        """The bounded mean's values before its tanh (x: observations)."""
-        return self.actor_mean[:-1](self.normalize(x))
+        """The bounded mean's values before its tanh (x: observations), in the env's frame."""
+        return self._act(x, self.actor_mean[:-1](self.normalize(x)))
 
     def get_action(self, x, deterministic=False):
         """The policy's mean, or a draw from it (the draw `get_action_and_value` makes, without building a
         Normal: its argument checks cost more than the networks at a rollout step's batch of a few envs)."""
-        mean = self.actor_mean(self.normalize(x))
+        mean = self._act(x, self.actor_mean(self.normalize(x)))
         if deterministic:
             return mean
         return torch.normal(mean, torch.exp(self.actor_logstd.expand_as(mean)))
 
     def get_action_and_value(self, x, action=None):
-        x = self.normalize(x)
-        mean = self.actor_mean(x)
+        z = self.normalize(x)
+        mean = self._act(x, self.actor_mean(z))  # a sign flip per dimension: the same Gaussian's density, mirrored
         probs = Normal(mean, torch.exp(self.actor_logstd.expand_as(mean)))
         if action is None:
             action = probs.sample()
-        return action, probs.log_prob(action).sum(1), probs.entropy().sum(1), self.critic(x)
+        return action, probs.log_prob(action).sum(1), probs.entropy().sum(1), self.critic(z)

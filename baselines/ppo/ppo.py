@@ -54,7 +54,7 @@ from baselines.ppo.checkpoints import (CSVLog, Progress, check_fit, load_checkpo
 from baselines.ppo.curiosity import ICM, make_icm
 from baselines.ppo.evaluation import evaluate_envs, finished_episodes, reset
 from baselines.ppo.networks import Agent
-from baselines.ppo.update import adam, ppo_update, signal_advantages
+from baselines.ppo.update import adam, hold_log_std_floor, ppo_update, signal_advantages
 from baselines.ppo.start_states import GOAL_SLOTS, StartFromStates, failure_task_weights, widen_near_goal, widen_reach_starts
 from ms_construction.envs.construction_env import NearGoalTimeLimit
 from ms_construction.parameters import ELEMENT_KINDS
@@ -261,6 +261,7 @@ def setup(args: Args) -> Run:
             icm.load_state_dict(init["icm"])
         if args.evaluate:
             progress = Progress(**init["progress"])
+    hold_log_std_floor(agent, args)
     return Run(args, eval_envs, agent, optimizer, icm, icm_optimizer, progress, base_args)
 
 

@@ -64,9 +64,14 @@ def signal_advantages(args, rewards: torch.Tensor, intrinsic: torch.Tensor, valu
     return advantages.mean(-1), advantages + values
 
 
-SATURATION_BOUND = 2.0
-"""where `mean_saturation_coef`'s penalty begins on the policy mean's values before tanh: tanh(2) = 0.96 of the action
-bound, its slope 0.07 there (1e-8 at 10)."""
+def hold_log_std_floor(agent: Agent, args) -> None:
+    """Raise the policy's log standard deviation to `args.ppo.log_std_floor` where it lies below, on
+    `args.ppo.log_std_floor_joints` (all when None); nothing when the floor is off."""
+    if args.ppo.log_std_floor is None:
+        return
+    joints = list(args.ppo.log_std_floor_joints or range(agent.actor_logstd.shape[-1]))
+    with torch.no_grad():
+        agent.actor_logstd[:, joints] = agent.actor_logstd[:, joints].clamp(min=args.ppo.log_std_floor)
 
 
 def ppo_update(agent: Agent, optimizer: optim.Optimizer, batch: dict, args, icm: Optional[ICM] = None,
@@ -78,8 +83,9 @@ def ppo_update(agent: Agent, optimizer: optim.Optimizer, batch: dict, args, icm:
     `args.ppo.num_minibatches` shuffled minibatches (numpy's RNG), stopping after an epoch whose last minibatch's approximate KL
     exceeds `args.ppo.target_kl`; ICM learns on the same minibatches. `demos` (obs, actions) add a
     behaviour-cloning term, `args.warm.residual_l2_coef` a pull of a residual agent's correction towards zero,
-    `args.ppo.mean_saturation_coef` a pull of the bounded mean's values before tanh back within +-SATURATION_BOUND;
-    `value_only` trains the critic alone (the warm-up). The mean of each loss."""
+    `args.ppo.mean_saturation_coef` a pull of the bounded mean's values before tanh back within
+    +-`args.ppo.mean_saturation_bound` (`log_std_floor` holds the spread after every step); `value_only` trains
+    the critic alone (the warm-up). The mean of each loss."""
     batch_size = len(batch["obs"])
     minibatch_size = batch_size // args.ppo.num_minibatches
     b_inds = np.arange(batch_size)
@@ -111,7 +117,7 @@ def ppo_update(agent: Agent, optimizer: optim.Optimizer, batch: dict, args, icm:
             entropy_loss = entropy.mean()
             loss = pg_loss - args.ppo.ent_coef * entropy_loss + v_loss * args.ppo.vf_coef
             if args.ppo.mean_saturation_coef > 0:
-                beyond = (agent.mean_before_tanh(obs).abs() - SATURATION_BOUND).clamp(min=0)
+                beyond = (agent.mean_before_tanh(obs).abs() - args.ppo.mean_saturation_bound).clamp(min=0)
                 if args.ppo.mean_saturation_joints is not None:
                     beyond = beyond[:, list(args.ppo.mean_saturation_joints)]
                 saturation = beyond.pow(2).sum(-1).mean()
@@ -133,6 +139,7 @@ def ppo_update(agent: Agent, optimizer: optim.Optimizer, batch: dict, args, icm:
             if args.ppo.max_grad_norm is not None:
                 nn.utils.clip_grad_norm_(agent.parameters(), args.ppo.max_grad_norm)
             optimizer.step()
+            hold_log_std_floor(agent, args)
             if icm is not None:
                 icm_losses = icm.update(icm_optimizer, obs, batch["next_obs"][mb], actions)
                 losses["icm_forward_loss"].append(icm_losses["forward"])

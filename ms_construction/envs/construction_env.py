@@ -48,6 +48,26 @@ STATE_QUATERNION_STARTS = (16, 23, 33)
 """Where the quaternions [w, x, y, z] of the plate (tcp_pose), the goal and the element start in the
 flat `state` observation (qpos 6, qvel 6, is_grasped 1, tcp_pose 7, goal_pose 7, task 3, obj_pose 7,
 tcp_to_grasp_pos 3, obj_to_goal_pos 3: 43 numbers)."""
+STATE_TASK_START, STATE_GOAL_Y = 27, 21
+"""Where the task's one-hot (ELEMENT_KINDS order) and the goal's y start in the flat `state` observation."""
+JOINT_MIRROR_SIGNS = (-1.0, 1.0, 1.0, -1.0, 1.0, -1.0)
+"""How each arm joint turns in the mirror image of the arm in its base's plane y = 0: joints 1, 4 and 6 turn about
+axes in that plane (z, x, x) and turn the other way, joints 2, 3 and 5 about axes across it (y) the same way; every
+link's offsets lie in the plane (assets/arm/construction_arm.urdf), so the mirrored arm is the arm at these signs."""
+
+
+def state_mirror_signs(obs_dim: int) -> torch.Tensor:
+    """[obs_dim] the signs that turn a flat `state` observation into the one of its mirror image in the plane y = 0:
+    joints and their velocities by JOINT_MIRROR_SIGNS, the y of every position and vector, the x and z of every
+    quaternion [w, x, y, z] (the rotation M R M, M = diag(1, -1, 1)); after the 43 numbers the joint moves
+    (`obs_install_offset`, `obs_path_offset`: 6 each) by JOINT_MIRROR_SIGNS and the elapsed time unchanged."""
+    extra, elapsed = divmod(obs_dim - 43, 6)
+    if obs_dim < 43 or elapsed > 1:
+        raise ValueError(f"state_mirror_signs: a state observation has 43 numbers, then 6 per joint move and 1 for the "
+                         f"elapsed time, not {obs_dim}")
+    j, vec, quat = list(JOINT_MIRROR_SIGNS), [1.0, -1.0, 1.0], [1.0, -1.0, 1.0, -1.0]
+    signs = j + j + [1.0] + vec + quat + vec + quat + [1.0] * 3 + vec + quat + vec + vec + j * extra + [1.0] * elapsed
+    return torch.tensor(signs)
 
 
 def _bearing(a: torch.Tensor, b: torch.Tensor) -> torch.Tensor:
@@ -425,17 +445,18 @@ class ConstructionTaskEnv(BaseEnv):
 
     def set_reach_starts(self, share: float, radius: Union[float, Sequence[float]]) -> None:
         """From the next reset on, a `share` (one for all task types, or one per type in ELEMENT_KINDS order) of the
-        resets that are not near-goal starts start on the reach path's
-        last `radius` of its length (one for all goal slots, one per task type in ELEMENT_KINDS order, or one per goal
-        slot, those of each type in turn: a slot reached from the turret side the policy does not grasp from widens
-        on its own, not on the other slots' grasps), the element
-        lying on the table: the path runs on the joint line from the reset's configuration to the lift LIFT_HEIGHT
-        above the element, on a turret side the goal slot's start paths leave from (`_path_sides`), then down to
-        GRASP_START_HEIGHT above it. The start-state curriculum carried back through the grasp (reverse curriculum
-        generation): radius 0 starts about to grasp, 1 anywhere from the reset on; everything from IK of the table
-        (`lift_configurations`), no demonstrations. `info["reach_start"]` marks those episodes and
-        `info["reach_start_grasped"]` whether the element was grasped from the side the start was on. A training
-        device: evaluations use ordinary resets (share 0, the default)."""
+        resets that are not near-goal starts start on the last `radius` of the reach path's length, the element lying
+        on the table. `radius`: one for all goal slots, one per task type in ELEMENT_KINDS order, or one per goal slot,
+        those of each type in turn (a slot reached from the turret side the policy does not grasp from then widens on
+        its own, not on the other slots' grasps). The path runs on the joint line from the reset's configuration to
+        the lift LIFT_HEIGHT above the element, on a turret side the goal slot's start paths leave from
+        (`_path_sides`), then down to GRASP_START_HEIGHT above it.
+
+        The start-state curriculum carried back through the grasp (reverse curriculum generation): radius 0 starts
+        about to grasp, 1 anywhere from the reset on; everything from IK of the table (`lift_configurations`), no
+        demonstrations. `info["reach_start"]` marks those episodes and `info["reach_start_grasped"]` whether the
+        element was grasped from the side the start was on. A training device: evaluations use ordinary resets
+        (share 0, the default)."""
         kinds, slots = len(ELEMENT_KINDS), self._goal_table.shape[1]
         radii = [float(radius)] if np.isscalar(radius) else [float(r) for r in radius]
         if len(radii) not in (1, kinds, kinds * slots):
