@@ -182,7 +182,8 @@ class PPOArgs:
     (`state_mirror_signs`) and the action is mirrored back (JOINT_MIRROR_SIGNS). The opening at y = +0.85 is reached
     from +pi only, the one at -0.85 from -pi only; a policy that turns every reach to -pi meets the first as the
     second. The window's head stays up, so in the mirror it must be installed turned half a turn on the plate:
-    a goal orientation of its own, learnt from reward (probe AJ). Joint control only."""
+    a goal orientation of its own, left to reward (probe AJ learnt it from near-goal starts, not the grasp before
+    it). Joint control only."""
     bounded_mean: bool = False
     """squash the policy's mean into the action bounds by tanh: an unbounded mean can drift past them, where
     every draw clips to the same action, the advantages cannot tell draws apart and the mean stays there (the
@@ -425,16 +426,13 @@ def validate(args: Args) -> None:
                          "pd_joint_delta_pos and without --residual-of")
     if args.ppo.mean_saturation_bound <= 0:
         raise SystemExit(f"--mean-saturation-bound {args.ppo.mean_saturation_bound}: a value > 0 before tanh")
-    joints = args.ppo.mean_saturation_joints
-    if joints is not None and (not joints or min(joints) < 0 or len(set(joints)) != len(joints)
-                               or not args.ppo.mean_saturation_coef):
-        raise SystemExit(f"--mean-saturation-joints {' '.join(map(str, joints or ()))}: distinct action dimensions >= 0 "
-                         "(0: the turret), with --mean-saturation-coef > 0")
-    joints = args.ppo.log_std_floor_joints
-    if joints is not None and (not joints or min(joints) < 0 or len(set(joints)) != len(joints)
-                               or args.ppo.log_std_floor is None):
-        raise SystemExit(f"--log-std-floor-joints {' '.join(map(str, joints or ()))}: distinct action dimensions >= 0 "
-                         "(0: the turret), with --log-std-floor")
+    for flag, joints, needs, has in (("--mean-saturation-joints", args.ppo.mean_saturation_joints,
+                                      "--mean-saturation-coef > 0", bool(args.ppo.mean_saturation_coef)),
+                                     ("--log-std-floor-joints", args.ppo.log_std_floor_joints, "--log-std-floor",
+                                      args.ppo.log_std_floor is not None)):
+        if joints is not None and (not joints or min(joints) < 0 or len(set(joints)) != len(joints) or not has):
+            raise SystemExit(f"{flag} {' '.join(map(str, joints or ()))}: distinct action dimensions >= 0 "
+                             f"(0: the turret), with {needs}")
     radius = args.starts.reach_start_radius
     if radius is not None and (not 0 <= radius <= 1 or not args.starts.reach_start_share or args.starts.reach_starts_to_lift):
         raise SystemExit(f"--reach-start-radius {radius}: a fraction in [0, 1] of the reach path, with --reach-start-share "
