@@ -8,6 +8,8 @@
 - `lift_configurations`: per task type, the configuration that holds the element lifted above the middle
   of the staging table, one per side the turret can reach the table from. The start-state curriculum poses
   the arm on the joint line between a lift and an installation.
+- `mirror_twins`, `mirror_branch_mask`: the goal slots met as the mirror image of another, and which of their
+  installation configurations they keep.
 
 Nothing here comes from demonstrations: the URDF, the manifest's goal and grasp poses, and IK; where no IK path
 leaves a goal slot from the turret side its task type's other slots are reached from, one via configuration found
@@ -87,6 +89,38 @@ def install_configurations() -> np.ndarray:
             per_slot.append(kept)
         table.append(per_slot)
     return np.asarray(table, dtype=np.float32)
+
+
+def mirror_branch_mask(joint_signs, kinds: tuple[str, ...] = ("window",)) -> np.ndarray:
+    """[kinds, slots, CONFIGS_PER_SLOT] bool: the installation configurations kept where a goal slot at y > 0 is met as
+    the mirror image, in the plane y = 0, of the slot at y < 0 it mirrors (a policy with `mirror_windows`): of each
+    such slot of `kinds`, those whose mirror image (joints times `joint_signs`) has the mirrored slot's least folded
+    configuration's joints 1-5, so that the two differ in joint 6 alone (by half a turn for a window, whose head is
+    up at every opening); every configuration elsewhere. Without it the nearest configuration in the mirror is often
+    the other wrist branch, joints 4 and 5 far from any the policy knows (docs/experiments/from_scratch.md)."""
+    install, twins = install_configurations(), mirror_twins(kinds)
+    keep = np.ones(install.shape[:3], dtype=bool)
+    signs = np.asarray(joint_signs, dtype=np.float32)
+    for k, slot in zip(*np.nonzero(twins >= 0)):
+        keep[k, slot] = np.abs(install[k, slot, :, :5] * signs[:5] - install[k, twins[k, slot], 0, :5]).max(-1) < 0.05
+        if not keep[k, slot].any():
+            raise RuntimeError(f"no {ELEMENT_KINDS[k]} installation configuration of goal slot {slot} mirrors slot "
+                               f"{twins[k, slot]}'s")
+    return keep
+
+
+def mirror_twins(kinds: tuple[str, ...] = ("window",)) -> np.ndarray:
+    """[kinds, slots] int: of each goal slot of `kinds` at y > 0, the slot at its mirror image in the plane y = 0
+    (-1: none, or not of `kinds`)."""
+    goals = load_manifest()["goal_poses"]
+    twins = np.full((len(ELEMENT_KINDS), len(goals[ELEMENT_KINDS[0]])), -1)
+    for kind in kinds:
+        for slot, goal in enumerate(goals[kind]):
+            mirrored = [goal[0], -goal[1], goal[2]]
+            found = [s for s, g in enumerate(goals[kind]) if np.allclose(g[:3], mirrored, atol=1e-3)]
+            if goal[1] > 0 and found:
+                twins[ELEMENT_KINDS.index(kind), slot] = found[0]
+    return twins
 
 
 @functools.lru_cache(maxsize=None)

@@ -110,6 +110,12 @@ class RunArgs:
     """the carry measured along `carry_along_paths`' paths (and the path offset observed) only along those from the
     turret side the element was grasped from, each radian off a path through a planned via counting much more (the
     tasks' `carry_keeps_to_vias`), in training and evaluation: it shapes the observation too."""
+    install_mirror_branch: bool = False
+    """the window opening at y = +0.85's installation configurations (and start paths) cut to the wrist branch whose
+    mirror image is the opening at -0.85's but for joint 6 (the tasks' `install_mirror_branch`), in training and
+    evaluation: it shapes the observation too. For `mirror_windows`: the joint moves then differ from the mirrored
+    opening's in joint 6 alone, by half a turn, and until the grasp not at all (measured for the element held half a
+    turn on, the plate's roll being free until then)."""
     task_weights: Optional[tuple[float, float, float]] = None
     """the general task's sampling weights of ceiling, window and flooring in the training envs (None: uniform;
     `1 2 1`: window installation half the episodes); evaluation always samples uniformly."""
@@ -184,6 +190,16 @@ class PPOArgs:
     second. The window's head stays up, so in the mirror it must be installed turned half a turn on the plate:
     a goal orientation of its own, left to reward (probe AJ learnt it from near-goal starts, not the grasp before
     it). Joint control only."""
+    mirror_canonical_reach: bool = False
+    """with `mirror_windows`, until the grasp the networks see a mirrored window's goal orientation as it is (the same
+    at every opening; the mirror turns it half a turn): with `install_mirror_branch` the reach and the grasp of the
+    opening at y = +0.85 then see what those of the one at -0.85 see, the plate's roll not mattering to them; after
+    the grasp the honest mirror, where the carry turns the element half a turn more."""
+    mirror_held_half_turn: bool = False
+    """with `mirror_canonical_reach`, once the window is held the networks see the goal's orientation as it is too,
+    and joint 6, the plate and the window turned half a turn about the plate's axis: a window is a box, so that is
+    a state of the mirrored opening, installed where it is; the carry's extra half turn then shows right after the
+    grasp, above the staging table, instead of at the opening."""
     bounded_mean: bool = False
     """squash the policy's mean into the action bounds by tanh: an unbounded mean can drift past them, where
     every draw clips to the same action, the advantages cannot tell draws apart and the mean stays there (the
@@ -424,6 +440,10 @@ def validate(args: Args) -> None:
     if args.ppo.mirror_windows and (args.control_mode != "pd_joint_delta_pos" or args.warm.residual_of):
         raise SystemExit("--mirror-windows mirrors the joints' actions of a plain policy: with --control-mode "
                          "pd_joint_delta_pos and without --residual-of")
+    if args.ppo.mirror_canonical_reach and not args.ppo.mirror_windows:
+        raise SystemExit("--mirror-canonical-reach changes what the mirror shows: give --mirror-windows too")
+    if args.ppo.mirror_held_half_turn and not args.ppo.mirror_canonical_reach:
+        raise SystemExit("--mirror-held-half-turn goes on from what --mirror-canonical-reach shows: give it too")
     if args.ppo.mean_saturation_bound <= 0:
         raise SystemExit(f"--mean-saturation-bound {args.ppo.mean_saturation_bound}: a value > 0 before tanh")
     for flag, joints, needs, has in (("--mean-saturation-joints", args.ppo.mean_saturation_joints,

@@ -23,10 +23,10 @@ import torch
 import torch.nn as nn
 
 from baselines.ppo import curiosity
-from baselines.ppo.networks import Agent, Mirror
+from baselines.ppo.networks import Agent, CanonicalReach, Mirror
 from baselines.ppo.residual import ResidualAgent
-from ms_construction.envs.construction_env import (JOINT_MIRROR_SIGNS, STATE_GOAL_Y, STATE_QUATERNION_STARTS,
-                                                   STATE_TASK_START, state_mirror_signs)
+from ms_construction.envs.construction_env import (JOINT_MIRROR_SIGNS, STATE_GOAL_Y, STATE_IS_GRASPED,
+                                                   STATE_QUATERNION_STARTS, STATE_TASK_START, state_mirror_signs)
 from ms_construction.parameters import ELEMENT_KINDS
 
 WHAT_A_CHECKPOINT_IS = ("a checkpoint is the .pt file that baselines/ppo/ppo.py or baselines/ppo/bc.py writes "
@@ -55,8 +55,12 @@ def make_agent(args, obs_dim: int, act_dim: int, base_args: Optional[dict] = Non
     if get("mirror_windows", False):
         if act_dim != len(JOINT_MIRROR_SIGNS):
             raise ValueError(f"mirror_windows mirrors joint actions ({len(JOINT_MIRROR_SIGNS)}), not {act_dim}")
+        canonical = None
+        if get("mirror_canonical_reach", False):
+            tcp, goal, obj = STATE_QUATERNION_STARTS
+            canonical = CanonicalReach(STATE_IS_GRASPED, goal, bool(get("mirror_held_half_turn", False)), tcp, obj)
         mirror = Mirror(state_mirror_signs(obs_dim), torch.tensor(JOINT_MIRROR_SIGNS),
-                        STATE_TASK_START + ELEMENT_KINDS.index("window"), STATE_GOAL_Y)
+                        STATE_TASK_START + ELEMENT_KINDS.index("window"), STATE_GOAL_Y, canonical)
     return Agent(obs_dim, act_dim, get("hidden_size"), starts, value_heads(args), get("num_layers", 3),
                  bool(get("bounded_mean", False)), mirror)
 
@@ -197,10 +201,10 @@ def with_path_offset_inputs(ckpt: dict, path) -> dict:
 def policy_env_kwargs(args: dict) -> dict:
     """The env kwargs that a checkpoint's policy (its saved `args`) acts in, beside obs_mode="state": its control
     mode, the observation's optional entries (install offset, path offset, elapsed time) it was trained with, and
-    the path offset's measure (`carry_keeps_to_vias`)."""
+    the joint moves' measures (`carry_keeps_to_vias`, `install_mirror_branch`)."""
     return dict(control_mode=args["control_mode"],
-                **{k: True for k in ("obs_install_offset", "obs_path_offset", "obs_elapsed_time", "carry_keeps_to_vias")
-                   if args.get(k)})
+                **{k: True for k in ("obs_install_offset", "obs_path_offset", "obs_elapsed_time", "carry_keeps_to_vias",
+                                        "install_mirror_branch") if args.get(k)})
 
 
 def load_policy(path, env_id: str) -> tuple[Agent, dict]:

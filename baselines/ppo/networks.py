@@ -10,7 +10,7 @@ import torch
 import torch.nn as nn
 from torch.distributions.normal import Normal
 
-from ms_construction.rotations import qmat
+from ms_construction.rotations import qconj, qmat, qmul
 
 
 def layer_init(layer, std=np.sqrt(2), bias_const=0.0):
@@ -73,23 +73,65 @@ def _feature_layout(quat_starts: tuple[int, ...], obs_dim: int, device: torch.de
     return _layouts[key]
 
 
+class CanonicalReach:
+    """Until the grasp, a mirrored window's goal orientation as it is: every opening's is the same, and the mirror
+    turns it half a turn about the window's normal, which matters to the installation only. With the tasks'
+    `install_mirror_branch` the joint moves until the grasp are its twin's already, so the reach and the grasp of a
+    mirrored opening see what those of the opening it mirrors see.
+
+    With `held_half_turn`, once the window is held, the goal's orientation as it is too, and joint 6, the plate and
+    the window turned half a turn about the plate's axis: a window is a box, so this is a state of the twin opening
+    (the joint moves unchanged), and its installation is the twin's, joint 6 included. The half turn the carry must
+    add then shows at the grasp, above the staging table, where the wrist turns freely, not at the opening."""
+
+    def __init__(self, grasped_index: int, goal_quat_start: int, held_half_turn: bool = False,
+                 tcp_quat_start: int = 0, obj_quat_start: int = 0, roll_index: int = 5):
+        self.grasped_index, self.goal_quat = grasped_index, slice(goal_quat_start, goal_quat_start + 4)
+        self.held_half_turn = held_half_turn
+        self.tcp_quat = slice(tcp_quat_start, tcp_quat_start + 4)
+        self.obj_quat = slice(obj_quat_start, obj_quat_start + 4)
+        self.roll_index = roll_index
+
+    def __call__(self, x, mirrored):
+        """`mirrored` (x times the mirror's signs) with the goal's orientation of `x` put back where not grasped (and,
+        with `held_half_turn`, where grasped, with the half turn)."""
+        out = mirrored.clone()
+        out[..., self.goal_quat] = x[..., self.goal_quat]
+        held = x[..., self.grasped_index] > 0.5
+        if not self.held_half_turn:
+            return torch.where(held[..., None], mirrored, out)
+        turned = out.clone()
+        tcp = mirrored[..., self.tcp_quat]
+        half = torch.zeros_like(tcp)
+        half[..., 3] = 1.0  # half a turn about z
+        turned[..., self.tcp_quat] = qmul(tcp, half)  # about the plate's own axis
+        turned[..., self.obj_quat] = qmul(qmul(qmul(tcp, half), qconj(tcp)), mirrored[..., self.obj_quat])
+        turned[..., self.roll_index] = mirrored[..., self.roll_index] - np.pi
+        return torch.where(held[..., None], turned, out)
+
+
 class Mirror(nn.Module):
     """The mirror image of chosen states (a task whose site is symmetric in a plane): `observation` mirrors the
     observations `applies` to by `obs_signs`, `action` the actions taken in them by `action_signs`. The signs are
     buffers outside the state dict: they follow from the observation's layout, not from training."""
 
-    def __init__(self, obs_signs: torch.Tensor, action_signs: torch.Tensor, task_index: int, goal_y_index: int):
+    def __init__(self, obs_signs: torch.Tensor, action_signs: torch.Tensor, task_index: int, goal_y_index: int,
+                 canonical_reach: Optional[CanonicalReach] = None):
         super().__init__()
         self.register_buffer("obs_signs", obs_signs.float(), persistent=False)
         self.register_buffer("action_signs", action_signs.float(), persistent=False)
         self.task_index, self.goal_y_index = task_index, goal_y_index
+        self.canonical_reach = canonical_reach
 
     def applies(self, x):
         """[...] bool; the observations of the task (its one-hot entry set) whose goal lies at y > 0."""
         return (x[..., self.task_index] > 0.5) & (x[..., self.goal_y_index] > 0)
 
     def observation(self, x):
-        return torch.where(self.applies(x)[..., None], x * self.obs_signs, x)
+        mirrored = x * self.obs_signs
+        if self.canonical_reach is not None:
+            mirrored = self.canonical_reach(x, mirrored)
+        return torch.where(self.applies(x)[..., None], mirrored, x)
 
     def action(self, x, a):
         """`a` chosen on `observation(x)`, in the env's frame."""

@@ -28,7 +28,8 @@ from mani_skill.utils.structs.types import GPUMemoryConfig, SimConfig
 from ms_construction.agents.construction_arm import ConstructionArm
 from ms_construction.agents.suction_gripper import PLATE_ELEMENT_COLLISION_BIT, SuctionGripper, grasp_ray
 from ms_construction.curriculum import FINAL_STAGE, TOLERANCE_KEYS, resolve_tolerances, stage_tolerances, validate_tolerances
-from ms_construction.goal_configurations import install_configurations, lift_configurations, symmetry_period
+from ms_construction.goal_configurations import (install_configurations, lift_configurations, mirror_branch_mask,
+                                                  mirror_twins, symmetry_period)
 from ms_construction.parameters import (
     DROP_CLEARANCE,
     ELEMENT_KINDS,
@@ -44,30 +45,42 @@ from ms_construction.site import ConstructionSiteSceneBuilder, build_element
 
 ROBOT_INIT_QPOS_NOISE = 0.02
 """rad; std of the arm's start configuration around its rest keyframe, per joint."""
-STATE_QUATERNION_STARTS = (16, 23, 33)
-"""Where the quaternions [w, x, y, z] of the plate (tcp_pose), the goal and the element start in the
-flat `state` observation (qpos 6, qvel 6, is_grasped 1, tcp_pose 7, goal_pose 7, task 3, obj_pose 7,
-tcp_to_grasp_pos 3, obj_to_goal_pos 3: 43 numbers)."""
-STATE_TASK_START, STATE_GOAL_Y = 27, 21
-"""Where the task's one-hot (ELEMENT_KINDS order) and the goal's y start in the flat `state` observation."""
 JOINT_MIRROR_SIGNS = (-1.0, 1.0, 1.0, -1.0, 1.0, -1.0)
 """How each arm joint turns in the mirror image of the arm in its base's plane y = 0: joints 1, 4 and 6 turn about
 axes in that plane (z, x, x) and turn the other way, joints 2, 3 and 5 about axes across it (y) the same way; every
 link's offsets lie in the plane (assets/arm/construction_arm.urdf), so the mirrored arm is the arm at these signs."""
+MIRROR_SIGNS = {"joints": JOINT_MIRROR_SIGNS, "scalars": (1.0,), "vector": (1.0, -1.0, 1.0),
+                "pose": (1.0, -1.0, 1.0, 1.0, -1.0, 1.0, -1.0)}
+"""How each kind of entry changes in the mirror image in the plane y = 0: joints by JOINT_MIRROR_SIGNS, the y of a
+position or vector, the x and z of a quaternion [w, x, y, z] (the rotation M R M, M = diag(1, -1, 1))."""
+STATE_LAYOUT = (("qpos", 6, "joints"), ("qvel", 6, "joints"), ("is_grasped", 1, "scalars"), ("tcp_pose", 7, "pose"),
+                ("goal_pose", 7, "pose"), ("task", 3, "scalars"), ("obj_pose", 7, "pose"),
+                ("tcp_to_grasp_pos", 3, "vector"), ("obj_to_goal_pos", 3, "vector"))
+"""The flat `state` observation's entries in order (the agent's, then `_get_obs_extra`'s): name, size, and the kind
+of MIRROR_SIGNS it is; after them the optional joint moves (`obs_install_offset`, `obs_path_offset`: 6 joints each)
+and the elapsed time (1)."""
+STATE_START = dict(zip([name for name, _, _ in STATE_LAYOUT],
+                       np.cumsum([0] + [size for _, size, _ in STATE_LAYOUT[:-1]]).tolist()))
+"""Where each entry of STATE_LAYOUT starts in the flat `state` observation."""
+STATE_SIZE = sum(size for _, size, _ in STATE_LAYOUT)
+STATE_QUATERNION_STARTS = tuple(STATE_START[name] + 3 for name in ("tcp_pose", "goal_pose", "obj_pose"))
+"""Where the quaternions [w, x, y, z] of the plate (tcp_pose), the goal and the element start."""
+STATE_TASK_START = STATE_START["task"]
+"""Where the task's one-hot (ELEMENT_KINDS order) starts."""
+STATE_GOAL_Y, STATE_IS_GRASPED = STATE_START["goal_pose"] + 1, STATE_START["is_grasped"]
+"""Where the goal's y and is_grasped are."""
 
 
 def state_mirror_signs(obs_dim: int) -> torch.Tensor:
     """[obs_dim] the signs that turn a flat `state` observation into the one of its mirror image in the plane y = 0:
-    joints and their velocities by JOINT_MIRROR_SIGNS, the y of every position and vector, the x and z of every
-    quaternion [w, x, y, z] (the rotation M R M, M = diag(1, -1, 1)); after the 43 numbers the joint moves
-    (`obs_install_offset`, `obs_path_offset`: 6 each) by JOINT_MIRROR_SIGNS and the elapsed time unchanged."""
-    extra, elapsed = divmod(obs_dim - 43, 6)
-    if obs_dim < 43 or elapsed > 1:
-        raise ValueError(f"state_mirror_signs: a state observation has 43 numbers, then 6 per joint move and 1 for the "
-                         f"elapsed time, not {obs_dim}")
-    j, vec, quat = list(JOINT_MIRROR_SIGNS), [1.0, -1.0, 1.0], [1.0, -1.0, 1.0, -1.0]
-    signs = j + j + [1.0] + vec + quat + vec + quat + [1.0] * 3 + vec + quat + vec + vec + j * extra + [1.0] * elapsed
-    return torch.tensor(signs)
+    each entry of STATE_LAYOUT by its kind's MIRROR_SIGNS, then the joint moves by JOINT_MIRROR_SIGNS and the elapsed
+    time unchanged."""
+    extra, elapsed = divmod(obs_dim - STATE_SIZE, 6)
+    if obs_dim < STATE_SIZE or elapsed > 1:
+        raise ValueError(f"state_mirror_signs: a state observation has {STATE_SIZE} numbers, then 6 per joint move and "
+                         f"1 for the elapsed time, not {obs_dim}")
+    signs = [x for _, size, kind in STATE_LAYOUT for x in MIRROR_SIGNS[kind] * (size // len(MIRROR_SIGNS[kind]))]
+    return torch.tensor(signs + list(JOINT_MIRROR_SIGNS) * extra + [1.0] * elapsed)
 
 
 def _bearing(a: torch.Tensor, b: torch.Tensor) -> torch.Tensor:
@@ -132,6 +145,7 @@ class ConstructionTaskEnv(BaseEnv):
         reach_starts_to_lift: bool = False,
         carry_counts_lag: bool = False,
         carry_keeps_to_vias: bool = False,
+        install_mirror_branch: bool = False,
         **kwargs,
     ):
         self._tol_init = resolve_tolerances(curriculum_stage, tolerances)
@@ -163,6 +177,7 @@ class ConstructionTaskEnv(BaseEnv):
         self.reach_starts_to_lift = bool(reach_starts_to_lift)
         self.carry_counts_lag = bool(carry_counts_lag)
         self.carry_keeps_to_vias = bool(carry_keeps_to_vias)
+        self.install_mirror_branch = bool(install_mirror_branch)
         self.robot_init_qpos_noise = robot_init_qpos_noise
         self._step_grasp_frame, self._in_step_readout = None, False
         self.near_goal_share, self.near_goal_radius, self.near_goal_max_steps = 0.0, None, None
@@ -284,6 +299,7 @@ class ConstructionTaskEnv(BaseEnv):
         # the dense reward's carry: installation configurations [3, slots, K, 6] (IK, a few seconds: made when
         # first needed) and joint 6's period per kind
         self._install_q: Optional[torch.Tensor] = None
+        self._mirrored_slot: Optional[torch.Tensor] = None  # [3, slots] bool, with `install_mirror_branch`
         self._table_q: Optional[torch.Tensor] = None
         self._lift_q: Optional[torch.Tensor] = None
         self._grasp_start_q: Optional[torch.Tensor] = None
@@ -383,10 +399,20 @@ class ConstructionTaskEnv(BaseEnv):
 
             paths = start_paths()
             f32 = dict(dtype=torch.float32, device=self.device)
+            usable = paths.usable & self._kept_configurations()[..., None]
             self._start_paths = dict(waypoints=torch.tensor(paths.waypoints, **f32), free=torch.tensor(paths.free, **f32),
-                                     usable=torch.tensor(paths.usable, device=self.device).flatten(2).float(),
+                                     usable=torch.tensor(usable, device=self.device).flatten(2).float(),
                                      planned=torch.tensor(paths.planned, device=self.device).flatten(2).float())
         return self._start_paths
+
+    def _kept_configurations(self) -> np.ndarray:
+        """[kinds, slots, configurations] bool: the installation configurations (and their start paths) the carry is
+        measured to, and near-goal starts start on: with `install_mirror_branch`, those of the window opening at
+        y = +0.85 cut to the wrist branch whose mirror image is the opening at -0.85's but for joint 6
+        (`goal_configurations.mirror_branch_mask`), for a policy that meets the one as the mirror image of the
+        other (ppo.py's `--mirror-windows`); all of them otherwise."""
+        shape = install_configurations().shape[:3]
+        return mirror_branch_mask(JOINT_MIRROR_SIGNS) if self.install_mirror_branch else np.ones(shape, dtype=bool)
 
     @staticmethod
     def _path_points(waypoints: torch.Tensor, fraction: torch.Tensor) -> torch.Tensor:
@@ -724,10 +750,19 @@ class ConstructionTaskEnv(BaseEnv):
     def plate_turn(self) -> torch.Tensor:
         """[n] rad; how far the held element is turned on the plate about the plate's axis (the grasp keeps the
         element's yaw relative to the plate); 0 when it lies as in `install_configurations`, and before the episode's
-        grasp (each reset sets the nominal hold)."""
+        grasp (each reset sets the nominal hold), but half a turn there with `install_mirror_branch` for the slot it
+        cuts."""
         grasp_q = self._grasp_in_el[self.task_id, 3:]
         turn = qmul(qconj(grasp_q), qconj(self.hold_pose_in_tcp[:, 3:]))  # a rotation about the plate's z axis
-        return 2 * torch.atan2(turn[:, 3], turn[:, 0])
+        turn = 2 * torch.atan2(turn[:, 3], turn[:, 0])
+        if self.install_mirror_branch:
+            # until the grasp, a slot met as its twin's mirror image is measured for the element held half a turn on
+            # (the plate's roll is free until then): its joint moves are then the mirror image of its twin's
+            if self._mirrored_slot is None:
+                self._mirrored_slot = torch.tensor(mirror_twins() >= 0, device=self.device)
+            ahead = self._mirrored_slot[self.task_id, self.goal_slot] & ~self.picked
+            turn = torch.where(ahead, turn + torch.pi, turn)
+        return turn
 
     def carry_distance(self) -> torch.Tensor:
         """[n] rad; how far the arm is from holding its element installed, in joint space (summed over the joints):
@@ -859,7 +894,11 @@ class ConstructionTaskEnv(BaseEnv):
         """[n, 6] rad; the joint move from the arm's configuration to the nearest one that holds its element
         installed (the one `carry_distance` measures to), joint 6's part taken modulo the element's symmetry."""
         if self._install_q is None:
-            self._install_q = torch.tensor(install_configurations(), dtype=torch.float32, device=self.device)
+            # a configuration not kept is replaced by its slot's first kept one (the table repeats them already)
+            table, kept = install_configurations().copy(), self._kept_configurations()
+            first = kept.argmax(-1)[..., None, None].repeat(table.shape[-1], -1)
+            table = np.where(kept[..., None], table, np.take_along_axis(table, first, 2))
+            self._install_q = torch.tensor(table, dtype=torch.float32, device=self.device)
         q = self.agent.robot.get_qpos()
         diff = self._install_q[self.task_id, self.goal_slot] - q[:, None, :]  # [n, K, 6]
         period = self._sym_period[self.task_id][:, None]

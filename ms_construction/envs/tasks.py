@@ -71,7 +71,12 @@ way round from -pi). `carry_counts_lag=True` adds to the carry distance
 or wall while the arm goes on), so that pushing a jammed element on does not pay. `carry_keeps_to_vias=True`
 measures the carry (and the path offset observed) only along the paths from the turret side the element was
 grasped from, each radian off a path through a planned via (from its lift in) counted {ConstructionTaskEnv.VIA_DEVIATION_WEIGHT:g} times, so that a carry cutting
-across that detour into the wall does not measure nearer its goal than the detour. All six off by default.
+across that detour into the wall does not measure nearer its goal than the detour. `install_mirror_branch=True`
+cuts the window opening at y = +0.85's installation configurations (and start paths) to the wrist branch whose
+mirror image in the plane y = 0 is the opening at -0.85's but for joint 6, half a turn off, and until the grasp
+measures its joint moves for the element held half a turn on the plate, for a policy that meets the one as the
+mirror image of the other (ppo.py's `--mirror-windows`): its joint moves then are the mirror image of the other's
+until the grasp. All seven off by default.
 
 **Start states:** `set_near_goal_starts(share, radius)` makes a share of the following resets start with the
 element held on a collision-free joint path out of its goal (reverse curriculum generation; IK, no
