@@ -19,7 +19,7 @@ assets/checkpoints/scratch_general_agent.pt with its campaign record. The recipe
 | success | absorbing: bootstrapped with its reward for ever | the critic never trains on a state after success; its guess let hovering near the goal outvalue placing |
 | start states | 80% of the training episodes (20% from 17,250,000 to 17,540,000 steps) start held on a collision-free joint path out of the goal (`set_near_goal_starts`; IK, and since 17,540,000 steps one planned via for the window opening at y = +0.85 from -pi), each task type's radius widening from 0.1 of the path by 0.1 once 60% of its last 20 such episodes placed; such an episode that has not placed in 80 steps is cut | reverse curriculum generation (Florensa et al. 2017) from resets the env computes by IK: no demonstrations; evaluation always resets as usual. One radius for all three types widened on lucky iterations of the easy type (probe F); with half the episodes and no cut, a failed start wandered for 250 steps and an update held a handful of near-goal episodes (probes I-L) |
 | observation | the tasks' state + the joint move to the installation configuration (`obs_install_offset`); since 18,062,000 steps + the joint move a little ahead along the start path (`obs_path_offset`) | what the carry term measures, from IK of the goal pose: following it places from near-goal starts (a test); without it the policy must learn IK of nine goal slots itself |
-| policy | Gaussian, its mean bounded by tanh (`bounded_mean`) | an unbounded mean drifted past the action bounds, where every draw clips alike and PPO cannot move it back (the third start's `--diagnose`) |
+| policy | Gaussian, its mean bounded by tanh (`bounded_mean`); since 18,742,000 steps a window for the opening at y = +0.85 met as the mirror image of one for -0.85 (`mirror_windows`), that opening's installation cut to the wrist branch that mirrors -0.85's but for joint 6 (`install_mirror_branch`), and seen as -0.85's until the grasp (`mirror_canonical_reach`) and, held, turned half a turn about the plate's axis (`mirror_held_half_turn`) | an unbounded mean drifted past the action bounds, where every draw clips alike and PPO cannot move it back (the third start's `--diagnose`). The opening at y = +0.85 is reached from +pi only, the one at -0.85 from -pi only, where the policy turns every reach; in the mirror the window's head stays up, so the carry must turn it half a turn more, which the held view shows at the grasp, above the table, instead of at the opening (probes AJ-AM, docs/experiments/from_scratch.md) |
 | discount | gamma 0.95, GAE lambda 0.95 | values of a few dozen steps: the dense reward carries the rest, and the critic learns them quickly |
 | updates | 2,000 samples (2 envs x 1,000 steps), 8 epochs of 8 minibatches, KL stop 0.1 | more gradient steps per env step: env steps are the cost on a CPU |
 | curiosity | none | the dense reward explores |
@@ -66,7 +66,8 @@ STARTS = {1_682_000: "fifth start: carry along the start paths, reach in joint s
                       "starts again (probe W)",
           17_676_000: "windows sampled twice as often (probe X)",
           18_062_000: "path offset in the observation (probe Y)",
-          18_742_000: "carry kept to the planned via's path, its window opening drawn three times as often (probe AB)"}
+          18_742_000: "carry kept to the planned via's path, its window opening drawn three times as often and met as "
+                      "the mirror image of the one at -0.85, held half a turn about the plate's axis (probe AM)"}
 """env step: the change the campaign went on with there, of the recipe or of the tasks (the fourth start's steps before
 the first; the experiment page says how each came to be)."""
 
@@ -76,7 +77,9 @@ RECIPE_BEFORE = {1_682_000: dict(carry_along_paths=False, reach_in_joint_space=F
                  17_540_000: dict(near_goal_share=0.2),
                  17_676_000: dict(task_weights=None),
                  18_062_000: dict(obs_path_offset=False),
-                 18_742_000: dict(carry_keeps_to_vias=False, goal_slot_weights=None)}
+                 18_742_000: dict(carry_keeps_to_vias=False, goal_slot_weights=None, mirror_windows=False,
+                                  install_mirror_branch=False, mirror_canonical_reach=False,
+                                  mirror_held_half_turn=False)}
 """env step of STARTS: the recipe's settings as they were before the change the campaign went on with there (the
 fourth start's recipe before the first)."""
 
@@ -103,6 +106,7 @@ def scratch_args(num_envs: Optional[int] = None, **overrides) -> ppo.Args:
         near_goal_max_steps=80, obs_install_offset=True, obs_path_offset=True, bounded_mean=True, carry_along_paths=True, reach_in_joint_space=True,
         reach_toward_path_sides=True, task_weights=(1.0, 2.0, 1.0),
         carry_keeps_to_vias=True, goal_slot_weights=(1.0, 1.0, 1.0, 1.0, 1.0, 3.0, 1.0, 1.0, 1.0),
+        mirror_windows=True, install_mirror_branch=True, mirror_canonical_reach=True, mirror_held_half_turn=True,
         eval_freq=25, checkpoint_freq=10, log_dir=str(CAMPAIGN_DIR),
     )
     return args.replace(**overrides)
@@ -366,17 +370,24 @@ def train(run: Run, every: int = SNAPSHOT_EVERY, snapshots: Path = SNAPSHOT_DIR,
         ship_best(run, snapshots=snapshots, page=page)
 
 
-ADOPT_MAY_DIFFER = ("exp_name", "log_dir", "checkpoint", "total_timesteps", "eval_freq", "near_goal_radius")
+ADOPT_MAY_DIFFER = ("exp_name", "log_dir", "checkpoint", "resume", "extend", "total_timesteps", "eval_freq",
+                    "near_goal_radius")
 """the settings a continuation probe the campaign goes on from may have run with other than the recipe's: where it
-logged, what it started from, its length and evaluations, and its first start radius (its radii are in its progress)."""
+logged, what it started or was resumed from, its length and evaluations, and its first start radius (its radii are in
+its progress)."""
 
 
-def adopt(run: Run, probe_dir: Path) -> None:
+PROBE_SNAPSHOTS = "snapshots"
+"""the folder in a probe's run folder that holds its snapshots (step_<its env steps>.pt: copies of its checkpoint)."""
+
+
+def adopt(run: Run, probe_dir: Path, snapshots: Path = SNAPSHOT_DIR) -> None:
     """Go on with the campaign from a continuation probe (experiments/probes.py) that ran the recipe, changed as the
     recipe now is, from the campaign's checkpoint (a start of STARTS): the probe's checkpoint (weights, optimizer, start
     radii, random states) becomes the campaign's, with its env steps and iterations counted on from the start's and
-    the recipe's args, and its progress.csv rows, so counted, follow the campaign's. Refuses a probe that ran
-    another recipe than `run`'s (beyond ADOPT_MAY_DIFFER) or started elsewhere than the campaign's checkpoint."""
+    the recipe's args, and its progress.csv rows, so counted, follow the campaign's; its snapshots (PROBE_SNAPSHOTS),
+    so counted, join the campaign's in `snapshots`, for `ship_best`. Refuses a probe that ran another recipe than
+    `run`'s (beyond ADOPT_MAY_DIFFER) or started elsewhere than the campaign's checkpoint."""
     import torch
 
     ckpt, csv_path = checkpoint_of(run), checkpoint_of(run).with_name("progress.csv")
@@ -392,11 +403,15 @@ def adopt(run: Run, probe_dir: Path) -> None:
     if began is None or not all(torch.equal(v, start["agent"][k]) for k, v in began["agent"].items()):
         raise SystemExit(f"--adopt {probe_dir}: the probe did not start from the campaign's checkpoint ({ckpt})")
     at, iteration = start["progress"]["global_step"], start["progress"]["iteration"]
-    probe["args"] = recipe
-    probe["progress"] = {**probe["progress"], "global_step": at + probe["progress"]["global_step"],
-                         "iteration": iteration + probe["progress"]["iteration"],
-                         "stage_changes": start["progress"]["stage_changes"],
-                         "stage_start_step": start["progress"]["stage_start_step"]}
+
+    def counted_on(ckpt: dict) -> dict:
+        return {**ckpt, "args": recipe,
+                "progress": {**ckpt["progress"], "global_step": at + ckpt["progress"]["global_step"],
+                             "iteration": iteration + ckpt["progress"]["iteration"],
+                             "stage_changes": start["progress"]["stage_changes"],
+                             "stage_start_step": start["progress"]["stage_start_step"]}}
+
+    probe = counted_on(probe)
     with open(csv_path) as f:
         rows = [r for r in csv.DictReader(f) if int(r["global_step"]) <= at]
     with open(probe_dir / "progress.csv") as f:
@@ -411,6 +426,10 @@ def adopt(run: Run, probe_dir: Path) -> None:
         writer.writeheader()
         writer.writerows(rows + added)
     os.replace(tmp, ckpt)
+    for path in sorted((probe_dir / PROBE_SNAPSHOTS).glob("step_*.pt")):
+        snapshot = counted_on(load_checkpoint(path))
+        snapshots.mkdir(parents=True, exist_ok=True)
+        torch.save(snapshot, snapshots / f"checkpoint_{snapshot['progress']['global_step']}.pt")
     print(f"the campaign goes on from {probe_dir} at {probe['progress']['global_step']:,} env steps")
 
 

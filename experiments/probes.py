@@ -238,7 +238,8 @@ CONTINUATIONS = {
                                         "(the via weight from the lift in): AA's policy turned its grasp toward the "
                                         "path's table end and missed half that opening's windows at the pick",
                                         _recipe(18_742_000, exp_name="probeAB_keeps_to_vias_from_lift", **VIA_ROUND)
-                                        + " (adopted: the campaign's last 1,258,000 steps, to its 20,000,000 budget)",
+                                        + " (adopted: the campaign's last 1,258,000 steps, to its 20,000,000 budget, "
+                                          "until probe AM's took their place)",
                                         "start_18742k"),
     "probeAC_reach_avoids_vias": ("AB with the reach toward the turret side of the direct paths only (`--reach-avoids-vias`: "
                                   "since the planned via (the seventh start) the reach paid for grasping windows for the "
@@ -326,6 +327,30 @@ CONTINUATIONS = {
                                             mirror_windows=True, **GRASP_STARTS)
                                     + " (stopped at 386,000 steps; not adopted)",
                                     "probeAJ_mirror_windows"),
+    "probeAL_mirror_twin_reach": ("AJ (the mirror) with the opening at y = +0.85's installation configurations cut to "
+                                  "the wrist branch whose mirror image is the -0.85 opening's but for joint 6 "
+                                  "(`--install-mirror-branch`), its joint moves until the grasp measured for the "
+                                  "element held half a turn on, and its goal orientation shown as it is until the "
+                                  "grasp (`--mirror-canonical-reach`): until the grasp the policy sees the -0.85 "
+                                  "opening's reach exactly, after it the carry has to turn the window half a turn "
+                                  "more; in AJ the mirror's nearest installation was the other wrist branch, and the "
+                                  "reach hovered",
+                                  _recipe(18_742_000, exp_name="probeAL_mirror_twin_reach", **VIA_ROUND,
+                                          mirror_windows=True, install_mirror_branch=True, mirror_canonical_reach=True)
+                                  + " (stopped at 466,000 steps; not adopted)",
+                                  "start_18742k"),
+    "probeAM_mirror_held_half_turn": ("AL with the held window seen half a turn about the plate's axis, joint 6 "
+                                      "with it (`--mirror-held-half-turn`): a state of the -0.85 opening, installed "
+                                      "where its own installation is; AL's policy grasped those windows at +pi and "
+                                      "carried them to 0.2-0.4 m of the opening with the wrist 40 degrees short of "
+                                      "the extra half turn, as its habit at -0.85 has it; in this view the half turn "
+                                      "shows at the grasp, above the table",
+                                      _recipe(18_742_000, exp_name="probeAM_mirror_held_half_turn", **VIA_ROUND,
+                                              mirror_windows=True, install_mirror_branch=True,
+                                              mirror_canonical_reach=True, mirror_held_half_turn=True)
+                                      + " (adopted: the campaign's last 906,000 steps, to 19,648,000 of its 20,000,000 "
+                                        "budget)",
+                                      "start_18742k"),
 }
 """name: (what it changed, how its policy came to be, the start it went on from, or the probe whose end it went on from:
 its steps count after that one's);

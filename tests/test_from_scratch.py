@@ -4,6 +4,7 @@ it ships with a record that says so, and its report writes the curve and the sec
 import csv
 import dataclasses
 import json
+import shutil
 
 import pytest
 import torch
@@ -243,7 +244,7 @@ def test_the_campaign_goes_on_from_a_probe_of_its_recipe_with_its_steps_counted_
     """`--adopt`: a probe that went on from the campaign's checkpoint with the recipe as it now is becomes the
     campaign's checkpoint (its weights, its progress counted on from the start's steps and iterations, the recipe's
     args) and its CSV rows follow the campaign's, counted on; the campaign then resumes from there. A probe of another
-    recipe, or one that started elsewhere, is refused."""
+    recipe, or one that started elsewhere, is refused. The probe's snapshots join the campaign's, counted on."""
     small = dict(num_envs=2, num_steps=20, num_minibatches=2, update_epochs=1, num_eval_envs=1, eval_freq=100,
                  checkpoint_freq=1, env_id="Flooring-v1", task_weights=None, log_dir=str(tmp_path))
     [run] = fs.scratch_runs(num_envs=2)
@@ -257,9 +258,15 @@ def test_the_campaign_goes_on_from_a_probe_of_its_recipe_with_its_steps_counted_
     ppo.main(probe_args.replace(checkpoint=None, exp_name="elsewhere", total_timesteps=40))
     with pytest.raises(SystemExit, match="did not start from the campaign's checkpoint"):
         fs.adopt(run, tmp_path / "elsewhere")
-    ppo.main(probe_args)
+    ppo.main(probe_args.replace(total_timesteps=80))
+    (tmp_path / "probe" / fs.PROBE_SNAPSHOTS).mkdir()
+    shutil.copyfile(tmp_path / "probe" / "checkpoint.pt", tmp_path / "probe" / fs.PROBE_SNAPSHOTS / "step_80.pt")
+    ppo.main(probe_args.replace(resume=str(tmp_path / "probe" / "checkpoint.pt"), extend=True))
     probe = torch.load(tmp_path / "probe" / "checkpoint.pt", weights_only=False)
-    fs.adopt(run, tmp_path / "probe")
+    fs.adopt(run, tmp_path / "probe", snapshots=tmp_path / "snapshots")
+    snapshot = torch.load(tmp_path / "snapshots" / "checkpoint_160.pt", weights_only=False)
+    assert snapshot["progress"]["global_step"] == 80 + 80 and snapshot["args"] == run.args.flat()
+    assert [p.name for p in (tmp_path / "snapshots").iterdir()] == ["checkpoint_160.pt"]
     adopted = torch.load(start, weights_only=False)
     assert adopted["progress"]["global_step"] == 80 + 120 and adopted["progress"]["iteration"] == 2 + 3
     assert adopted["progress"]["near_goal_radius"] == probe["progress"]["near_goal_radius"]
