@@ -348,8 +348,8 @@ CONTINUATIONS = {
                                       _recipe(18_742_000, exp_name="probeAM_mirror_held_half_turn", **VIA_ROUND,
                                               mirror_windows=True, install_mirror_branch=True,
                                               mirror_canonical_reach=True, mirror_held_half_turn=True)
-                                      + " (adopted: the campaign's last 906,000 steps, to 19,648,000 of its 20,000,000 "
-                                        "budget)",
+                                      + " (adopted: the campaign's steps from 18,742,000 to 19,648,000; it ran on "
+                                        "with this recipe to its 20,000,000 budget)",
                                       "start_18742k"),
 }
 """name: (what it changed, how its policy came to be, the start it went on from, or the probe whose end it went on from:
