@@ -104,8 +104,9 @@ class CanonicalReach:
         tcp = mirrored[..., self.tcp_quat]
         half = torch.zeros_like(tcp)
         half[..., 3] = 1.0  # half a turn about z
-        turned[..., self.tcp_quat] = qmul(tcp, half)  # about the plate's own axis
-        turned[..., self.obj_quat] = qmul(qmul(qmul(tcp, half), qconj(tcp)), mirrored[..., self.obj_quat])
+        turned_tcp = qmul(tcp, half)  # about the plate's own axis
+        turned[..., self.tcp_quat] = turned_tcp
+        turned[..., self.obj_quat] = qmul(qmul(turned_tcp, qconj(tcp)), mirrored[..., self.obj_quat])
         turned[..., self.roll_index] = mirrored[..., self.roll_index] - np.pi
         return torch.where(held[..., None], turned, out)
 
