@@ -39,6 +39,15 @@ class Run:
     """the campaign record's method line (default: the paper setting's)."""
 
 
+def choose(runs: list[Run], names: tuple[str, ...]) -> list[Run]:
+    """The runs named `names`, in that order; an unknown name stops with the names allowed (`--runs`)."""
+    plan = {r.name: r for r in runs}
+    unknown = [n for n in names if n not in plan]
+    if unknown:
+        raise SystemExit(f"--runs {' '.join(unknown)}: use among {', '.join(plan)}")
+    return [plan[n] for n in names]
+
+
 def checkpoint_of(run: Run) -> Path:
     return Path(run.args.log_dir) / run.args.exp_name / "checkpoint.pt"
 

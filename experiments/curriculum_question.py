@@ -37,7 +37,7 @@ import tyro
 from baselines.ppo import evaluation
 from baselines.ppo.checkpoints import load_checkpoint
 from baselines.ppo.evaluation import PAPER_CONTROL_GROUPS, PAPER_TABLE_II, pct
-from experiments.campaign import Run, checkpoint_of, describe
+from experiments.campaign import Run, checkpoint_of, choose, describe
 from experiments.from_scratch import VALIDATION_EPISODES, scratch_args, train
 from experiments.refine import VALIDATION_SEED, validate
 from ms_construction.curriculum import FINAL_STAGE, STAGE_NAMES
@@ -264,15 +264,12 @@ class Args:
 
 
 def main(args: Args) -> None:
-    plan = {r.name: r for r in question_runs(args.total_timesteps, args.num_envs, args.seed)}
-    unknown = [n for n in args.runs if n not in plan]
-    if unknown:
-        raise SystemExit(f"--runs {' '.join(unknown)}: use among {', '.join(plan)}")
-    runs = [plan[n] for n in args.runs]
+    arms = question_runs(args.total_timesteps, args.num_envs, args.seed)
+    runs = choose(arms, args.runs)
     for run in runs:
         print(describe(run))
     if args.report:
-        print(report(list(plan.values())))
+        print(report(arms))
     elif not args.dry_run:
         for run in runs:
             train(run, every=STAGE_STEPS, snapshots=SNAPSHOT_DIR / run.name)

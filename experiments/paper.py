@@ -51,7 +51,7 @@ from typing import Optional
 import tyro
 
 from baselines.ppo.args import Args as PPOArgs
-from experiments.campaign import CAMPAIGN_DIR, SHIPPED_DIR, Run, describe, run_or_resume
+from experiments.campaign import CAMPAIGN_DIR, SHIPPED_DIR, Run, choose, describe, run_or_resume
 from ms_construction.envs import TASK_ENV_IDS
 from ms_construction.curriculum import FINAL_STAGE, STAGE_NAMES
 
@@ -142,11 +142,7 @@ def main(args: Args) -> None:
         plan = {r.name: r for r in control_group_runs(args.total_timesteps, args.num_envs, args.seed)}
         runs = [plan[f"control_{t}"] for t in args.tasks]
     else:
-        plan = {r.name: r for r in general_runs(args.num_envs, args.seed)}
-        unknown = [n for n in args.runs if n not in plan]
-        if unknown:
-            raise SystemExit(f"--runs {' '.join(unknown)}: use among {', '.join(plan)}")
-        runs = [plan[n] for n in args.runs]
+        runs = choose(general_runs(args.num_envs, args.seed), args.runs)
     for run in runs:
         print(describe(run))
     if not args.dry_run:

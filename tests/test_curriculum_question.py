@@ -102,3 +102,8 @@ def test_an_arm_not_yet_at_its_budget_says_where_it_stands_and_how_it_goes_on(tm
             for r in cq.question_runs(num_envs=2)]
     body = cq.report(runs, tmp_path / "RESULTS.md")
     assert f"| 0 of {cq.BUDGET:,} (not evaluated: `{cq.COMMAND} --runs question_cp4` goes on) |" in body
+
+
+def test_an_unknown_arm_is_refused_with_the_arms_there_are():
+    with pytest.raises(SystemExit, match="--runs question_cp3: use among question_cp4, question_curriculum"):
+        cq.main(cq.Args(runs=("question_cp3",), dry_run=True))
