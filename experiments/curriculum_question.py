@@ -38,7 +38,7 @@ from baselines.ppo import evaluation
 from baselines.ppo.checkpoints import load_checkpoint
 from baselines.ppo.evaluation import PAPER_CONTROL_GROUPS, PAPER_TABLE_II, pct
 from experiments.campaign import Run, checkpoint_of, choose, describe
-from experiments.from_scratch import VALIDATION_EPISODES, scratch_args, train
+from experiments.from_scratch import VALIDATION_EPISODES, csv_column, moving_mean, scratch_args, train
 from experiments.refine import VALIDATION_SEED, validate
 from ms_construction.curriculum import FINAL_STAGE, STAGE_NAMES
 from ms_construction.envs import TASK_ENV_IDS
@@ -112,16 +112,6 @@ def progress_rows(run: Run) -> list[dict]:
         return list(csv.DictReader(f))
 
 
-def _column(rows: list[dict], key: str) -> np.ndarray:
-    return np.array([float(r[key]) if r.get(key) not in ("", None) else np.nan for r in rows])
-
-
-def _recent(x: np.ndarray, i: int) -> float:
-    """The mean of the SMOOTH values up to `i` that are there (NaN: no such episode ended in those iterations)."""
-    part = x[max(0, i - SMOOTH + 1):i + 1]
-    return float(np.nanmean(part)) if np.isfinite(part).any() else np.nan
-
-
 def draw_curves(runs: list[Run], validations: dict[str, dict[int, dict]], out: Path) -> None:
     """Per task, top: each arm's snapshots placed at cp4 on validation seeds, with 95% intervals; middle: its
     near-goal start radius (the share of the path out of the goal its starts are drawn from, widened as those
@@ -144,11 +134,11 @@ def draw_curves(runs: list[Run], validations: dict[str, dict[int, dict]], out: P
                 axes[0, col].errorbar(steps, 100 * p, yerr=100 * np.abs(ci.T - p), marker="o", capsize=3,
                                       color=colors[run.name], label=run.name)
             rows = progress_rows(run)
-            x = _column(rows, "global_step") / 1e6
-            axes[1, col].step(x, 100 * _column(rows, f"near_goal_radius_{kind}"), where="post", color=colors[run.name],
-                              label=run.name)
-            placed = _column(rows, f"ordinary_place_{kind}")
-            axes[2, col].plot(x, [100 * _recent(placed, i) for i in range(len(rows))], color=colors[run.name])
+            x = csv_column(rows, "global_step") / 1e6
+            axes[1, col].step(x, 100 * csv_column(rows, f"near_goal_radius_{kind}"), where="post",
+                              color=colors[run.name], label=run.name)
+            axes[2, col].plot(x, 100 * moving_mean(csv_column(rows, f"ordinary_place_{kind}"), SMOOTH),
+                              color=colors[run.name])
         for row in axes[:, col]:
             for i, stage in enumerate(STAGE_NAMES[:-1]):
                 row.axvspan(i * STAGE_STEPS / 1e6, (i + 1) * STAGE_STEPS / 1e6, color="gray", alpha=0.08 * (3 - i))
@@ -186,12 +176,12 @@ def training_table(runs: list[Run]) -> str:
         rows = progress_rows(run)
         if not rows:
             continue
-        last = len(rows) - 1
+        recent = lambda key: moving_mean(csv_column(rows, key), SMOOTH)[-1]  # noqa: E731
         lines.append(f"| {run.name} | {int(rows[-1]['global_step']):,} | {rows[-1]['stage']} | "
                      + " / ".join(f"{float(rows[-1].get(f'near_goal_radius_{k}') or 0):.1f}" for k in TASK_ENV_IDS)
                      + " | " + " / ".join(_whole_path_at(rows, k) for k in TASK_ENV_IDS)
-                     + f" | {fmt(_recent(_column(rows, 'near_goal_place_success'), last))} | "
-                     + " / ".join(fmt(_recent(_column(rows, f"ordinary_place_{k}"), last)) for k in TASK_ENV_IDS)
+                     + f" | {fmt(recent('near_goal_place_success'))} | "
+                     + " / ".join(fmt(recent(f"ordinary_place_{k}")) for k in TASK_ENV_IDS)
                      + " |")
     return "\n".join(lines)
 

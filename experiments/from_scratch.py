@@ -127,11 +127,11 @@ WINDOW = 50
 """iterations in the curve's moving average (100,000 env steps at 2,000 per iteration)."""
 
 
-def _column(rows: list[dict], key: str) -> np.ndarray:
+def csv_column(rows: list[dict], key: str) -> np.ndarray:
     return np.array([float(r[key]) if r.get(key) not in ("", None) else np.nan for r in rows])
 
 
-def _smooth(x: np.ndarray, window: int) -> np.ndarray:
+def moving_mean(x: np.ndarray, window: int) -> np.ndarray:
     """The mean of the last `window` values that are there (iterations in which no such episode ended are not)."""
     out = np.full_like(x, np.nan)
     for i in range(len(x)):
@@ -149,16 +149,16 @@ def draw_curve(rows: list[dict], out: Path) -> None:
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    steps = _column(rows, "global_step") / 1e6
+    steps = csv_column(rows, "global_step") / 1e6
     fig, ax = plt.subplots(figsize=(8, 4.2))
     for kind, color in zip(ELEMENT_KINDS, ("tab:blue", "tab:orange", "tab:green")):
-        ax.plot(steps, 100 * _smooth(_column(rows, f"ordinary_place_{kind}"), WINDOW), color=color,
+        ax.plot(steps, 100 * moving_mean(csv_column(rows, f"ordinary_place_{kind}"), WINDOW), color=color,
                 label=f"placed, ordinary resets: {kind}")
-    ax.plot(steps, 100 * _smooth(_column(rows, "near_goal_place_success"), WINDOW), color="gray", ls="--",
+    ax.plot(steps, 100 * moving_mean(csv_column(rows, "near_goal_place_success"), WINDOW), color="gray", ls="--",
             label="placed, near-goal starts (all tasks)")
     ax2 = ax.twinx()
     for kind, color in zip(ELEMENT_KINDS, ("tab:blue", "tab:orange", "tab:green")):
-        ax2.plot(steps, _column(rows, f"near_goal_radius_{kind}"), color=color, lw=0.8, ls=":",
+        ax2.plot(steps, csv_column(rows, f"near_goal_radius_{kind}"), color=color, lw=0.8, ls=":",
                  label=f"start radius: {kind} (right axis)")
     for step, what in STARTS.items():
         ax.axvline(step / 1e6, color="black", lw=0.8, ls="-.")
@@ -186,7 +186,7 @@ def report(run: Run, results: Path = Path("docs/RESULTS.md")) -> str:
         rows = list(csv.DictReader(f))
     done = int(rows[-1]["global_step"])
     late = [r for r in rows if int(r["global_step"]) > done - 200_000]
-    mean = lambda key: np.nanmean(_column(late, key)) if np.isfinite(_column(late, key)).any() else math.nan  # noqa: E731
+    mean = lambda key: np.nanmean(csv_column(late, key)) if np.isfinite(csv_column(late, key)).any() else math.nan  # noqa: E731
     fmt = lambda x: "-" if math.isnan(x) else f"{100 * x:.1f}"  # noqa: E731
     wall = training_wall_s(progress, run.args.num_envs * run.args.num_steps)
     draw_curve(rows, CURVE)
