@@ -188,7 +188,8 @@ def training_table(runs: list[Run]) -> str:
 
 def report(runs: list[Run], results: Path = Path("docs/RESULTS.md")) -> str:
     """Both arms at cp4 (`evaluated`), their curves (`draw_curves`), and the Table II-shaped comparison beside the
-    paper's rows, into the section `curriculum-question` of `results` and of PAGE (with the snapshots' table)."""
+    paper's rows, into the section `curriculum-question` of `results` and of PAGE (with where training stood and the
+    snapshots' table)."""
     validations, finals = {}, {}
     for run in runs:
         validations[run.name], finals[run.name] = evaluated(run)
@@ -217,9 +218,7 @@ def report(runs: list[Run], results: Path = Path("docs/RESULTS.md")) -> str:
     lines += ["", f"![curriculum question]({Path(*CURVE.parts[1:])})", "",
               f"*Made by `{COMMAND} --report`: top, each arm's snapshots placed at cp4 ({VALIDATION_EPISODES} "
               f"episodes per task from seed {VALIDATION_SEED:,}, 95% intervals); middle, its near-goal start radius; "
-              "bottom, its training episodes from ordinary resets placed at the tolerance of the stage it was in.*", "",
-              f"Where each arm's training stood at its end (its last {SMOOTH} iterations, at the tolerance of the "
-              "stage it was in; from its progress.csv):", "", training_table(runs)]
+              "bottom, its training episodes from ordinary resets placed at the tolerance of the stage it was in.*"]
     body = "\n".join(lines)
     update_section(results, "curriculum-question", body, "Results")
     steps = sorted(set().union(*validations.values()))
@@ -232,8 +231,10 @@ def report(runs: list[Run], results: Path = Path("docs/RESULTS.md")) -> str:
         snap.append(f"| {step:,} | {stage} | " + " | ".join(
             " / ".join(f"{100 * validations[r.name][step]['tasks'][t]['place_success']:.0f}" for t in tasks)
             if step in validations[r.name] else "-" for r in runs) + " |")
-    update_section(PAGE, "curriculum-question", body + "\n\nEach snapshot at cp4 (the top row of the figure):\n\n"
-                   + "\n".join(snap), TITLE)
+    training = (f"Where each arm's training stood at its end (its last {SMOOTH} iterations, at the tolerance of the "
+                f"stage it was in; from its progress.csv):\n\n{training_table(runs)}")
+    update_section(PAGE, "curriculum-question", f"{body}\n\n{training}\n\nEach snapshot at cp4 (the top row of the "
+                   "figure):\n\n" + "\n".join(snap), TITLE)
     return body
 
 
