@@ -91,9 +91,9 @@ def install_configurations() -> np.ndarray:
     return np.asarray(table, dtype=np.float32)
 
 
-def mirror_branch_mask(joint_signs, kinds: tuple[str, ...] = ("window",)) -> np.ndarray:
+def mirror_branch_mask(joint_signs, kinds: tuple[str, ...] = ELEMENT_KINDS) -> np.ndarray:
     """[kinds, slots, CONFIGS_PER_SLOT] bool: the installation configurations kept where a goal slot at y > 0 is met as
-    the mirror image, in the plane y = 0, of the slot at y < 0 it mirrors (a policy with `mirror_windows`): of each
+    the mirror image, in the plane y = 0, of the slot at y < 0 it mirrors (a policy with `mirror_twins`): of each
     such slot of `kinds`, those whose mirror image (joints times `joint_signs`) has the mirrored slot's least folded
     configuration's joints 1-5, so that the two differ in joint 6 alone (by half a turn for a window, whose head is
     up at every opening); every configuration elsewhere. Without it the nearest configuration in the mirror is often
@@ -109,7 +109,7 @@ def mirror_branch_mask(joint_signs, kinds: tuple[str, ...] = ("window",)) -> np.
     return keep
 
 
-def mirror_twins(kinds: tuple[str, ...] = ("window",)) -> np.ndarray:
+def mirror_twins(kinds: tuple[str, ...] = ELEMENT_KINDS) -> np.ndarray:
     """[kinds, slots] int: of each goal slot of `kinds` at y > 0, the slot at its mirror image in the plane y = 0
     (-1: none, or not of `kinds`)."""
     goals = load_manifest()["goal_poses"]

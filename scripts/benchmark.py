@@ -222,23 +222,31 @@ def held_training_envs():
         ppo.make_envs = make_envs
 
 
-TRAINING = (("free", "none"), ("free", "icm"), ("held", "none"), ("held", "icm"))
-"""the PPO trainings measured against the simulation alone: free-running or held steps, ICM off or on."""
+TRAINING = (("free", "none"), ("free", "icm"), ("held", "none"), ("held", "icm"), ("free", "recipe"))
+"""the PPO trainings measured against the simulation alone: free-running or held steps, ICM off or on (the paper's
+learner: sparse reward), and the from-scratch recipe (experiments/from_scratch.py: the dense reward, its
+observation's joint moves, near-goal starts, its rollout and update sizes)."""
 
 
 def ppo_steps_per_second(iterations: int, backend: str, num_envs: Optional[int] = None, held: bool = False,
                          curiosity: Optional[str] = None) -> dict:
-    """baselines/ppo/ppo.py on GENERAL with its defaults (but `num_envs` and `curiosity`, when given): the median env
-    steps/s of `iterations` iterations (rollout and update; the first, start-up, iteration and the last,
+    """baselines/ppo/ppo.py on GENERAL with its defaults but the paper's sparse reward (and `num_envs` and `curiosity`,
+    when given), or the from-scratch recipe (`curiosity="recipe"`): the median env steps/s of `iterations` iterations (rollout and update; the first, start-up, iteration and the last,
     whose final evaluation is cut to one step, left out). No checkpoints."""
     import csv
 
     from baselines.ppo import ppo
 
+    from experiments.from_scratch import scratch_args
+
     with tempfile.TemporaryDirectory() as log_dir:
-        run_args = ppo.Args.of(env_id=GENERAL, sim_backend=backend, num_envs=num_envs, num_eval_envs=1, num_eval_steps=1,
-                            eval_freq=10**9, save_model=False, log_dir=log_dir, exp_name="benchmark",
-                            **({} if curiosity is None else dict(curiosity=curiosity)))
+        common = dict(sim_backend=backend, num_eval_envs=1, num_eval_steps=1, eval_freq=10**9, save_model=False,
+                      log_dir=log_dir, exp_name="benchmark")
+        if curiosity == "recipe":
+            run_args = scratch_args(num_envs, cuda=backend == "physx_cuda", **common)
+        else:
+            run_args = ppo.Args.of(env_id=GENERAL, num_envs=num_envs, reward_mode="sparse", **common,
+                                   **({} if curiosity is None else dict(curiosity=curiosity)))
         run = ppo.setup(run_args)
         run.args.total_timesteps = run.args.num_envs * run.args.num_steps * (iterations + 2)
         with held_training_envs() if held else nullcontext():
@@ -283,7 +291,7 @@ def cpu_sections(args: Args) -> str:
         "### Env processes",
         "",
         "ms_construction.vector_env.CPUVectorEnv: one env per process, env 0 in the learner's (this one) and the "
-        "others in worker processes, same-step resets, sparse reward (the learner's default), uniform random actions, "
+        "others in worker processes, same-step resets, sparse reward (the paper's; the least a step can cost), uniform random actions, "
         f"{args.vector_steps} vector steps per measurement; env steps/s = envs x vector steps per second; medians of "
         f"{args.rounds} rounds. \"Held\": the element held by the plate from every reset on (as in most steps of a "
         "trained agent). \"Every env in a worker\": the same envs with `first_env_in_process=False`, the layout "
@@ -293,12 +301,14 @@ def cpu_sections(args: Args) -> str:
         "",
         "### PPO training against simulating alone",
         "",
-        f"baselines/ppo/ppo.py training on {GENERAL}, its defaults (sparse reward, {args.train_iterations} timed "
-        "iterations after an untimed one, each its rollout and its PPO update, and ICM's where on) but for the number "
-        "of envs and the curiosity; free-running steps, or the element held in every training env from every reset "
-        "on. \"Share\": training's env steps/s over those of the same processes simulating alone (the table above) "
-        f"in the same round; median (range) of {args.rounds} rounds that alternate between them. Target: 0.6 or more "
-        "(stretch 0.8).",
+        f"baselines/ppo/ppo.py training on {GENERAL}: its defaults but the paper's sparse reward, the number of envs "
+        "and the curiosity, or (curiosity \"recipe\") the from-scratch recipe (experiments/from_scratch.py: its dense "
+        "reward, the joint moves in its observation, near-goal starts, 2,000-step rollouts); "
+        f"{args.train_iterations} timed iterations after an untimed one, each its rollout and its PPO update (and ICM's "
+        "where on); free-running steps, or the element held in every training env from every reset on. \"Share\": "
+        "training's env steps/s over those of the same processes simulating alone with the sparse reward (the table "
+        f"above) in the same round; median (range) of {args.rounds} rounds that alternate between them. Target: 0.6 or "
+        "more (stretch 0.8), the recipe included.",
         "",
         training,
         "",

@@ -154,7 +154,7 @@ def test_critic_warmup_moves_the_value_only_and_obs_norm_is_kept_in_the_checkpoi
 
 
 def test_rotation_features_are_the_same_for_q_and_minus_q_and_sit_where_the_state_has_quaternions():
-    from ms_construction.envs.construction_env import STATE_QUATERNION_STARTS
+    from ms_construction.envs.state_layout import STATE_QUATERNION_STARTS
 
     env = gym.make("ConstructionPickPlace-v1", obs_mode="state_dict", num_envs=1)
     obs_dict, _ = env.reset(seed=0)

@@ -17,16 +17,21 @@ from baselines.ppo.checkpoints import CSV_FIELDS
 from experiments import from_scratch as fs
 
 
-def test_the_recipe_learns_from_reward_alone():
-    [run] = fs.scratch_runs(num_envs=2)
+def test_the_recipe_learns_from_reward_alone_on_the_tasks_default_reward_from_nothing():
+    run = fs.seed_run(2, num_envs=2)
     a = run.args
     ppo.validate(a)
-    assert a.env_id == "ConstructionPickPlace-v1" and a.stages.curriculum == ("cp4",) and a.total_timesteps <= 20_000_000
+    assert a.env_id == "ConstructionPickPlace-v1" and a.stages.curriculum == ("cp4",) and a.total_timesteps <= 10_000_000
+    assert (a.seed, a.exp_name, run.shipped) == (2, "scratch_s2", None) and "--seed 2" in run.command
+    # the task's own reward and sampling: the default reward mode, nothing weighs a task type or a goal slot
+    assert a.reward_mode == ppo.Args().reward_mode and a.task_weights is None and a.starts.goal_slot_weights is None
     assert a.reward_mode == "normalized_dense" and a.starts.near_goal_share > 0 and a.ppo.success_value == "absorbing"
     # nothing from the expert: no demonstrations, no warm start, no residual base, no bank of expert states
     assert a.warm.demos == () and a.warm.bc_coef == 0 and a.checkpoint is None and a.warm.residual_of is None and a.starts.start_states is None
     assert a.num_envs * a.num_steps == 2000
-    assert "demonstrations: none" in run.method and run.shipped.name == "scratch_general_agent.pt"
+    assert "demonstrations: none" in run.method
+    [campaign_run] = fs.scratch_runs(num_envs=2)
+    assert campaign_run.shipped.name == "scratch_general_agent.pt" and campaign_run.args.total_timesteps == fs.CAMPAIGN_BUDGET
     # written down as one ppo.py command, it is the same run
     assert tyro.cli(ppo.Args, args=command_line(a)) == a
 
@@ -90,21 +95,6 @@ def test_a_tiny_run_ships_before_its_end_with_a_record_that_says_where_it_stands
     campaign.ship(longer, before_the_end=True)
     record = torch.load(run.shipped, weights_only=False)["campaign"]["record"]
     assert record["env steps"] == "80 (of the 160 planned)" and "demonstrations: none" in record["method"]
-    # the diagnosis: where its policy takes elements it starts holding near their goals, a row per task and seed
-    table = fs.near_goal_rollouts(campaign.checkpoint_of(run), radius=0.0, seeds=1, steps=2)
-    rows = [line for line in table.splitlines()[2:]]
-    assert [r.split(" | ")[0] for r in rows] == ["| CeilingInstallation-v1", "| WindowInstallation-v1", "| Flooring-v1"]
-    assert all(" | yes | " in r for r in rows), "radius 0 starts installed: placed at the first step"
-    assert all(float(r.split(" | ")[7].split(" / ")[1]) < 0.02 for r in rows), "and on its plate: not behind it"
-    # a fresh policy's mean lies near 0: never past the action bounds
-    assert all(r.rstrip(" |").split(" | ")[-1].startswith("0.00; ") for r in rows), rows
-    # and from ordinary resets (test seeds): a fresh policy grasps nothing and leaves the element on the table
-    table = fs.ordinary_rollouts(campaign.checkpoint_of(run), seeds=1)
-    rows = [line.strip("| ").split(" | ") for line in table.splitlines()[2:]]
-    assert [r[0] for r in rows] == ["CeilingInstallation-v1", "WindowInstallation-v1", "Flooring-v1"]
-    assert all(r[1] == "1000000" and r[2] in ("0", "1", "2", "3") and r[3] == "-" and r[4] == "no" and r[5] == "-"
-               for r in rows), rows
-    assert all(r[8] == "-" and "staging_table" in r[9] for r in rows), rows  # never held: no lag behind the plate
 
 
 def test_the_report_draws_the_curve_and_writes_the_section(tmp_path, monkeypatch):
@@ -148,49 +138,6 @@ def test_the_shipped_agent_from_reward_alone_has_no_demonstrations_in_it_and_pla
     out = tmp_path / "eval.json"
     evaluation.main(evaluation.Args(checkpoint=path, env_id="Flooring-v1", episodes=1, workers=1, json=out))
     assert json.loads(out.read_text())["episodes"] == 1
-
-
-def test_the_continuation_table_compares_each_probe_s_evaluation_with_the_control_s(tmp_path, monkeypatch):
-    from experiments import probes
-
-    monkeypatch.setattr(probes, "PROBE_DIR", tmp_path)
-    windows = [dict(seed=i, goal_slot=i % 3, placed=i % 3 < 2) for i in range(6)]  # the third opening lost
-    task = lambda pick, place: dict(pick_success=pick, place_success=place, place_success_ci95=[0.0, 0.5],  # noqa: E731
-                                    episode_results=windows)
-    for name, placed in (("control_campaign", 0.1), ("probeM_paths", 0.2)):
-        (tmp_path / f"{name}_eval.json").write_text(json.dumps(dict(global_step=2_012_000, tasks={
-            "CeilingInstallation-v1": task(1.0, 0.0), "WindowInstallation-v1": task(0.5, 0.0), "Flooring-v1": task(0.9, placed)})))
-    table = probes.continuation_table()
-    rows = [line for line in table.splitlines() if line.startswith("| control") or line.startswith("| probe")]
-    assert [r.split(" | ")[0] for r in rows] == ["| control_campaign", "| probeM_paths"], "in CONTINUATIONS' order, evaluated ones only"
-    assert "| 2,012,000 | 100% / 50% / 90% | 0.0 [0.0, 50.0] / 0.0 [0.0, 50.0] / 20.0 [0.0, 50.0] | 2/2, 2/2, 0/2 |" in rows[1]
-    assert "--carry-along-paths" in table and "python -m experiments.probes --evaluate probeM_paths" in table
-
-
-def test_each_probe_s_command_is_the_recipe_its_start_ran_with_its_own_change_and_the_adopted_one_is_the_recipe():
-    """A probe's documented command is the recipe as the campaign ran it before the probe's start (RECIPE_BEFORE
-    undoes each later change: a probe of the fifth start shows none of the flags the recipe gained since) with the
-    probe's change; the continuation the campaign went on from last ran the recipe as it is now (what `adopt`
-    demands), and each change of RECIPE_BEFORE is at a start of STARTS."""
-    from experiments import probes
-
-    def ran(name: str) -> dict:
-        command = probes.CONTINUATIONS[name][1].split(" (")[0]
-        return tyro.cli(ppo.Args, args=command.split()[2:]).flat()
-
-    assert set(fs.RECIPE_BEFORE) <= set(fs.STARTS)
-    assert fs.recipe_before(fs.BUDGET) == {}
-    now = fs.scratch_args(2).flat()
-    for step, before in fs.RECIPE_BEFORE.items():
-        assert all(now[k] != v or k == "near_goal_share" for k, v in before.items()), (step, before)
-    fifth = ran("probeP_lag")
-    assert fifth["carry_along_paths"] and not fifth["obs_path_offset"] and not fifth["carry_keeps_to_vias"]
-    assert fifth["task_weights"] is None and fifth["goal_slot_weights"] is None and fifth["carry_counts_lag"]
-    sixth = ran("probeV_reach_starts05")
-    assert sixth["near_goal_share"] == 0.2 and sixth["reach_toward_path_sides"] and sixth["reach_start_share"] == 0.5
-    adopted = [name for name, (_, how, _start) in probes.CONTINUATIONS.items() if "(adopted" in how][-1]
-    differ = {k for k, v in ran(adopted).items() if v != now[k]}
-    assert differ <= set(fs.ADOPT_MAY_DIFFER) | {"checkpoint", "num_eval_envs"}, (adopted, differ)
 
 
 def test_the_campaign_keeps_snapshots_and_ships_the_one_that_validates_best(tmp_path, monkeypatch):
@@ -240,58 +187,20 @@ def test_the_campaign_keeps_snapshots_and_ships_the_one_that_validates_best(tmp_
     assert len(list((tmp_path / "snapshots").glob("*.pt"))) == 2
 
 
-def test_the_campaign_goes_on_from_a_probe_of_its_recipe_with_its_steps_counted_on(tmp_path):
-    """`--adopt`: a probe that went on from the campaign's checkpoint with the recipe as it now is becomes the
-    campaign's checkpoint (its weights, its progress counted on from the start's steps and iterations, the recipe's
-    args) and its CSV rows follow the campaign's, counted on; the campaign then resumes from there. A probe of another
-    recipe, or one that started elsewhere, is refused. The probe's snapshots join the campaign's, counted on."""
-    small = dict(num_envs=2, num_steps=20, num_minibatches=2, update_epochs=1, num_eval_envs=1, eval_freq=100,
-                 checkpoint_freq=1, env_id="Flooring-v1", task_weights=None, log_dir=str(tmp_path))
-    [run] = fs.scratch_runs(num_envs=2)
-    run = dataclasses.replace(run, args=fs.scratch_args(**small, exp_name="campaign", total_timesteps=80), shipped=None)
-    campaign.run_or_resume(run)
-    start = campaign.checkpoint_of(run)
-    probe_args = fs.scratch_args(**small, exp_name="probe", total_timesteps=120, checkpoint=str(start), near_goal_radius=1.0)
-    ppo.main(probe_args.replace(gamma=0.9, exp_name="other_recipe", total_timesteps=40))
-    with pytest.raises(SystemExit, match="another recipe.*gamma"):
-        fs.adopt(run, tmp_path / "other_recipe")
-    ppo.main(probe_args.replace(checkpoint=None, exp_name="elsewhere", total_timesteps=40))
-    with pytest.raises(SystemExit, match="did not start from the campaign's checkpoint"):
-        fs.adopt(run, tmp_path / "elsewhere")
-    ppo.main(probe_args.replace(total_timesteps=80))
-    (tmp_path / "probe" / fs.PROBE_SNAPSHOTS).mkdir()
-    shutil.copyfile(tmp_path / "probe" / "checkpoint.pt", tmp_path / "probe" / fs.PROBE_SNAPSHOTS / "step_80.pt")
-    ppo.main(probe_args.replace(resume=str(tmp_path / "probe" / "checkpoint.pt"), extend=True))
-    probe = torch.load(tmp_path / "probe" / "checkpoint.pt", weights_only=False)
-    fs.adopt(run, tmp_path / "probe", snapshots=tmp_path / "snapshots")
-    snapshot = torch.load(tmp_path / "snapshots" / "checkpoint_160.pt", weights_only=False)
-    assert snapshot["progress"]["global_step"] == 80 + 80 and snapshot["args"] == run.args.flat()
-    assert [p.name for p in (tmp_path / "snapshots").iterdir()] == ["checkpoint_160.pt"]
-    adopted = torch.load(start, weights_only=False)
-    assert adopted["progress"]["global_step"] == 80 + 120 and adopted["progress"]["iteration"] == 2 + 3
-    assert adopted["progress"]["near_goal_radius"] == probe["progress"]["near_goal_radius"]
-    assert all(torch.equal(v, probe["agent"][k]) for k, v in adopted["agent"].items())
-    assert adopted["args"] == run.args.flat()
-    with open(start.with_name("progress.csv")) as f:
-        steps = [int(r["global_step"]) for r in csv.DictReader(f)]
-    assert steps == [40, 80, 120, 160, 200]
-    longer = dataclasses.replace(run, args=run.args.replace(total_timesteps=240))
-    campaign.run_or_resume(longer)
-    assert torch.load(start, weights_only=False)["progress"]["global_step"] == 240
-
-
-def test_the_via_landscape_shows_the_cut_across_paying_only_at_the_old_weight():
-    """experiments/via_landscape.py's path table: for every -pi path of the window opening at y = +0.85, the point that
-    cuts across the detour measures nearer the goal than the lift at the paths' deviation weight, and farther than the
-    table end with `carry_keeps_to_vias`; the goal's back-off is nearer than the via under both."""
-    from experiments import via_landscape
-
-    rows = [line.split("|")[1:-1] for line in via_landscape.path_table().splitlines()[2:]]
-    assert len(rows) == 8
-    for cells in rows:
-        table, lift, via, back_off, cut = map(float, cells[2:])
-        assert back_off < via < lift
-        if cells[1].strip() == "carry_keeps_to_vias":
-            assert cut > table
-        else:
-            assert cut < lift
+def test_the_seeds_report_has_a_row_per_seed_and_says_how_a_seed_not_started_starts(tmp_path, monkeypatch):
+    run_dir = tmp_path / "campaign" / "scratch_s1"
+    run_dir.mkdir(parents=True)
+    with open(run_dir / "progress.csv", "w", newline="") as f:
+        w = csv.DictWriter(f, fieldnames=CSV_FIELDS)
+        w.writeheader()
+        for i in range(1, 151):
+            w.writerow(dict(global_step=2000 * i, iteration=i, stage="cp4", episodes=10, sps=500, near_goal_place_success=0.5,
+                            near_goal_radius_ceiling=0.3, near_goal_radius_window=0.6, near_goal_radius_flooring=1.0,
+                            ordinary_place_ceiling=0.0, ordinary_place_window=0.1, ordinary_place_flooring=""))
+    monkeypatch.setattr(fs, "SEEDS_CURVE", tmp_path / "images" / "seeds.png")
+    results = tmp_path / "RESULTS.md"
+    body = fs.seeds_report(results, log_dir=tmp_path / "campaign")
+    assert "| 1 | 300,000 / 10,000,000 | 0.2 h | 0.3 / 0.6 / 1.0 | 0.0 / 10.0 / - | 50.0 |" in body
+    assert "| 2 | not started: `python -m experiments.from_scratch --seed 2` |" in body
+    assert (tmp_path / "images" / "seeds.png").stat().st_size > 0
+    assert "<!-- begin from-scratch-seeds (generated) -->" in results.read_text()

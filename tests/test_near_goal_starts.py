@@ -1,24 +1,21 @@
 """The dense reward's carry term and the start-state curriculum (`set_near_goal_starts`), both built from IK of the
 site's poses alone (ms_construction/goal_configurations.py).
 
-- The carry distance is 0 with the element installed, whatever its turn on the plate, and falls at every step of
-  a straight joint move from a lift above the staging table, on either turret side, to every installation
-  configuration of every goal slot (the turret turning the way its limits allow: through 0, never across +-pi).
-- With `carry_along_paths` it is measured along the start paths: their length left, falling along every one,
-  and a shortcut straight from the lift to the goal pays less than the path.
-- With `reach_in_joint_space` the reach toward the element is measured in joint space to the configurations that
-  grasp it on the staging table: it falls on the way there and they grasp. With `reach_toward_path_sides` as well,
-  only the configurations on the turret sides usable start paths of the goal slot leave from count; with
-  `reach_avoids_vias`, only those of the paths without a planned via, where there are such.
+- The straight joint move (`install_offset`, observed) is 0 with the element installed, whatever its turn on the
+  plate, and falls at every step of a straight joint move from a lift above the staging table, on either turret
+  side, to every installation configuration of every goal slot (the turret turning the way its limits allow).
+- The carry distance is measured along the start paths: their length left, falling along every one, and a
+  shortcut straight from the lift to the goal pays less than the path.
+- The reach toward the element is half joint-space, to the configurations that grasp it on the staging table from
+  the turret sides usable start paths of the goal slot leave from: it falls on the way there and they grasp.
 - Reach starts (`reach_start_share`) pose the arm on the way to the table from the side the goal slot's paths leave
   from, the element untouched.
 - `set_reach_starts` carries the start-state curriculum back through the grasp: radius 0 starts right above the
-  element on the side of the direct paths, which a still arm grasps at once; wider radii start farther back along
-  the reach path; near-goal starts take the place of reach starts drawn before them.
-- With `carry_counts_lag` the carry distance also counts how far a jammed element trails its plate.
-- With `carry_keeps_to_vias` a carry that cuts across the planned via's detour never pays, and the carry is measured
-  along the paths from the turret side the element was grasped from (set by the grasp or the near-goal start,
-  cleared by a reset, kept in the env state).
+  element, which a still arm grasps at once; wider radii start farther back along the reach path; near-goal starts
+  take the place of reach starts drawn before them.
+- A carry that cuts across a planned via's detour never pays, and the carry is measured along the paths from the
+  turret side the element was grasped from (set by the grasp or the near-goal start, cleared by a reset, kept in
+  the env state).
 - The path-offset observation points along the start path: following it places the ceiling panel.
 - A near-goal start is a valid state: the element held against the plate, nothing penetrating, still after a
   step; radius 0 starts it installed (placed at the first step), and evaluation-style resets are untouched.
@@ -43,12 +40,15 @@ def _hold(u, turn_deg: float) -> torch.Tensor:
 
 
 @pytest.mark.parametrize("kind", ELEMENT_KINDS)
-def test_carry_distance_falls_on_every_carry_from_either_side_and_is_zero_installed(kind):
+def test_the_straight_joint_move_falls_on_every_carry_from_either_side_and_is_zero_installed(kind):
     env = make_env(TASK_ENVS[kind], control_mode="pd_joint_delta_pos", reward_mode="dense")
     env.reset(seed=0)
     u, k = env.unwrapped, ELEMENT_KINDS.index(kind)
-    install, lift, period = install_configurations(), lift_configurations(), symmetry_period(kind)
+    # the installation configurations it measures to: a slot that mirrors another keeps its twin's mirror branch
+    install, lift, period = u.geometry.install_q.cpu().numpy(), lift_configurations(), symmetry_period(kind)
     u.set_held(True)
+    u.picked[:] = True  # held since its grasp: the element's own turn on the plate counts
+    straight = lambda: float(u.install_offset().abs().sum())  # noqa: E731
     for slot in range(install.shape[1]):
         u.goal_slot[:] = slot
         for side in range(2):
@@ -56,7 +56,7 @@ def test_carry_distance_falls_on_every_carry_from_either_side_and_is_zero_instal
                 u.gripper.hold_pose_in_tcp[:] = _hold(u, turn)
                 start = lift[k, side].astype(np.float64)
                 u.agent.robot.set_qpos(torch.tensor(start[None], dtype=torch.float32))
-                assert float(u.carry_distance()[0]) < u.CARRY_RANGE, "the carry term pulls from the table already"
+                assert straight() < u.CARRY_RANGE, "a straight move from the table is within the carry's range"
                 # to each installation configuration, the nearest first (the one the carry term measures at the start)
                 wrap = lambda a: (a + period / 2) % period - period / 2  # noqa: E731
                 goals = sorted(install[k, slot].astype(np.float64), key=lambda g: np.abs(g[:5] - start[:5]).sum()
@@ -72,7 +72,7 @@ def test_carry_distance_falls_on_every_carry_from_either_side_and_is_zero_instal
                     for f in np.linspace(0.0, 1.0, 30):
                         q = line_start + f * (goal - line_start)
                         u.agent.robot.set_qpos(torch.tensor(q[None], dtype=torch.float32))
-                        dists.append(float(u.carry_distance()[0]))
+                        dists.append(straight())
                     assert dists[-1] < 1e-3, (slot, c, side, turn, dists[-1])
                     if c == 0:
                         assert np.all(np.diff(dists) < 0), (slot, side, turn, np.round(dists, 3))
@@ -110,7 +110,7 @@ def test_near_goal_starts_are_valid_held_states(kind):
         dists.append(float(info["place_dist"][0]))
         # held from the side its start path leaves the table from, one the goal slot has a usable path from
         side = int(u.carry_side[0])
-        assert side in (0, 1) and u._start_paths["usable"][u.task_id[0], u.goal_slot[0], side::2].any()
+        assert side in (0, 1) and u.geometry.paths["usable"][u.task_id[0], u.goal_slot[0], side::2].any()
     assert max(dists) > 0.3, "radius 1 starts reach well away from the goal"
     # radius 0: installed, placed at the first step
     u.set_near_goal_starts(1.0, 0.0)
@@ -129,36 +129,39 @@ def test_near_goal_starts_are_valid_held_states(kind):
 
 
 def test_the_env_s_batched_path_points_are_the_reference_s():
-    from ms_construction.envs.construction_env import ConstructionTaskEnv
+    from ms_construction.envs.carry_geometry import path_points
     from ms_construction.goal_configurations import path_point, start_paths
 
     wp = start_paths().waypoints.reshape(-1, 5, 6)
     frac = torch.linspace(0, 1, len(wp))
-    got = ConstructionTaskEnv._path_points(torch.tensor(wp), frac)
+    got = path_points(torch.tensor(wp), frac)
     for i in range(len(wp)):
         np.testing.assert_allclose(got[i].numpy(), path_point(wp[i].astype(np.float64), float(frac[i])), atol=1e-5)
 
 
 @pytest.mark.parametrize("kind", ELEMENT_KINDS)
 def test_the_path_distance_falls_along_every_start_path_and_a_shortcut_off_it_pays_less(kind):
-    """`carry_along_paths`: along each usable start path of every goal slot (from the table end to the goal, the
+    """Along each usable start path of every goal slot (from the table end to the goal, the
     element turned on the plate or not) the carry distance is at most the path's length left (the least over the
     slot's paths: it falls along the one it measures) and 0 at the goal; a straight joint move from the lift above
     the table toward the goal (the carry that runs into the barriers) pays less than the same step along the path."""
     from ms_construction.goal_configurations import path_point, start_paths
 
-    env = make_env(TASK_ENVS[kind], control_mode="pd_joint_delta_pos", reward_mode="dense", carry_along_paths=True)
+    env = make_env(TASK_ENVS[kind], control_mode="pd_joint_delta_pos", reward_mode="dense")
     env.reset(seed=0)
     u, k, paths = env.unwrapped, ELEMENT_KINDS.index(kind), start_paths()
     u.set_held(True)
+    u.picked[:] = True
 
     def distance_at(q: np.ndarray) -> float:
         u.agent.robot.set_qpos(torch.tensor(q[None], dtype=torch.float32))
         return float(u.carry_distance()[0])
 
     checked = 0
-    for slot, c, side in zip(*np.nonzero(paths.usable[k])):
+    usable = u.geometry.paths["usable"][k].view(paths.usable.shape[1:]).cpu().numpy()  # the mirror branch's alone
+    for slot, c, side in zip(*np.nonzero(usable)):
         u.goal_slot[:] = int(slot)
+        u.carry_side[:] = int(side)  # grasped from the path's side
         wp = paths.waypoints[k, slot, c, side].astype(np.float64)
         length = np.abs(np.diff(wp, axis=0)).sum()
         for turn in (0.0, 9.0):
@@ -182,16 +185,17 @@ def test_the_path_distance_falls_along_every_start_path_and_a_shortcut_off_it_pa
 
 @pytest.mark.parametrize("kind", ELEMENT_KINDS)
 def test_the_joint_space_reach_leads_to_configurations_that_grasp_and_pays_on_the_way(kind):
-    """`reach_in_joint_space`: from the rest pose a straight joint move to either table grasp configuration (turret at
-    about +pi or -pi) lowers the reach distance at every step when it heads for the nearer one, raises the dense
-    reward over the move, and ends grasping the element."""
-    env = make_env(TASK_ENVS[kind], control_mode="pd_joint_delta_pos", reward_mode="dense", reach_in_joint_space=True)
+    """From the rest pose a straight joint move to a table grasp configuration (turret at about +pi or -pi) on a side
+    the goal slot's start paths leave from lowers the reach distance to 0, at every step when it heads for the nearer
+    one, raises the dense reward over the move, and ends grasping the element."""
+    env = make_env(TASK_ENVS[kind], control_mode="pd_joint_delta_pos", reward_mode="dense")
     u, k = env.unwrapped, ELEMENT_KINDS.index(kind)
     env.reset(seed=0)
     rest = u.agent.robot.get_qpos()[0].numpy().astype(np.float64)
     table = lift_configurations(0.0)[k].astype(np.float64)
-    nearer = int(np.argmin(np.abs(table[:, :5] - rest[:5]).sum(-1)))
-    for side in (nearer, 1 - nearer):
+    sides = _path_sides(kind, int(u.goal_slot[0]))
+    nearer = min(sides, key=lambda side: np.abs(table[side, :5] - rest[:5]).sum())
+    for side in sides:
         env.reset(seed=0)
         dists, rewards = [], []
         for f in np.linspace(0.0, 1.0, 20):
@@ -216,17 +220,13 @@ def _path_sides(kind: str, slot: int) -> list[int]:
 
 
 def test_the_reach_toward_path_sides_pays_for_the_turret_side_the_goal_slot_s_start_paths_leave_from():
-    """With `reach_toward_path_sides` the reach distance is 0 at the table grasp configuration of a turret side a
+    """The reach distance is 0 at the table grasp configuration of a turret side a
     usable start path of the goal slot leaves from and the full joint move away at a side none does, so the dense
     reward pays more for arriving where the carry can go on (the ceiling openings beside the wall only from +pi, the
-    floor recesses only from -pi); without it both sides count alike. It needs `reach_in_joint_space`."""
-    with pytest.raises(ValueError, match="reach_in_joint_space"):
-        make_env("WindowInstallation-v1", reach_toward_path_sides=True)
+    floor recesses only from -pi)."""
     one_sided = {side: 0 for side in (0, 1)}
     for kind in ("ceiling", "flooring"):
-        env = make_env(TASK_ENVS[kind], control_mode="pd_joint_delta_pos", reward_mode="dense", reach_in_joint_space=True,
-                       reach_toward_path_sides=True)
-        plain = make_env(TASK_ENVS[kind], control_mode="pd_joint_delta_pos", reward_mode="dense", reach_in_joint_space=True)
+        env = make_env(TASK_ENVS[kind], control_mode="pd_joint_delta_pos", reward_mode="dense")
         table = lift_configurations(0.0)[ELEMENT_KINDS.index(kind)]  # [side: +pi, -pi, 6]
         apart = float(np.abs(table[0, :5] - table[1, :5]).sum())
         for slot in range(3):
@@ -234,79 +234,31 @@ def test_the_reach_toward_path_sides_pays_for_the_turret_side_the_goal_slot_s_st
             if len(sides) == 1:
                 one_sided[sides[0]] += 1
             reach, reward = {}, {}
-            for e in (env, plain):
-                e.reset(seed=0)
+            env.reset(seed=0)
             for side in (0, 1):
-                for e in (env, plain):
-                    e.unwrapped.goal_slot[:] = slot
-                    e.unwrapped.agent.robot.set_qpos(torch.tensor(table[side][None], dtype=torch.float32))
                 u = env.unwrapped
+                u.goal_slot[:] = slot
+                u.agent.robot.set_qpos(torch.tensor(table[side][None], dtype=torch.float32))
                 reach[side] = float(u.reach_distance()[0])
                 reward[side] = float(u.compute_dense_reward(None, torch.zeros(1, 6), u.evaluate())[0])
-                assert float(plain.unwrapped.reach_distance()[0]) < 1e-4, "without the option either side counts"
             for side in (0, 1):
                 assert reach[side] < 1e-4 if side in sides else reach[side] == pytest.approx(apart, rel=1e-4), (kind, slot, reach)
             if len(sides) == 1:
                 assert reward[sides[0]] > reward[1 - sides[0]], (kind, slot, reward)
         env.close()
-        plain.close()
     assert one_sided[0] > 0 and one_sided[1] > 0, "slots reached from one side only, of each side"
 
 
-def test_reach_avoids_vias_pays_only_for_the_side_of_the_direct_paths_of_a_slot_also_reached_through_a_via():
-    """The window opening at y = +0.85 is reached directly from the turret's +pi side and, through a planned via, from
-    -pi: `reach_toward_path_sides` counts both, `reach_avoids_vias` only +pi (the reach distance 0 there and the full
-    joint move away at -pi, so the dense reward pays more at +pi). Slots without a via keep their sides. It needs
-    `reach_toward_path_sides`."""
-    from ms_construction.goal_configurations import start_paths
-
-    with pytest.raises(ValueError, match="reach_toward_path_sides"):
-        make_env("WindowInstallation-v1", reach_in_joint_space=True, reach_avoids_vias=True)
-    paths, k = start_paths(), ELEMENT_KINDS.index("window")
-    via_slots = [slot for slot in range(3) if paths.planned[k, slot].any()]
-    assert via_slots, "a window slot is reached through a planned via"
-    options = dict(control_mode="pd_joint_delta_pos", reward_mode="dense", reach_in_joint_space=True,
-                   reach_toward_path_sides=True)
-    avoiding, both = make_env("WindowInstallation-v1", reach_avoids_vias=True, **options), make_env("WindowInstallation-v1", **options)
-    table = lift_configurations(0.0)[k]  # [side: +pi, -pi, 6]
-    apart = float(np.abs(table[0, :5] - table[1, :5]).sum())
-    for slot in range(3):
-        direct = [side for side in (0, 1) if (paths.usable[k, slot, :, side] & ~paths.planned[k, slot, :, side]).any()]
-        reach, reward = {}, {}
-        for side in (0, 1):
-            for e in (avoiding, both):
-                e.reset(seed=0)
-                e.unwrapped.goal_slot[:] = slot
-                e.unwrapped.agent.robot.set_qpos(torch.tensor(table[side][None], dtype=torch.float32))
-            u = avoiding.unwrapped
-            reach[side] = float(u.reach_distance()[0])
-            reward[side] = float(u.compute_dense_reward(None, torch.zeros(1, 6), u.evaluate())[0])
-            if slot in via_slots:
-                assert float(both.unwrapped.reach_distance()[0]) < 1e-4, "without the option the via's side counts too"
-            else:
-                assert float(both.unwrapped.reach_distance()[0]) == pytest.approx(reach[side], abs=1e-5), (slot, side)
-        for side in (0, 1):
-            assert reach[side] < 1e-4 if side in direct else reach[side] == pytest.approx(apart, rel=1e-4), (slot, reach)
-        if slot in via_slots:
-            assert direct == [0] and reward[0] > reward[1], (slot, direct, reward)
-    avoiding.close()
-    both.close()
-
-
-@pytest.mark.parametrize("to_lift", [False, True])
-def test_reach_starts_pose_the_arm_on_the_way_to_the_turret_side_of_the_goal_slot_s_paths_and_leave_the_element(to_lift):
+def test_reach_starts_pose_the_arm_on_the_way_to_the_turret_side_of_the_goal_slot_s_paths_and_leave_the_element():
     """`reach_start_share=1`: every reset starts with the arm part of the way from its start configuration to a table
     grasp configuration on a side the goal slot's start paths leave from (the ceiling openings beside the wall: +pi;
-    the floor recesses: -pi), or with `reach_starts_to_lift` up to all the way to the lift above the element: the
-    turret turned that way, the reach distance shorter than at rest, the element lying on the table where an ordinary
+    the floor recesses: -pi): the turret turned that way, the reach distance shorter than at rest, the element lying on the table where an ordinary
     reset puts it, untouched by a still step and not grasped. A share out of [0, 1] is refused."""
     with pytest.raises(ValueError, match="reach_start_share"):
         make_env("WindowInstallation-v1", reach_start_share=1.5)
     for kind in ("ceiling", "flooring"):
-        env = make_env(TASK_ENVS[kind], control_mode="pd_joint_delta_pos", reach_start_share=1.0,
-                       reach_starts_to_lift=to_lift, reach_in_joint_space=True, reach_toward_path_sides=True)
-        plain = make_env(TASK_ENVS[kind], control_mode="pd_joint_delta_pos", reach_in_joint_space=True,
-                         reach_toward_path_sides=True)
+        env = make_env(TASK_ENVS[kind], control_mode="pd_joint_delta_pos", reach_start_share=1.0)
+        plain = make_env(TASK_ENVS[kind], control_mode="pd_joint_delta_pos")
         u, p = env.unwrapped, plain.unwrapped
         checked = 0
         for seed in range(8):
@@ -333,41 +285,37 @@ def test_reach_starts_pose_the_arm_on_the_way_to_the_turret_side_of_the_goal_slo
         plain.close()
 
 
-def test_set_reach_starts_carries_the_start_curriculum_back_through_the_grasp_on_the_direct_side():
-    """Windows for the opening at y = +0.85 with `reach_avoids_vias`: radius 0 starts with the plate
+def test_set_reach_starts_carries_the_start_curriculum_back_through_the_grasp_on_the_path_side():
+    """Ceiling panels for an opening whose start paths leave the table from the turret's +pi side only: radius 0 starts with the plate
     GRASP_START_HEIGHT above the element at turret +pi, the element lying where an ordinary reset puts it; a still
     step grasps it from that side (`reach_start_grasped`). Radius 1 starts anywhere back along the path to the reset's
     configuration, on the same side, never farther back than it. A near-goal start drawn after a reach start takes
-    its place (not marked a reach start); bad shares and radii, and `reach_starts_to_lift` beside it, are refused."""
-    kw = dict(control_mode="pd_joint_delta_pos", reach_in_joint_space=True, reach_toward_path_sides=True,
-              reach_avoids_vias=True, goal_slot_weights={"window": (0, 0, 1)})
-    env = make_env("WindowInstallation-v1", **kw)
-    plain = make_env("WindowInstallation-v1", **kw)
+    its place (not marked a reach start); bad shares and radii are refused."""
+    slot = next(slot for slot in range(3) if _path_sides("ceiling", slot) == [0])
+    kw = dict(control_mode="pd_joint_delta_pos", goal_slot_weights={"ceiling": tuple(float(s == slot) for s in range(3))})
+    env = make_env("CeilingInstallation-v1", **kw)
+    plain = make_env("CeilingInstallation-v1", **kw)
     u, p = env.unwrapped, plain.unwrapped
     with pytest.raises(ValueError, match="radius"):
         u.set_reach_starts(1.0, 1.5)
     with pytest.raises(ValueError, match="radius"):
         u.set_reach_starts(1.0, (0.1, 0.2))
-    u.set_reach_starts(1.0, (1.0,) * 5 + (0.0,) + (1.0,) * 3)  # per goal slot: this opening's alone at 0
+    u.set_reach_starts(1.0, tuple(float(s != slot) for s in range(3)) + (1.0,) * 6)  # per goal slot: this opening's alone at 0
     with pytest.raises(ValueError, match="share"):
         u.set_reach_starts(-0.1, 0.5)
     with pytest.raises(ValueError, match="share"):
         u.set_reach_starts((1.0, 1.0), 0.5)
-    fixed = make_env("WindowInstallation-v1", reach_starts_to_lift=True, **kw)
-    with pytest.raises(ValueError, match="reach_starts_to_lift"):
-        fixed.unwrapped.set_reach_starts(1.0, 0.5)
-    fixed.close()
-    grasp_start = torch.tensor(lift_configurations(u.GRASP_START_HEIGHT)[ELEMENT_KINDS.index("window"), 0])
+    grasp_start = torch.tensor(lift_configurations(u.GRASP_START_HEIGHT)[ELEMENT_KINDS.index("ceiling"), 0])
     for seed in range(3):
         env.reset(seed=seed)
         plain.reset(seed=seed)
-        assert int(u.goal_slot[0]) == 2
+        assert int(u.goal_slot[0]) == slot
         q = u.agent.robot.get_qpos()[0]
         assert torch.allclose(q, grasp_start, atol=1e-4) and float(q[0]) > 3.0, "right above the element at +pi"
         assert torch.allclose(u.obj.pose.raw_pose[0], p.obj.pose.raw_pose[0], atol=1e-5)
         _, _, _, _, info = env.step(torch.zeros(1, 6))
         assert bool(info["reach_start"][0]) and bool(info["is_grasped"][0]) and bool(info["reach_start_grasped"][0])
-    u.set_reach_starts(1.0, (0.0, 1.0, 0.0))  # per task type: windows at 1
+    u.set_reach_starts(1.0, (1.0, 0.0, 0.0))  # per task type: ceiling panels at 1
     spread = []
     for seed in range(6):
         env.reset(seed=seed)
@@ -379,7 +327,7 @@ def test_set_reach_starts_carries_the_start_curriculum_back_through_the_grasp_on
         assert bool(info["reach_start"][0])
         assert bool(info["reach_start_grasped"][0]) == bool(info["is_grasped"][0])
     assert max(spread) - min(spread) > 0.5, "wider radii start farther back"
-    u.set_reach_starts((1.0, 0.0, 1.0), 1.0)  # per task type: none for windows
+    u.set_reach_starts((0.0, 1.0, 1.0), 1.0)  # per task type: none for ceiling panels
     env.reset(seed=0)
     _, _, _, _, info = env.step(torch.zeros(1, 6))
     assert not bool(info["reach_start"][0])
@@ -466,7 +414,7 @@ def test_a_seeded_reset_observes_the_same_whatever_the_last_episode_held():
     the same seed placing or not by what the evaluation worker ran before it, and one policy placing about half as
     many windows in WindowInstallation-v1 as in the general task (docs/experiments/from_scratch.md)."""
     env = make_env("ConstructionPickPlace-v1", control_mode="pd_joint_delta_pos", reward_mode="dense",
-                   obs_install_offset=True, obs_path_offset=True, carry_along_paths=True)
+                   obs_install_offset=True, obs_path_offset=True)
     u = env.unwrapped
     first = env.reset(seed=5)[0]
     kinds = set()
@@ -482,7 +430,7 @@ def test_a_seeded_reset_observes_the_same_whatever_the_last_episode_held():
 
 
 def test_near_goal_episodes_are_cut_at_their_own_limit_and_ordinary_ones_are_not():
-    from ms_construction.envs.construction_env import NearGoalTimeLimit
+    from ms_construction.envs.start_states import NearGoalTimeLimit
 
     env = NearGoalTimeLimit(make_env("Flooring-v1", control_mode="pd_joint_delta_pos", reward_mode="dense"))
     u = env.unwrapped
@@ -499,40 +447,13 @@ def test_near_goal_episodes_are_cut_at_their_own_limit_and_ordinary_ones_are_not
     env.close()
 
 
-def test_the_carry_counts_an_element_jammed_behind_its_plate():
-    """`carry_counts_lag`: a floor panel pushed on into the slab stays on it and trails the plate; the carry distance
-    then counts LAG_WEIGHT per metre of that lag over the joints' own distance. Carried freely, the element keeps up."""
-    env = make_env("Flooring-v1", control_mode="pd_joint_delta_pos", reward_mode="dense", carry_along_paths=True,
-                   carry_counts_lag=True)
-    u = env.unwrapped
-    u.set_near_goal_starts(1.0, 0.0)  # installed
-    env.reset(seed=100)
-    q = u.agent.robot.get_qpos()[0]
-    paths = u._load_start_paths()["waypoints"][u.task_id[0], u.goal_slot[0]].flatten(0, 1)  # [M, P, 6]
-    path = paths[(paths[:, 0, :5] - q[:5]).abs().sum(-1).argmin()]
-    out = path[1] - path[0]  # the first step out of the goal: back along the plate's axis
-    push = -out / out.abs().max()
-    for _ in range(10):  # on into the slab
-        env.step(push[None])
-    lag = float(u.hold_lag()[0])
-    assert lag > 0.05, "the slab stops the element while the plate goes on"
-    assert float(u.evaluate()["place_dist"][0]) < 0.05, "the element stays on the slab, at its goal"
-    assert float(u.carry_distance()[0]) == pytest.approx(float(u.path_distance()[0]) + u.LAG_WEIGHT * lag, abs=1e-4)
-    for _ in range(16):  # back out and away
-        env.step(-push[None])
-    assert float(u.hold_lag()[0]) < 0.02, "carried freely, the element keeps its place on the plate"
-    u.carry_counts_lag = False
-    assert float(u.carry_distance()[0]) == pytest.approx(float(u.path_distance()[0]))
-    env.close()
-
-
 def test_the_path_offset_observation_leads_along_the_start_path_into_the_goal():
     """`obs_path_offset` appends, after the install offset, the joint move to a point a little ahead along the start path
     (`path_offset`): 0 installed, and a proportional controller that follows it from anywhere on the path (a lift above
     the table included) brings the ceiling panel up into its opening, the path-measured carry falling on the way."""
     plain = make_env("CeilingInstallation-v1", control_mode="pd_joint_delta_pos", reward_mode="dense", obs_install_offset=True)
     env = make_env("CeilingInstallation-v1", control_mode="pd_joint_delta_pos", reward_mode="dense", obs_install_offset=True,
-                   obs_path_offset=True, carry_along_paths=True)
+                   obs_path_offset=True)
     obs_p, obs = plain.reset(seed=3)[0], env.reset(seed=3)[0]
     assert obs.shape[-1] == obs_p.shape[-1] + 6 and torch.equal(obs[..., :-6], obs_p)
     u = env.unwrapped
@@ -599,15 +520,15 @@ def test_goal_slot_weights_draw_the_weighted_slot_more_and_leave_the_draws_alone
         e.close()
 
 
-def _held_window_for_the_via_opening(keeps: bool, side: int = -1):
-    """A WindowInstallation-v1 env holding its window for the opening at y = +0.85 (goal slot 2), the carry measured
-    along the start paths (`carry_keeps_to_vias=keeps`), grasped from `side`; and the carry distance at a joint
+def _held_window_for_the_via_opening(side: int = -1):
+    """A WindowInstallation-v1 env holding its window (since a grasp) for the opening at y = +0.85 (goal slot 2), the
+    one whose start paths from -pi run through planned vias, grasped from `side`; and the carry distance at a joint
     configuration."""
-    env = make_env("WindowInstallation-v1", control_mode="pd_joint_delta_pos", reward_mode="dense",
-                   carry_along_paths=True, carry_keeps_to_vias=keeps)
+    env = make_env("WindowInstallation-v1", control_mode="pd_joint_delta_pos", reward_mode="dense")
     env.reset(seed=0)
     u = env.unwrapped
     u.set_held(True)
+    u.picked[:] = True
     u.goal_slot[:] = 2
     u.carry_side[:] = side
 
@@ -618,49 +539,43 @@ def _held_window_for_the_via_opening(keeps: bool, side: int = -1):
     return env, u, distance_at
 
 
-def test_carry_keeps_to_vias_makes_cutting_across_the_window_detour_never_pay():
-    """The window opening at y = +0.85, grasped from -pi (the side the policy grasps windows from), is reached along
-    planned vias. Its shortcut, the straight joint line from the -pi lift to the back-off out of the opening (into
-    the wall between the openings), measures nearer the goal than the lift 60% of the way across at the paths'
-    deviation weight: cutting across pays, and the policy carried those windows into the neighbouring opening. With
-    `carry_keeps_to_vias` the same point measures farther than the table end of the path: cutting never pays. Near
-    the table (off the path between its table end and its lift, where a grasp's posture need not match the path's)
-    both measure alike. Along every via path the carry stays within the path's length left and is 0 at the goal."""
+def test_cutting_across_the_window_detour_never_pays():
+    """The window opening at y = +0.85, grasped from -pi, is reached along planned vias (the rule: no direct path
+    leaves the table from the side its task type's other slots are reached from). Its shortcut, the straight joint
+    line from the -pi lift to the back-off out of the opening (into the wall between the openings), measures farther
+    than the table end of the path: cutting never pays (at the paths' deviation weight it measured nearer the goal
+    than the lift, and the campaign's policy carried those windows into the neighbouring opening). Along every
+    usable via path the carry stays within the path's length left and is 0 at the goal."""
     from ms_construction.goal_configurations import path_point, start_paths
 
     paths, w = start_paths(), ELEMENT_KINDS.index("window")
     assert paths.planned[w, 2, :, 1].all() and paths.planned.sum() == paths.planned[w, 2, :, 1].sum(), \
         "the shipped vias are the -pi paths of that opening, and only they"
-    near_table = {}
-    for keeps in (False, True):
-        env, _, distance_at = _held_window_for_the_via_opening(keeps, side=1)
-        for c in range(paths.waypoints.shape[2]):
-            wp = paths.waypoints[w, 2, c, 1].astype(np.float64)
-            table, lift, back_off = wp[4], wp[3], wp[1]
-            cut = distance_at(lift + 0.6 * (back_off - lift))
-            if keeps:
-                assert cut > distance_at(table), (c, cut)
-            else:
-                assert cut < distance_at(lift), (c, cut)
-            length = np.abs(np.diff(wp, axis=0)).sum()
-            fractions = np.linspace(1.0, 0.0, 21)
-            dists = np.array([distance_at(path_point(wp, f)) for f in fractions])
-            assert dists[-1] < 1e-3 and np.all(dists <= fractions * length + 1e-3), (keeps, c, np.round(dists, 2))
-            near_table[keeps, c] = distance_at((table + lift) / 2 + np.array([0, 0.2, 0, -0.3, 0.2, 0.4]))
-        env.close()
-    for c in range(paths.waypoints.shape[2]):
-        assert near_table[True, c] == pytest.approx(near_table[False, c], abs=1e-4), c
+    env, u, distance_at = _held_window_for_the_via_opening(side=1)
+    usable = u.geometry.paths["usable"][w, 2].view(-1, 2)[:, 1]
+    assert usable.any()
+    for c in np.flatnonzero(usable.numpy()):
+        wp = paths.waypoints[w, 2, c, 1].astype(np.float64)
+        table, lift, back_off = wp[4], wp[3], wp[1]
+        cut = distance_at(lift + 0.6 * (back_off - lift))
+        assert cut > distance_at(table), (c, cut)
+        length = np.abs(np.diff(wp, axis=0)).sum()
+        fractions = np.linspace(1.0, 0.0, 21)
+        dists = np.array([distance_at(path_point(wp, f)) for f in fractions])
+        assert dists[-1] < 1e-3 and np.all(dists <= fractions * length + 1e-3), (c, np.round(dists, 2))
+    env.close()
 
 
-def test_carry_keeps_to_vias_measures_along_the_grasp_side_s_paths_and_the_grasp_sets_the_side():
-    """`carry_keeps_to_vias`: a point on that opening's +pi path measures its path's length left when the element
+def test_the_carry_is_measured_along_the_grasp_side_s_paths_and_the_grasp_sets_the_side():
+    """A point on that opening's +pi path measures its path's length left when the element
     was grasped from +pi, and farther when it was grasped from -pi (only the via paths count then); before a grasp
     (side -1) every usable path counts. A grasp sets the side its turret is on; the env state keeps it."""
     from ms_construction.goal_configurations import path_point, start_paths
 
     paths, w = start_paths(), ELEMENT_KINDS.index("window")
-    env, u, distance_at = _held_window_for_the_via_opening(True)
-    wp = paths.waypoints[w, 2, 0, 0].astype(np.float64)
+    env, u, distance_at = _held_window_for_the_via_opening()
+    c = int(np.flatnonzero(u.geometry.paths["usable"][w, 2].view(-1, 2)[:, 0].numpy())[0])
+    wp = paths.waypoints[w, 2, c, 0].astype(np.float64)
     measured = {}
     for side in (-1, 0, 1):
         u.carry_side[:] = side

@@ -215,9 +215,10 @@ def test_checkpoint_for_other_shapes_gives_a_clear_error(tmp_path):
 
 
 def test_short_run_on_the_easiest_stage_shows_a_learning_signal(tmp_path):
-    """40k steps of PPO at cp1 (dense reward, two CPU envs): the training episodes pick more often in the
-    run's second half than in its first, and the deterministic policy's evaluation return rises above the
-    untrained policy's. (Its evaluation picks, two episodes each, are too few to say more this early.)"""
+    """40k steps of PPO at cp1 (dense reward, two CPU envs): the training episodes' return rises from the run's first
+    half to its second, and the deterministic policy's evaluation return rises above the untrained policy's. (The
+    task's dense reward pulls the arm to the turret side its goal's paths leave from first; at this budget its
+    episodes pick no more often than at the start, docs/experiments/from_scratch.md.)"""
     args = tiny_args(tmp_path, exp_name="learn", reward_mode="dense", curriculum=("cp1",), curiosity="none",
                      num_steps=250, num_minibatches=4, num_eval_envs=2, total_timesteps=40_000, eval_freq=10,
                      checkpoint_freq=10**6)
@@ -228,10 +229,10 @@ def test_short_run_on_the_easiest_stage_shows_a_learning_signal(tmp_path):
     rows = read_csv(tmp_path / "learn" / "progress.csv")
     evals = [r for r in rows if r["eval_pick_success"]]
     assert len(evals) == 8
-    picks = [float(r["pick_success"]) for r in rows if r["pick_success"]]
-    first, second = np.mean(picks[:len(picks) // 2]), np.mean(picks[len(picks) // 2:])
+    returns = [float(r["extrinsic_return"]) for r in rows if r["extrinsic_return"]]
+    first, second = np.mean(returns[:len(returns) // 2]), np.mean(returns[len(returns) // 2:])
     best_return = max(float(r["eval_extrinsic_return"]) for r in evals)
-    print(f"training picks {first:.2f} -> {second:.2f}, return {untrained['eval_extrinsic_return']:.0f} -> {best_return:.0f}")
+    print(f"training return {first:.0f} -> {second:.0f}, evaluation {untrained['eval_extrinsic_return']:.0f} -> {best_return:.0f}")
     assert second > first
     assert best_return > untrained["eval_extrinsic_return"] + 5.0
 
@@ -544,9 +545,8 @@ def test_reach_starts_widen_per_goal_slot_as_they_grasp_from_their_side_and_a_re
     --near-goal-window such episodes grasped from the side they started on often enough (the workers told at once),
     whatever the other slots of its task type did; --reach-start-tasks gives the share to those task types alone.
     A run sets the workers' radii from --reach-start-radius, keeps them and their windows in its checkpoint, and a
-    resumed run sets them from there. The flag needs reach starts and refuses the fixed ones' --reach-starts-to-lift."""
-    for bad in (dict(reach_start_radius=1.5, reach_start_share=1.0), dict(reach_start_radius=0.2),
-                dict(reach_start_radius=0.2, reach_start_share=1.0, reach_starts_to_lift=True)):
+    resumed run sets them from there. The flag needs reach starts."""
+    for bad in (dict(reach_start_radius=1.5, reach_start_share=1.0), dict(reach_start_radius=0.2)):
         with pytest.raises(SystemExit, match="reach-start-radius"):
             ppo.validate(Args.of(**bad))
     for bad in (dict(reach_start_share=1.0, reach_start_tasks=("window",)),

@@ -58,8 +58,9 @@ class RunArgs:
     """the environment: the general task or one of the three single tasks (ms_construction.envs.ENV_IDS)."""
     control_mode: ControlMode = "pd_joint_delta_pos"
     """the arm's controller."""
-    reward_mode: RewardMode = "sparse"
-    """sparse (the paper's Algorithm 1), dense or normalized_dense."""
+    reward_mode: RewardMode = "normalized_dense"
+    """normalized_dense (the tasks' default, as ManiSkill's PPO trains on its tasks' default), dense, or sparse (the
+    paper's Algorithm 1, which its setting passes)."""
     sim_backend: Literal["auto", "physx_cpu", "physx_cuda"] = "auto"
     """physx_cuda when a GPU is there (auto), else physx_cpu."""
     total_timesteps: int = 8_000_000
@@ -89,33 +90,8 @@ class RunArgs:
     the goal pose, what the dense reward's carry term measures) to the observation, in training and evaluation."""
     obs_path_offset: bool = False
     """append the joint move to the point a little ahead along the start path (the tasks' `obs_path_offset`: what
-    `carry_along_paths` measures the carry along) to the observation, in training and evaluation. A run from
+    the dense reward measures the carry along) to the observation, in training and evaluation. A run from
     `--checkpoint` of a policy without it gets zero weights on it: the policy acts as before until it learns to read it."""
-    carry_along_paths: bool = False
-    """the dense rewards' carry measured along the near-goal starts' collision-checked joint paths (the tasks'
-    `carry_along_paths`, `path_distance`) instead of straight to the installation configuration, in training."""
-    reach_in_joint_space: bool = False
-    """the dense rewards' reach toward the element's grasp half measured in joint space to the configurations that
-    grasp it on the staging table (the tasks' `reach_in_joint_space`, `reach_distance`), in training."""
-    reach_toward_path_sides: bool = False
-    """with `reach_in_joint_space`, the reach measured only to the table grasp configurations on the turret sides that
-    the goal slot's usable start paths leave from (the tasks' `reach_toward_path_sides`), in training."""
-    reach_avoids_vias: bool = False
-    """with `reach_toward_path_sides`, only the turret sides a usable start path without a planned via leaves from,
-    where one does (the tasks' `reach_avoids_vias`), in training."""
-    carry_counts_lag: bool = False
-    """the dense rewards' carry distance counts how far the held element trails its place on the plate (the tasks'
-    `carry_counts_lag`, `hold_lag`: jammed against a slab or wall while the arm goes on), in training."""
-    carry_keeps_to_vias: bool = False
-    """the carry measured along `carry_along_paths`' paths (and the path offset observed) only along those from the
-    turret side the element was grasped from, each radian off a path through a planned via counting much more (the
-    tasks' `carry_keeps_to_vias`), in training and evaluation: it shapes the observation too."""
-    install_mirror_branch: bool = False
-    """the window opening at y = +0.85's installation configurations (and start paths) cut to the wrist branch whose
-    mirror image is the opening at -0.85's but for joint 6 (the tasks' `install_mirror_branch`), in training and
-    evaluation: it shapes the observation too. For `mirror_windows`: the joint moves then differ from the mirrored
-    opening's in joint 6 alone, by half a turn, and until the grasp not at all (measured for the element held half a
-    turn on, the plate's roll being free until then)."""
     task_weights: Optional[tuple[float, float, float]] = None
     """the general task's sampling weights of ceiling, window and flooring in the training envs (None: uniform;
     `1 2 1`: window installation half the episodes); evaluation always samples uniformly."""
@@ -182,17 +158,17 @@ class PPOArgs:
     rotation_features: bool = True
     """feed the networks each quaternion of the state (plate, goal, element) as the first two columns
     of its rotation matrix: a quaternion's sign can flip mid-episode, the matrix cannot."""
-    mirror_windows: bool = False
-    """act on a window whose opening lies at y > 0 as on its mirror image in the plane y = 0 (the arm's and the
-    window site's plane of symmetry: the table at y = 0, openings at +-0.85): the networks see the mirrored state
-    (`state_mirror_signs`) and the action is mirrored back (JOINT_MIRROR_SIGNS). The opening at y = +0.85 is reached
-    from +pi only, the one at -0.85 from -pi only; a policy that turns every reach to -pi meets the first as the
-    second. The window's head stays up, so in the mirror it must be installed turned half a turn on the plate:
-    a goal orientation of its own, left to reward (probe AJ learnt it from near-goal starts, not the grasp before
-    it). Joint control only."""
+    mirror_twins: bool = False
+    """act on an episode whose goal slot is the mirror image, in the arm's plane of symmetry y = 0, of another slot of
+    its task type (`goal_configurations.mirror_twins`: a slot at y > 0 with a twin at its mirror image; on the shipped
+    site the window openings at y = +0.85 and -0.85) as on its twin's: the networks see the mirrored state
+    (`state_mirror_signs`) and the action is mirrored back (JOINT_MIRROR_SIGNS). The table lies at y = 0, so a slot
+    reached from the turret's +pi side is met as its twin reached from -pi. A window's head stays up, so in the
+    mirror it must be installed turned half a turn on the plate: a goal orientation of its own, left to reward
+    (probe AJ learnt it from near-goal starts, not the grasp before it). Joint control only."""
     mirror_canonical_reach: bool = False
-    """with `mirror_windows`, until the grasp the networks see a mirrored window's goal orientation as it is (the same
-    at every opening; the mirror turns it half a turn): with `install_mirror_branch` the reach and the grasp of the
+    """with `mirror_twins`, until the grasp the networks see a mirrored window's goal orientation as it is (the same
+    at every opening; the mirror turns it half a turn): the tasks' measures of a mirrored slot (`plate_turn`) make the reach and the grasp of the
     opening at y = +0.85 then see what those of the one at -0.85 see, the plate's roll not mattering to them; after
     the grasp the honest mirror, where the carry turns the element half a turn more."""
     mirror_held_half_turn: bool = False
@@ -331,9 +307,6 @@ class StartStateArgs:
     """this share of the training episodes start with the arm part of the way from its start configuration to a table
     grasp configuration on a turret side the goal slot's start paths leave from, the element lying on the table (the
     tasks' `reach_start_share`: the start-state curriculum's first stretch); evaluation always resets as usual."""
-    reach_starts_to_lift: bool = False
-    """reach starts anywhere on the joint line to the lift above the element, up to right above it (the tasks'
-    `reach_starts_to_lift`), instead of at most REACH_START_MAX of the way to the grasp."""
     reach_start_radius: Optional[float] = None
     """reach starts as the start-state curriculum carried back through the grasp (the tasks' `set_reach_starts`):
     each goal slot's starts on the reach path's last this much of its length (0: right above the element, about to
@@ -432,16 +405,14 @@ def validate(args: Args) -> None:
     if gsw is not None and (len(gsw) != 9 or min(gsw) < 0 or any(sum(gsw[i:i + 3]) <= 0 for i in (0, 3, 6))):
         raise SystemExit(f"--goal-slot-weights {' '.join(map(str, gsw))}: nine weights >= 0, three per task type "
                          "(ceiling, window, flooring), not all 0 within a type")
-    if args.reach_toward_path_sides and not args.reach_in_joint_space:
-        raise SystemExit("--reach-toward-path-sides narrows the joint-space reach: give --reach-in-joint-space too")
     if args.ppo.mean_saturation_coef < 0 or (args.ppo.mean_saturation_coef > 0 and not args.ppo.bounded_mean):
         raise SystemExit(f"--mean-saturation-coef {args.ppo.mean_saturation_coef}: a weight >= 0 on the mean's values "
                          "before tanh, with --bounded-mean")
-    if args.ppo.mirror_windows and (args.control_mode != "pd_joint_delta_pos" or args.warm.residual_of):
-        raise SystemExit("--mirror-windows mirrors the joints' actions of a plain policy: with --control-mode "
+    if args.ppo.mirror_twins and (args.control_mode != "pd_joint_delta_pos" or args.warm.residual_of):
+        raise SystemExit("--mirror-twins mirrors the joints' actions of a plain policy: with --control-mode "
                          "pd_joint_delta_pos and without --residual-of")
-    if args.ppo.mirror_canonical_reach and not args.ppo.mirror_windows:
-        raise SystemExit("--mirror-canonical-reach changes what the mirror shows: give --mirror-windows too")
+    if args.ppo.mirror_canonical_reach and not args.ppo.mirror_twins:
+        raise SystemExit("--mirror-canonical-reach changes what the mirror shows: give --mirror-twins too")
     if args.ppo.mirror_held_half_turn and not args.ppo.mirror_canonical_reach:
         raise SystemExit("--mirror-held-half-turn goes on from what --mirror-canonical-reach shows: give it too")
     if args.ppo.mean_saturation_bound <= 0:
@@ -454,15 +425,13 @@ def validate(args: Args) -> None:
             raise SystemExit(f"{flag} {' '.join(map(str, joints or ()))}: distinct action dimensions >= 0 "
                              f"(0: the turret), with {needs}")
     radius = args.starts.reach_start_radius
-    if radius is not None and (not 0 <= radius <= 1 or not args.starts.reach_start_share or args.starts.reach_starts_to_lift):
+    if radius is not None and (not 0 <= radius <= 1 or not args.starts.reach_start_share):
         raise SystemExit(f"--reach-start-radius {radius}: a fraction in [0, 1] of the reach path, with --reach-start-share "
-                         "> 0 and without --reach-starts-to-lift")
+                         "> 0")
     tasks = args.starts.reach_start_tasks
     if tasks is not None and (radius is None or not tasks or any(t not in ELEMENT_KINDS for t in tasks)):
         raise SystemExit(f"--reach-start-tasks {' '.join(tasks)}: task types among {', '.join(ELEMENT_KINDS)}, with "
                          "--reach-start-radius")
-    if args.reach_avoids_vias and not args.reach_toward_path_sides:
-        raise SystemExit("--reach-avoids-vias narrows the sides the reach counts: give --reach-toward-path-sides too")
     for name in ("near_goal_share", "near_goal_radius", "near_goal_promote", "reach_start_share"):
         if not 0 <= values[name] <= 1:
             raise SystemExit(f"--{name.replace('_', '-')} must lie in [0, 1], got {values[name]}")

@@ -16,7 +16,7 @@ import random
 import zipfile
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Optional
+from typing import Optional, Sequence
 
 import numpy as np
 import torch
@@ -25,8 +25,8 @@ import torch.nn as nn
 from baselines.ppo import curiosity
 from baselines.ppo.networks import Agent, CanonicalReach, Mirror
 from baselines.ppo.residual import ResidualAgent
-from ms_construction.envs.construction_env import (JOINT_MIRROR_SIGNS, STATE_GOAL_Y, STATE_IS_GRASPED,
-                                                   STATE_QUATERNION_STARTS, STATE_TASK_START, state_mirror_signs)
+from ms_construction.envs.carry_geometry import JOINT_MIRROR_SIGNS
+from ms_construction.envs.state_layout import STATE_IS_GRASPED, STATE_QUATERNION_STARTS, STATE_TASK_START, state_mirror_signs
 from ms_construction.parameters import ELEMENT_KINDS
 
 WHAT_A_CHECKPOINT_IS = ("a checkpoint is the .pt file that baselines/ppo/ppo.py or baselines/ppo/bc.py writes "
@@ -52,17 +52,34 @@ def make_agent(args, obs_dim: int, act_dim: int, base_args: Optional[dict] = Non
                              get("residual_scale"), value_heads=value_heads(args), time_input=time_input)
     starts = STATE_QUATERNION_STARTS if get("rotation_features", False) else ()
     mirror = None
-    if get("mirror_windows", False):
+    if get("mirror_twins", False):
         if act_dim != len(JOINT_MIRROR_SIGNS):
-            raise ValueError(f"mirror_windows mirrors joint actions ({len(JOINT_MIRROR_SIGNS)}), not {act_dim}")
+            raise ValueError(f"mirror_twins mirrors joint actions ({len(JOINT_MIRROR_SIGNS)}), not {act_dim}")
         canonical = None
         if get("mirror_canonical_reach", False):
             tcp, goal, obj = STATE_QUATERNION_STARTS
             canonical = CanonicalReach(STATE_IS_GRASPED, goal, bool(get("mirror_held_half_turn", False)), tcp, obj)
-        mirror = Mirror(state_mirror_signs(obs_dim), torch.tensor(JOINT_MIRROR_SIGNS),
-                        STATE_TASK_START + ELEMENT_KINDS.index("window"), STATE_GOAL_Y, canonical)
+        mirror = Mirror(state_mirror_signs(obs_dim), torch.tensor(JOINT_MIRROR_SIGNS), mirrored_goals(), canonical)
     return Agent(obs_dim, act_dim, get("hidden_size"), starts, value_heads(args), get("num_layers", 3),
                  bool(get("bounded_mean", False)), mirror)
+
+
+REMOVED_ENV_OPTIONS = ("carry_along_paths", "reach_in_joint_space", "reach_toward_path_sides", "reach_avoids_vias",
+                       "carry_counts_lag", "carry_keeps_to_vias", "install_mirror_branch", "reach_starts_to_lift")
+"""task kwargs that checkpoints before 2026-11-28 saved: the first three, `carry_keeps_to_vias` and
+`install_mirror_branch` became the one dense reward's measures, the rest were deleted (never adopted)."""
+
+
+def mirrored_goals() -> torch.Tensor:
+    """[G, 4]: of each goal slot with a mirror twin (`goal_configurations.mirror_twins`), the index of its task type's
+    one-hot entry in the state observation and its goal position: where a policy with `mirror_twins` acts in the
+    mirror."""
+    from ms_construction.assets import load_manifest
+    from ms_construction.goal_configurations import mirror_twins
+
+    goals = load_manifest()["goal_poses"]
+    rows = [[STATE_TASK_START + k, *goals[ELEMENT_KINDS[k]][slot][:3]] for k, slot in zip(*np.nonzero(mirror_twins() >= 0))]
+    return torch.tensor(rows, dtype=torch.float32).reshape(-1, 4)
 
 
 def upgrade_args(saved: dict) -> dict:
@@ -70,7 +87,7 @@ def upgrade_args(saved: dict) -> dict:
     written by earlier versions still load: `finite_horizon_gae` / `bootstrap_at_truncation` (booleans)
     became `bootstrap_at_done`, `norm_adv` a choice of where advantages are normalized, and `icm`
     meant the normalized variant (now `icm_normalized`) before ML-Agents' curiosity (with its
-    `icm_gamma`) took the name."""
+    `icm_gamma`) took the name; the task kwargs of REMOVED_ENV_OPTIONS are dropped."""
     args = dict(saved)
     for old in ("finite_horizon_gae", "bootstrap_at_truncation"):
         if old in args:
@@ -79,6 +96,10 @@ def upgrade_args(saved: dict) -> dict:
         args["norm_adv"] = "minibatch" if args["norm_adv"] else "none"
     if args.get("curiosity") == "icm" and "icm_gamma" not in args:
         args["curiosity"] = "icm_normalized"
+    if "mirror_windows" in args:  # the mirror of every slot with a twin, named for the one site's windows until 2026-11-28
+        args["mirror_twins"] = args.pop("mirror_windows")
+    for option in REMOVED_ENV_OPTIONS:  # the dense reward's options, now its only way (or deleted)
+        args.pop(option, None)
     if args.get("base_args") is not None:  # a refined agent's base that is itself a residual (ppo.py --residual-of)
         args["base_args"] = upgrade_args(args["base_args"])
     return args
@@ -200,11 +221,9 @@ def with_path_offset_inputs(ckpt: dict, path) -> dict:
 
 def policy_env_kwargs(args: dict) -> dict:
     """The env kwargs that a checkpoint's policy (its saved `args`) acts in, beside obs_mode="state": its control
-    mode, the observation's optional entries (install offset, path offset, elapsed time) it was trained with, and
-    the joint moves' measures (`carry_keeps_to_vias`, `install_mirror_branch`)."""
+    mode and the observation's optional entries (install offset, path offset, elapsed time) it was trained with."""
     return dict(control_mode=args["control_mode"],
-                **{k: True for k in ("obs_install_offset", "obs_path_offset", "obs_elapsed_time", "carry_keeps_to_vias",
-                                        "install_mirror_branch") if args.get(k)})
+                **{k: True for k in ("obs_install_offset", "obs_path_offset", "obs_elapsed_time") if args.get(k)})
 
 
 def load_policy(path, env_id: str) -> tuple[Agent, dict]:
@@ -261,6 +280,7 @@ CSV_FIELDS = [
     "reach_start_radius_ceiling0", "reach_start_radius_ceiling1", "reach_start_radius_ceiling2",
     "reach_start_radius_window0", "reach_start_radius_window1", "reach_start_radius_window2",
     "reach_start_radius_flooring0", "reach_start_radius_flooring1", "reach_start_radius_flooring2",
+    "ordinary_pick_ceiling", "ordinary_pick_window", "ordinary_pick_flooring",
 ]
 """`end_*` and `held_at_end`: where the iteration's training episodes ended (mean place distance in m and
 angle error in degrees to the goal at the last step, share with the element held), what a run that
@@ -268,7 +288,8 @@ places nothing still shows. `near_goal_*`: the start-state curriculum's radius (
 (--near-goal-share);
 `ordinary_place_success`: the place success of the other training episodes, those from ordinary resets (neither
 near-goal nor reach starts; in probes AC to AE the reach starts counted among them), and
-`ordinary_place_<task>` the same per task type; `task_weight_<task>`: the training envs' sampling probability of each
+`ordinary_place_<task>` the same per task type, `ordinary_pick_<task>` their pick success (grasped at least once: a
+near-goal start counts as picked from its first step, so `pick_success` alone hides the grasps a policy learnt); `task_weight_<task>`: the training envs' sampling probability of each
 task type from the next iteration on (--failure-task-weights); `mean_saturation`: the penalty of
 --mean-saturation-coef before its weight (the bounded mean's squared excess before tanh, summed over the action
 dimensions it penalizes); `reach_start_*`: the reach starts' episodes, the share that grasped from the side they
@@ -277,10 +298,11 @@ started on, and each goal slot's radius (`reach_start_radius_window2`: the windo
 
 
 class CSVLog:
-    """Appends one row per iteration; on resume, drops rows past the checkpoint's step."""
+    """Appends one row per iteration (the columns `fields`: ppo.py's CSV_FIELDS by default); on resume, drops rows
+    past the checkpoint's step."""
 
-    def __init__(self, path: Path, resume_step: Optional[int]):
-        self.path = path
+    def __init__(self, path: Path, resume_step: Optional[int], fields: Sequence[str] = CSV_FIELDS):
+        self.path, self.fields = path, list(fields)
         if resume_step is not None and path.exists():
             with open(path) as f:
                 rows = [r for r in csv.DictReader(f) if int(r["global_step"]) <= resume_step]
@@ -290,10 +312,10 @@ class CSVLog:
 
     def _write(self, rows, mode):
         with open(self.path, mode, newline="") as f:
-            w = csv.DictWriter(f, fieldnames=CSV_FIELDS)
+            w = csv.DictWriter(f, fieldnames=self.fields, extrasaction="ignore")
             if mode == "w":
                 w.writeheader()
             w.writerows(rows)
 
     def append(self, row: dict) -> None:
-        self._write([{k: row.get(k, "") for k in CSV_FIELDS}], "a")
+        self._write([{k: row.get(k, "") for k in self.fields}], "a")

@@ -10,6 +10,7 @@ import torch
 import torch.nn as nn
 from torch.distributions.normal import Normal
 
+from ms_construction.envs.state_layout import STATE_START
 from ms_construction.rotations import qconj, qmat, qmul
 
 
@@ -116,17 +117,21 @@ class Mirror(nn.Module):
     observations `applies` to by `obs_signs`, `action` the actions taken in them by `action_signs`. The signs are
     buffers outside the state dict: they follow from the observation's layout, not from training."""
 
-    def __init__(self, obs_signs: torch.Tensor, action_signs: torch.Tensor, task_index: int, goal_y_index: int,
-                 canonical_reach: Optional[CanonicalReach] = None):
+    def __init__(self, obs_signs: torch.Tensor, action_signs: torch.Tensor, goals: torch.Tensor,
+                 canonical_reach: Optional[CanonicalReach] = None, goal_start: int = STATE_START["goal_pose"]):
         super().__init__()
         self.register_buffer("obs_signs", obs_signs.float(), persistent=False)
         self.register_buffer("action_signs", action_signs.float(), persistent=False)
-        self.task_index, self.goal_y_index = task_index, goal_y_index
+        self.register_buffer("goals", goals.float(), persistent=False)
+        self.goal = slice(goal_start, goal_start + 3)
         self.canonical_reach = canonical_reach
 
     def applies(self, x):
-        """[...] bool; the observations of the task (its one-hot entry set) whose goal lies at y > 0."""
-        return (x[..., self.task_index] > 0.5) & (x[..., self.goal_y_index] > 0)
+        """[...] bool; the observations whose task one-hot entry and goal position are those of a row of `goals` [G, 4]
+        (task entry, goal x, y, z: the slots met as their twin's mirror image)."""
+        task = torch.gather(x, -1, self.goals[:, 0].long().expand(*x.shape[:-1], -1)) > 0.5  # [..., G]
+        at = (x[..., None, self.goal] - self.goals[:, 1:]).abs().amax(-1) < 1e-3
+        return (task & at).any(-1)
 
     def observation(self, x):
         mirrored = x * self.obs_signs

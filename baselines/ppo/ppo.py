@@ -6,7 +6,7 @@ in `args.stages`, warm starts' in `args.warm`, start states' in `args.starts`) i
 update.py, ICM in curiosity.py, checkpoints and the CSV log in checkpoints.py, the evaluation in evaluation.py.
 Additions: `--curiosity icm` (Pathak et al. 2017), `--curriculum
 cp1 cp2 cp3 cp4` (Table I of the paper, each stage inheriting every parameter of the previous one),
-sparse reward by default (the paper's Algorithm 1), atomic checkpoints and exact `--resume`, a CSV
+the tasks' default reward (normalized_dense; the paper's setting passes `--reward-mode sparse`), atomic checkpoints and exact `--resume`, a CSV
 log per run.
 Observations are normalized (running mean and variance, in the checkpoint) and their quaternions
 fed as rotation-matrix columns. Fine-tuning a warm start (our recipe for the general agent,
@@ -56,7 +56,7 @@ from baselines.ppo.evaluation import evaluate_envs, finished_episodes, reset
 from baselines.ppo.networks import Agent
 from baselines.ppo.update import adam, hold_log_std_floor, ppo_update, signal_advantages
 from baselines.ppo.start_states import GOAL_SLOTS, StartFromStates, failure_task_weights, widen_near_goal, widen_reach_starts
-from ms_construction.envs.construction_env import NearGoalTimeLimit
+from ms_construction.envs.start_states import NearGoalTimeLimit
 from ms_construction.parameters import ELEMENT_KINDS
 from ms_construction.vector_env import CPUVectorEnv
 
@@ -73,10 +73,6 @@ def make_envs(args: Args, num_envs: int, device: torch.device, eval_mode: bool =
     physx_cpu (one env each), ManiSkillVectorEnv on physx_cuda. With `video_dir`, evaluation videos."""
     kwargs = dict(obs_mode="state", reward_mode=args.reward_mode, render_mode="rgb_array" if video_dir else None)
     kwargs.update(policy_env_kwargs(args.flat()))
-    for reward_option in ("carry_along_paths", "reach_in_joint_space", "reach_toward_path_sides", "reach_avoids_vias",
-                          "carry_counts_lag"):  # the training envs' dense reward
-        if getattr(args, reward_option) and not eval_mode:
-            kwargs[reward_option] = True
     if args.task_weights is not None and not eval_mode:
         kwargs["task_weights"] = dict(zip(ELEMENT_KINDS, args.task_weights))
     if args.starts.goal_slot_weights is not None and not eval_mode:
@@ -84,7 +80,6 @@ def make_envs(args: Args, num_envs: int, device: torch.device, eval_mode: bool =
         kwargs["goal_slot_weights"] = {kind: w[3 * k:3 * k + 3] for k, kind in enumerate(ELEMENT_KINDS)}
     if args.starts.reach_start_share and not eval_mode:
         kwargs["reach_start_share"] = args.starts.reach_start_share
-        kwargs["reach_starts_to_lift"] = args.starts.reach_starts_to_lift
     # near-goal starts are set (and left off in evaluation) by set_near_goal_starts; this applies their time limit
     wrappers = (NearGoalTimeLimit,) if args.starts.near_goal_max_steps is not None and not eval_mode else ()
     if args.sim_backend == "physx_cpu":
@@ -367,9 +362,11 @@ def episode_columns(args: Args, progress: Progress, episodes: dict, envs: Envs) 
     near, reach = np.asarray(episodes["near_goal"], dtype=bool), np.asarray(episodes["reach_start"], dtype=bool)
     placed, task = np.asarray(episodes["success"], dtype=float), np.asarray(episodes["task_id"], dtype=int)
     ordinary = ~near & ~reach
+    picked = np.asarray(episodes["picked"], dtype=float)
     for k, kind in enumerate(ELEMENT_KINDS):
         if ((task == k) & ordinary).any():
             row[f"ordinary_place_{kind}"] = float(placed[(task == k) & ordinary].mean())
+            row[f"ordinary_pick_{kind}"] = float(picked[(task == k) & ordinary].mean())
     if args.failure_task_weights:
         weights = failure_task_weights(args, progress, task[ordinary].tolist(), placed[ordinary].tolist())
         call_task(envs, "set_task_weights", dict(zip(ELEMENT_KINDS, weights)))

@@ -1,20 +1,17 @@
 """The construction pick-and-place task shared by the four environments.
 
-One class holds the mechanics; `ms_construction/envs/tasks.py` registers the general task and the
-three single-task environments with their task cards.
-
-The suction plate's grasp sensor and hold are `ms_construction.agents.suction_gripper`; this module
-decides which element each env works on, when a grasp counts (first grasp, picked) and when it is
-placed.
+One class holds the task; `ms_construction/envs/tasks.py` registers the general task and the three single-task
+environments with their task cards. Beside it: the suction plate's grasp sensor and hold
+(`ms_construction.agents.suction_gripper`), the joint-space geometry the dense reward measures
+(`carry_geometry`), the start-state curricula (`start_states`) and the flat observation's layout (`state_layout`).
 """
 
 from __future__ import annotations
 
 import functools
 import os
-from typing import Any, Mapping, Optional, Sequence, Union
+from typing import Any, Mapping, Optional, Sequence
 
-import gymnasium as gym
 import numpy as np
 import sapien
 import torch
@@ -28,8 +25,8 @@ from mani_skill.utils.structs.types import GPUMemoryConfig, SimConfig
 from ms_construction.agents.construction_arm import ConstructionArm
 from ms_construction.agents.suction_gripper import PLATE_ELEMENT_COLLISION_BIT, SuctionGripper, grasp_ray
 from ms_construction.curriculum import FINAL_STAGE, TOLERANCE_KEYS, resolve_tolerances, stage_tolerances, validate_tolerances
-from ms_construction.goal_configurations import (install_configurations, lift_configurations, mirror_branch_mask,
-                                                  mirror_twins, symmetry_period)
+from ms_construction.envs.carry_geometry import CarryGeometry, Projection
+from ms_construction.envs.start_states import StartStates
 from ms_construction.parameters import (
     DROP_CLEARANCE,
     ELEMENT_KINDS,
@@ -45,49 +42,6 @@ from ms_construction.site import ConstructionSiteSceneBuilder, build_element
 
 ROBOT_INIT_QPOS_NOISE = 0.02
 """rad; std of the arm's start configuration around its rest keyframe, per joint."""
-JOINT_MIRROR_SIGNS = (-1.0, 1.0, 1.0, -1.0, 1.0, -1.0)
-"""How each arm joint turns in the mirror image of the arm in its base's plane y = 0: joints 1, 4 and 6 turn about
-axes in that plane (z, x, x) and turn the other way, joints 2, 3 and 5 about axes across it (y) the same way; every
-link's offsets lie in the plane (assets/arm/construction_arm.urdf), so the mirrored arm is the arm at these signs."""
-MIRROR_SIGNS = {"joints": JOINT_MIRROR_SIGNS, "scalars": (1.0,), "vector": (1.0, -1.0, 1.0),
-                "pose": (1.0, -1.0, 1.0, 1.0, -1.0, 1.0, -1.0)}
-"""How each kind of entry changes in the mirror image in the plane y = 0: joints by JOINT_MIRROR_SIGNS, the y of a
-position or vector, the x and z of a quaternion [w, x, y, z] (the rotation M R M, M = diag(1, -1, 1))."""
-STATE_LAYOUT = (("qpos", 6, "joints"), ("qvel", 6, "joints"), ("is_grasped", 1, "scalars"), ("tcp_pose", 7, "pose"),
-                ("goal_pose", 7, "pose"), ("task", 3, "scalars"), ("obj_pose", 7, "pose"),
-                ("tcp_to_grasp_pos", 3, "vector"), ("obj_to_goal_pos", 3, "vector"))
-"""The flat `state` observation's entries in order (the agent's, then `_get_obs_extra`'s): name, size, and the kind
-of MIRROR_SIGNS it is; after them the optional joint moves (`obs_install_offset`, `obs_path_offset`: 6 joints each)
-and the elapsed time (1)."""
-STATE_START = dict(zip([name for name, _, _ in STATE_LAYOUT],
-                       np.cumsum([0] + [size for _, size, _ in STATE_LAYOUT[:-1]]).tolist()))
-"""Where each entry of STATE_LAYOUT starts in the flat `state` observation."""
-STATE_SIZE = sum(size for _, size, _ in STATE_LAYOUT)
-STATE_QUATERNION_STARTS = tuple(STATE_START[name] + 3 for name in ("tcp_pose", "goal_pose", "obj_pose"))
-"""Where the quaternions [w, x, y, z] of the plate (tcp_pose), the goal and the element start."""
-STATE_TASK_START = STATE_START["task"]
-"""Where the task's one-hot (ELEMENT_KINDS order) starts."""
-STATE_GOAL_Y, STATE_IS_GRASPED = STATE_START["goal_pose"] + 1, STATE_START["is_grasped"]
-"""Where the goal's y and is_grasped are."""
-
-
-def state_mirror_signs(obs_dim: int) -> torch.Tensor:
-    """[obs_dim] the signs that turn a flat `state` observation into the one of its mirror image in the plane y = 0:
-    each entry of STATE_LAYOUT by its kind's MIRROR_SIGNS, then the joint moves by JOINT_MIRROR_SIGNS and the elapsed
-    time unchanged."""
-    extra, elapsed = divmod(obs_dim - STATE_SIZE, 6)
-    if obs_dim < STATE_SIZE or elapsed > 1:
-        raise ValueError(f"state_mirror_signs: a state observation has {STATE_SIZE} numbers, then 6 per joint move and "
-                         f"1 for the elapsed time, not {obs_dim}")
-    signs = [x for _, size, kind in STATE_LAYOUT for x in MIRROR_SIGNS[kind] * (size // len(MIRROR_SIGNS[kind]))]
-    return torch.tensor(signs + list(JOINT_MIRROR_SIGNS) * extra + [1.0] * elapsed)
-
-
-def _bearing(a: torch.Tensor, b: torch.Tensor) -> torch.Tensor:
-    """(1 + cos of the angle between two horizontal directions from the arm's axis) / 2, in [0, 1]."""
-    cos = (a * b).sum(-1) / (torch.linalg.norm(a, dim=-1) * torch.linalg.norm(b, dim=-1)).clamp(min=1e-6)
-    return (1 + cos) / 2
-
 
 RENDER_BACKEND_ENV = "MS_CONSTRUCTION_RENDER_BACKEND"
 """the render backend chosen by `default_render_backend`, passed on to child processes (env workers)."""
@@ -110,11 +64,14 @@ def default_render_backend() -> str:
     return backend
 
 
-class ConstructionTaskEnv(BaseEnv):
+
+class ConstructionTaskEnv(StartStates, BaseEnv):
     """Base of the construction tasks; see ms_construction/envs/tasks.py for the task cards."""
 
     SUPPORTED_ROBOTS = ["construction_arm"]
-    SUPPORTED_REWARD_MODES = ("sparse", "dense", "normalized_dense", "none")
+    SUPPORTED_REWARD_MODES = ("normalized_dense", "dense", "sparse", "none")
+    """the first is the default, as in ManiSkill's tasks (its baselines pass none); the paper's setting passes
+    reward_mode="sparse"."""
     MAX_EPISODE_STEPS = 250
     """10 s at 20 Hz: a planned pick-carry-place takes about half of it."""
     DENSE_REWARD_MAX = 10.0
@@ -137,15 +94,7 @@ class ConstructionTaskEnv(BaseEnv):
         obs_elapsed_time: bool = False,
         obs_install_offset: bool = False,
         obs_path_offset: bool = False,
-        carry_along_paths: bool = False,
-        reach_in_joint_space: bool = False,
-        reach_toward_path_sides: bool = False,
-        reach_avoids_vias: bool = False,
         reach_start_share: float = 0.0,
-        reach_starts_to_lift: bool = False,
-        carry_counts_lag: bool = False,
-        carry_keeps_to_vias: bool = False,
-        install_mirror_branch: bool = False,
         **kwargs,
     ):
         self._tol_init = resolve_tolerances(curriculum_stage, tolerances)
@@ -163,27 +112,13 @@ class ConstructionTaskEnv(BaseEnv):
         self.obs_elapsed_time = bool(obs_elapsed_time)
         self.obs_install_offset = bool(obs_install_offset)
         self.obs_path_offset = bool(obs_path_offset)
-        self.carry_along_paths = bool(carry_along_paths)
-        self.reach_in_joint_space = bool(reach_in_joint_space)
-        if reach_toward_path_sides and not reach_in_joint_space:
-            raise ValueError("reach_toward_path_sides=True narrows the joint-space reach: give reach_in_joint_space=True too")
-        self.reach_toward_path_sides = bool(reach_toward_path_sides)
-        if reach_avoids_vias and not reach_toward_path_sides:
-            raise ValueError("reach_avoids_vias=True narrows the sides the reach counts: give reach_toward_path_sides=True too")
-        self.reach_avoids_vias = bool(reach_avoids_vias)
-        if not 0 <= reach_start_share <= 1:
-            raise ValueError(f"reach_start_share must lie in [0, 1], got {reach_start_share}")
-        self.reach_start_share = torch.tensor(float(reach_start_share)).expand(len(ELEMENT_KINDS))  # per task type
-        self.reach_starts_to_lift = bool(reach_starts_to_lift)
-        self.carry_counts_lag = bool(carry_counts_lag)
-        self.carry_keeps_to_vias = bool(carry_keeps_to_vias)
-        self.install_mirror_branch = bool(install_mirror_branch)
+        self._init_start_states(reach_start_share)
         self.robot_init_qpos_noise = robot_init_qpos_noise
-        self._step_grasp_frame, self._in_step_readout = None, False
-        self.near_goal_share, self.near_goal_radius, self.near_goal_max_steps = 0.0, None, None
-        self.reach_start_radius: Optional[torch.Tensor] = None  # set_reach_starts: [kinds, slots]; None: the kwargs' way
+        self._step_cache: dict = {}
+        self._in_step_readout = False
         kwargs.setdefault("render_backend", default_render_backend())
         super().__init__(*args, robot_uids=robot_uids, **kwargs)
+
 
     def _check_task_weights(self, weights: Optional[Mapping[str, float]]) -> Optional[torch.Tensor]:
         """`task_weights` as sampling probabilities in the order of self.TASKS (None: uniform). A task type
@@ -291,19 +226,12 @@ class ConstructionTaskEnv(BaseEnv):
         self.carry_prev = torch.full((n,), -1.0, **f32)  # the carry distance at the last dense reward; -1: none
         # the turret side (0: +pi, 1: -pi, as StartPaths) the held element was grasped from; -1: none this episode
         self.carry_side = torch.full((n,), -1, dtype=torch.long, device=dev)
-        self._start_paths = None  # the start-state curriculum's paths, loaded when it is first switched on
         self.tolerances = torch.tensor([[self._tol_init[k] for k in TOLERANCE_KEYS]], **f32).repeat(n, 1)
         self.obj = self.elements[self.TASKS[0]]
         self._element_body_index: Optional[torch.Tensor] = None  # [kinds, num_envs], GPU only
         self._task_onehot = torch.eye(len(kinds), **f32)
-        # the dense reward's carry: installation configurations [3, slots, K, 6] (IK, a few seconds: made when
-        # first needed) and joint 6's period per kind
-        self._install_q: Optional[torch.Tensor] = None
-        self._mirrored_slot: Optional[torch.Tensor] = None  # [3, slots] bool, with `install_mirror_branch`
-        self._table_q: Optional[torch.Tensor] = None
-        self._lift_q: Optional[torch.Tensor] = None
-        self._grasp_start_q: Optional[torch.Tensor] = None
-        self._sym_period = torch.tensor([symmetry_period(k) for k in kinds], **f32)
+        # the dense reward's joint-space measures (IK tables, a few seconds once per process: made when first needed)
+        self._geometry: Optional[CarryGeometry] = None
 
     def _build_goal_marker(self, kind: str, manifest: dict) -> Actor:
         """A translucent green ghost of the element at its goal (human render only)."""
@@ -362,183 +290,6 @@ class ConstructionTaskEnv(BaseEnv):
                 self._start_on_the_way(env_idx)
             if self.near_goal_share > 0:
                 self._start_near_goal(env_idx)
-
-    # ------------------------------------------------------------------------------------- #
-    # start-state curriculum (reverse curriculum generation, Florensa et al. 2017)
-    # ------------------------------------------------------------------------------------- #
-    def set_near_goal_starts(self, share: float, radius: Union[float, Sequence[float]],
-                             max_steps: Optional[int] = None) -> None:
-        """From the next reset on, a `share` of episodes start with the element already held, the arm posed a
-        fraction in [0, `radius`] (one for all task types, or one per type in ELEMENT_KINDS order) of the way out
-        along a start path from its installation configuration
-        (`goal_configurations.StartPaths`: backed off the goal along the plate's axis, then on the joint line to
-        a lift above the staging table), within the path's collision-free part. Everything comes from IK of
-        the goal and the table (no demonstrations). `info["near_goal_start"]` marks those episodes; with
-        `max_steps`, one that has not placed within that many steps is truncated where the env is wrapped in
-        `NearGoalTimeLimit` (a start close to the goal that has wandered off teaches little more for the rest of
-        the step limit). A training device: evaluations use
-        ordinary resets (share 0, the default)."""
-        radii = [float(radius)] * len(ELEMENT_KINDS) if np.isscalar(radius) else [float(r) for r in radius]
-        if len(radii) != len(ELEMENT_KINDS):
-            raise ValueError(f"near-goal starts: give one radius or {len(ELEMENT_KINDS)} ({', '.join(ELEMENT_KINDS)}), got {radius}")
-        for name, value in [("share", share)] + [("radius", r) for r in radii]:
-            if not 0 <= value <= 1:
-                raise ValueError(f"near-goal starts: {name} must lie in [0, 1], got {value}")
-        if share > 0:
-            self._load_start_paths()
-        if max_steps is not None and not 0 < max_steps:
-            raise ValueError(f"near-goal starts: max_steps must be a positive step count or None, got {max_steps}")
-        self.near_goal_share = float(share)
-        self.near_goal_max_steps = None if max_steps is None else int(max_steps)
-        self.near_goal_radius = torch.tensor(radii, dtype=torch.float32, device=self.device)
-
-    def _load_start_paths(self) -> dict:
-        """The start paths (`goal_configurations.start_paths`, a few seconds once per process) as tensors."""
-        if self._start_paths is None:
-            from ms_construction.goal_configurations import start_paths
-
-            paths = start_paths()
-            f32 = dict(dtype=torch.float32, device=self.device)
-            usable = paths.usable & self._kept_configurations()[..., None]
-            self._start_paths = dict(waypoints=torch.tensor(paths.waypoints, **f32), free=torch.tensor(paths.free, **f32),
-                                     usable=torch.tensor(usable, device=self.device).flatten(2).float(),
-                                     planned=torch.tensor(paths.planned, device=self.device).flatten(2).float())
-        return self._start_paths
-
-    def _kept_configurations(self) -> np.ndarray:
-        """[kinds, slots, configurations] bool: the installation configurations (and their start paths) the carry is
-        measured to, and near-goal starts start on: with `install_mirror_branch`, those of the window opening at
-        y = +0.85 cut to the wrist branch whose mirror image is the opening at -0.85's but for joint 6
-        (`goal_configurations.mirror_branch_mask`), for a policy that meets the one as the mirror image of the
-        other (ppo.py's `--mirror-windows`); all of them otherwise."""
-        shape = install_configurations().shape[:3]
-        return mirror_branch_mask(JOINT_MIRROR_SIGNS) if self.install_mirror_branch else np.ones(shape, dtype=bool)
-
-    @staticmethod
-    def _path_points(waypoints: torch.Tensor, fraction: torch.Tensor) -> torch.Tensor:
-        """[m, 6]: the configurations `fraction` [m] of the way along polylines of joint configurations [m, p, 6],
-        by their summed joint-space (L1) length (goal_configurations.path_point, batched)."""
-        seg = (waypoints[:, 1:] - waypoints[:, :-1]).abs().sum(-1)  # [m, p - 1]
-        at = (fraction * seg.sum(-1))[:, None]
-        start = torch.cumsum(seg, -1) - seg
-        w = ((at - start) / seg.clamp(min=1e-9)).clamp(0, 1) * (seg > 0)  # how far along each segment
-        return waypoints[:, 0] + (w[..., None] * (waypoints[:, 1:] - waypoints[:, :-1])).sum(1)
-
-    def _start_near_goal(self, env_idx: torch.Tensor) -> None:
-        sp, b = self._start_paths, len(env_idx)
-        chosen = torch.rand(b) < self.near_goal_share
-        if not bool(chosen.any()):
-            return
-        idx = env_idx[chosen]
-        task, slot = self.task_id[idx], self.goal_slot[idx]
-        path = torch.multinomial(sp["usable"][task, slot], 1)[:, 0]  # a usable (configuration, side) of the slot
-        c, side = path // 2, path % 2
-        frac = torch.rand(len(idx)) * torch.minimum(sp["free"][task, slot, c, side], self.near_goal_radius[task])
-        q = self._path_points(sp["waypoints"][task, slot, c, side], frac)
-        turn = (torch.rand(len(idx)) * 2 - 1) * START_YAW_NOISE_DEG  # the element's turn on the plate
-        q[:, 5] += torch.deg2rad(turn)
-        qpos = self.agent.robot.get_qpos()[env_idx].clone()
-        qpos[chosen] = q
-        self._pose_arm(qpos)
-        tcp = self.agent.tcp.pose.raw_pose[idx]
-        grasp = self._grasp_in_el[task]
-        hold = pose_inv(torch.cat([grasp[:, :3], qmul(grasp[:, 3:], quat_z(turn))], -1))
-        element = self.obj.pose.raw_pose[env_idx].clone()
-        element[chosen] = pose_mul(tcp, hold)
-        self.obj.set_pose(Pose.create(element))
-        self.gripper.held[idx] = True
-        self.gripper.hold_pose_in_tcp[idx] = hold
-        self.picked[idx] = True
-        self.carry_side[idx] = side
-        self.near_goal_start[idx] = True
-        self.reach_start_side[idx] = -1  # a near-goal start takes the place of a reach start drawn before it
-
-    def _pose_arm(self, qpos: torch.Tensor) -> None:
-        """Set the arm of the envs being reset to `qpos`, its links posed at once (on the GPU they follow the new
-        joint positions only after a kinematics update)."""
-        self.agent.reset(qpos)
-        if self.gpu_sim_enabled:
-            self.scene._gpu_apply_all()
-            self.scene.px.gpu_update_articulation_kinematics()
-            self.scene._gpu_fetch_all()
-
-    REACH_START_MAX = 0.75
-    """a reach start poses the arm at most this fraction of the way to the table: the last stretch of the joint line
-    passes the plate through the element lying there."""
-    GRASP_START_HEIGHT = 0.2
-    """m; with `set_reach_starts`, the reach path ends with the plate this far above the element's grasp face, inside
-    every stage's tau_pick (0.3-0.4 m): an arm left there grasps at its first step."""
-
-    def set_reach_starts(self, share: float, radius: Union[float, Sequence[float]]) -> None:
-        """From the next reset on, a `share` (one for all task types, or one per type in ELEMENT_KINDS order) of the
-        resets that are not near-goal starts start on the last `radius` of the reach path's length, the element lying
-        on the table. `radius`: one for all goal slots, one per task type in ELEMENT_KINDS order, or one per goal slot,
-        those of each type in turn (a slot reached from the turret side the policy does not grasp from then widens on
-        its own, not on the other slots' grasps). The path runs on the joint line from the reset's configuration to
-        the lift LIFT_HEIGHT above the element, on a turret side the goal slot's start paths leave from
-        (`_path_sides`), then down to GRASP_START_HEIGHT above it.
-
-        The start-state curriculum carried back through the grasp (reverse curriculum generation): radius 0 starts
-        about to grasp, 1 anywhere from the reset on; everything from IK of the table (`lift_configurations`), no
-        demonstrations. `info["reach_start"]` marks those episodes and `info["reach_start_grasped"]` whether the
-        element was grasped from the side the start was on. A training device: evaluations use ordinary resets
-        (share 0, the default)."""
-        kinds, slots = len(ELEMENT_KINDS), self._goal_table.shape[1]
-        radii = [float(radius)] if np.isscalar(radius) else [float(r) for r in radius]
-        if len(radii) not in (1, kinds, kinds * slots):
-            raise ValueError(f"reach starts: give one radius, {kinds} ({', '.join(ELEMENT_KINDS)}) or {kinds * slots} "
-                             f"(one per goal slot), got {radius}")
-        shares = [float(share)] * kinds if np.isscalar(share) else [float(s) for s in share]
-        if len(shares) != kinds:
-            raise ValueError(f"reach starts: give one share or {kinds} ({', '.join(ELEMENT_KINDS)}), got {share}")
-        for name, value in [("share", s) for s in shares] + [("radius", r) for r in radii]:
-            if not 0 <= value <= 1:
-                raise ValueError(f"reach starts: {name} must lie in [0, 1], got {value}")
-        if self.reach_starts_to_lift:
-            raise ValueError("reach starts: set_reach_starts draws along the path down to the element; "
-                             "reach_starts_to_lift=True is the kwargs' fixed way, give one or the other")
-        self.reach_start_share = torch.tensor(shares)
-        per_slot = torch.tensor(radii, dtype=torch.float32, device=self.device)
-        self.reach_start_radius = per_slot.view(-1, 1).expand(kinds, slots) if len(radii) < kinds * slots \
-            else per_slot.view(kinds, slots)
-
-    def _start_on_the_way(self, env_idx: torch.Tensor) -> None:
-        """A `reach_start_share` of the resets (before near-goal starts draw theirs) start with the arm a uniform
-        fraction in [0, REACH_START_MAX) of the way along the joint line from its start configuration to a table grasp
-        configuration (`reach_distance`'s) on a turret side that a usable start path of the goal slot leaves from, the
-        element lying on the table: the start-state curriculum's first stretch, which near-goal starts (the element
-        already held) leave out, meant for a policy that grasps every element from one turret side where a goal slot
-        is reached from the other one (the window opening at y = +0.85; it did not turn the from-scratch policy's
-        reach there: docs/experiments/from_scratch.md, rounds 6 and 9). With
-        `reach_starts_to_lift`, along the joint line to the lift LIFT_HEIGHT above the element instead, any fraction
-        of the way up to all of it (the arm above the element, about to grasp it): a policy that turns back from
-        most of the way to a side it never grasps from may still grasp from right above the element. After
-        `set_reach_starts`, on the last part of the path down to the element instead (its docstring)."""
-        chosen = torch.rand(len(env_idx)) < self.reach_start_share.to(self.device)[self.task_id[env_idx]]
-        if not bool(chosen.any()):
-            return
-        idx = env_idx[chosen]
-        side = torch.multinomial(self._path_sides(self.task_id[idx], self.goal_slot[idx]).float(), 1)[:, 0]
-        qpos = self.agent.robot.get_qpos()[env_idx].clone()
-        if self.reach_start_radius is not None:
-            if self._grasp_start_q is None:
-                self._lift_q = torch.tensor(lift_configurations(), dtype=torch.float32, device=self.device)
-                self._grasp_start_q = torch.tensor(lift_configurations(self.GRASP_START_HEIGHT), dtype=torch.float32,
-                                                   device=self.device)
-            task = self.task_id[idx]
-            back = torch.stack([self._grasp_start_q[task, side], self._lift_q[task, side], qpos[chosen]], 1)  # [m, 3, 6]
-            radius = self.reach_start_radius[task, self.goal_slot[idx]]
-            qpos[chosen] = self._path_points(back, torch.rand(len(idx)) * radius)
-        else:
-            if self.reach_starts_to_lift and self._lift_q is None:
-                self._lift_q = torch.tensor(lift_configurations(), dtype=torch.float32, device=self.device)
-            elif not self.reach_starts_to_lift and self._table_q is None:
-                self._table_q = torch.tensor(lift_configurations(0.0), dtype=torch.float32, device=self.device)
-            ends, most = (self._lift_q, 1.0) if self.reach_starts_to_lift else (self._table_q, self.REACH_START_MAX)
-            target = ends[self.task_id[idx], side]
-            qpos[chosen] += torch.rand(len(idx), 1) * most * (target - qpos[chosen])
-        self._pose_arm(qpos)
-        self.reach_start_side[idx] = side
 
     def _place_goal_markers(self, env_idx: torch.Tensor) -> None:
         task, goal = self.task_id[env_idx], self._goal_table[self.task_id[env_idx], self.goal_slot[env_idx]]
@@ -644,7 +395,7 @@ class ConstructionTaskEnv(BaseEnv):
     def _step_action(self, action):
         action = super()._step_action(action)
         self._update_grasp()
-        self._step_grasp_frame, self._in_step_readout = None, True  # the poses are final until the step returns
+        self._step_cache, self._in_step_readout = {}, True  # the poses are final until the step returns
         return action
 
     def step(self, action):
@@ -688,16 +439,6 @@ class ConstructionTaskEnv(BaseEnv):
             reach_start_grasped=self.picked & (self.carry_side == self.reach_start_side),
         )
 
-    def _grasp_frame(self) -> torch.Tensor:
-        """Raw world pose [n, 7] of the grasp face's centre, z pointing into the element; read once
-        per step (the observation and the dense reward both need it, and on physx_cpu reading a pose
-        costs about a twentieth of a step)."""
-        if not self._in_step_readout:
-            return pose_mul(self.obj.pose.raw_pose, self._grasp_in_el[self.task_id])
-        if self._step_grasp_frame is None:
-            self._step_grasp_frame = pose_mul(self.obj.pose.raw_pose, self._grasp_in_el[self.task_id])
-        return self._step_grasp_frame
-
     def _get_obs_extra(self, info: dict):
         goal = self._goal_table[self.task_id, self.goal_slot]
         tcp = self.agent.tcp.pose.raw_pose
@@ -729,204 +470,102 @@ class ConstructionTaskEnv(BaseEnv):
         reward[info["success"]] = 2.0
         return reward
 
-    PROGRESS_GAIN = 1.25
-    """per rad; the progress term pays this much per radian the carry distance fell since the last step, within
-    +-0.25 around its 0.25 for standing still (a joint at its full 0.1 rad per step earns 0.125 more)."""
-    CARRY_RANGE = 12.0
-    """rad; the carry term falls linearly from 1 at an installation configuration to 0 this far (summed over the
-    joints) from the nearest one: a lift above the staging table leaves the arm 2.6-10.3 rad from its goal."""
+    # ------------------------------------------------------------------------------------- #
+    # the dense reward's measures (joint space, `carry_geometry`), read once per step
+    # ------------------------------------------------------------------------------------- #
+    def _per_step(self, name: str, compute):
+        """`compute()`, once per step while the step reads out its info, observation and reward (the poses and joints
+        are final until it returns); afresh outside a step (set_state_dict, set_pose may move them)."""
+        if not self._in_step_readout:
+            return compute()
+        if name not in self._step_cache:
+            self._step_cache[name] = compute()
+        return self._step_cache[name]
 
-    PATH_DEVIATION_WEIGHT = 3.0
-    """`path_distance` counts each radian off the path this many times: cutting across to the goal (or to a later
-    point of the path) costs more than going along the path, whose length from a lift above the table to the goal is
-    up to about twice the straight joint move's."""
-    VIA_DEVIATION_WEIGHT = 25.0
-    """with `carry_keeps_to_vias`, each radian off a path through a planned via, from the lift above the table in,
-    counts this many times: that detour exists because cutting across runs the element into the site. At
-    PATH_DEVIATION_WEIGHT a window for the opening at y = +0.85 carried from -pi into the neighbouring opening
-    measured about as near its goal as the via, and the cut across nearer than the lift; at this weight both measure
-    farther than the path's table end (`python -m experiments.via_landscape`, docs/experiments/from_scratch.md)."""
+    @property
+    def geometry(self) -> CarryGeometry:
+        """The joint-space tables of every task type and goal slot (IK and collision checks: a few seconds, once per
+        process)."""
+        if self._geometry is None:
+            self._geometry = CarryGeometry(self.device)
+        return self._geometry
+
+    def _grasp_frame(self) -> torch.Tensor:
+        """Raw world pose [n, 7] of the grasp face's centre, z pointing into the element (on physx_cpu reading a pose
+        costs about a twentieth of a step: the observation and the dense reward share it)."""
+        return self._per_step("grasp_frame", lambda: pose_mul(self.obj.pose.raw_pose, self._grasp_in_el[self.task_id]))
 
     def plate_turn(self) -> torch.Tensor:
         """[n] rad; how far the held element is turned on the plate about the plate's axis (the grasp keeps the
         element's yaw relative to the plate); 0 when it lies as in `install_configurations`, and before the episode's
-        grasp (each reset sets the nominal hold), but half a turn there with `install_mirror_branch` for the slot it
-        cuts."""
-        grasp_q = self._grasp_in_el[self.task_id, 3:]
-        turn = qmul(qconj(grasp_q), qconj(self.hold_pose_in_tcp[:, 3:]))  # a rotation about the plate's z axis
-        turn = 2 * torch.atan2(turn[:, 3], turn[:, 0])
-        if self.install_mirror_branch:
-            # until the grasp, a slot met as its twin's mirror image is measured for the element held half a turn on
-            # (the plate's roll is free until then): its joint moves are then the mirror image of its twin's
-            if self._mirrored_slot is None:
-                self._mirrored_slot = torch.tensor(mirror_twins() >= 0, device=self.device)
-            ahead = self._mirrored_slot[self.task_id, self.goal_slot] & ~self.picked
-            turn = torch.where(ahead, turn + torch.pi, turn)
-        return turn
+        grasp (each reset sets the nominal hold), but for a goal slot that is the mirror image of another there the
+        turn its installation is from its twin's mirror image (`CarryGeometry.mirror_turn`: half a turn for a window):
+        until the grasp the plate's roll is free, and measured so, that slot's joint moves are the mirror image of its
+        twin's (a policy may meet the one as the other)."""
+        def compute():
+            grasp_q = self._grasp_in_el[self.task_id, 3:]
+            turn = qmul(qconj(grasp_q), qconj(self.hold_pose_in_tcp[:, 3:]))  # a rotation about the plate's z axis
+            turn = 2 * torch.atan2(turn[:, 3], turn[:, 0])
+            return torch.where(self.picked, turn, turn + self.geometry.mirror_turn[self.task_id, self.goal_slot])
+        return self._per_step("plate_turn", compute)
+
+    def projection(self) -> Projection:
+        """The arm's nearest point on its goal slot's start paths, the grasp side's where it has any
+        (`CarryGeometry.project`): what the carry and the path offset measure."""
+        return self._per_step("projection", lambda: self.geometry.project(
+            self.agent.robot.get_qpos(), self.plate_turn(), self.task_id, self.goal_slot, self.carry_side))
 
     def carry_distance(self) -> torch.Tensor:
-        """[n] rad; how far the arm is from holding its element installed, in joint space (summed over the joints):
-        to the nearest installation configuration of the env's goal slot, joint 6 shifted by the element's turn
-        on the plate and compared modulo the element's symmetry period. Falls at every step of a straight joint
-        move to the goal from anywhere (the turret turning the way its limits allow), and so along any carry
-        that heads there; no demonstrations involved. With `carry_along_paths`, `path_distance` instead; with
-        `carry_counts_lag`, plus LAG_WEIGHT times `hold_lag`."""
-        distance = self.path_distance() if self.carry_along_paths else self.install_offset().abs().sum(-1)
-        if self.carry_counts_lag:
-            distance = distance + self.LAG_WEIGHT * self.hold_lag()
-        return distance
-
-    LAG_WEIGHT = 10.0
-    """rad per m; with `carry_counts_lag`, each metre the held element trails its place on the plate adds this much to
-    the carry distance: an element jammed 0.25 m under the slab's rim counts as far from its goal as a 2.5 rad joint
-    move, where the arm's joints alone say it is nearly there."""
-
-    def hold_lag(self) -> torch.Tensor:
-        """[n] m; how far the held element's centre is from where the suction plate holds it. The hold cannot pass an
-        element through walls and slabs: stopped there, it trails the plate while the arm goes on (the ceiling panels
-        pushed against the slab's underside beside their opening, docs/experiments/from_scratch.md). About 0 while
-        carrying, up to tau_pick for a step or two after the grasp (the pull onto the plate), a few cm pressed into
-        the goal; meaningless while nothing is held."""
-        target = pose_mul(self.agent.tcp.pose.raw_pose, self.gripper.hold_pose_in_tcp)
-        return torch.linalg.norm(self.obj.pose.raw_pose[:, :3] - target[:, :3], dim=-1)
-
-    def path_distance(self) -> torch.Tensor:
-        """[n] rad; how far the arm is from holding its element installed along the nearest start path of its goal
-        slot (`goal_configurations.StartPaths`, the near-goal starts' collision-checked joint paths: in from the
-        goal along the plate's axis, up to a lift above the staging table and down to it): the least, over the
-        points of the path, of PATH_DEVIATION_WEIGHT times the joint-space (L1) distance to the point plus the
-        path's length from there to the installation, joint 6 compared as in `carry_distance`. A straight joint
-        move to the goal runs the element into the slab, the wall and the barriers beside the staging table (the
-        fourth start's carries, docs/experiments/from_scratch.md); this distance falls on the way up and over them
-        and into the opening along the plate's axis. No demonstrations: the paths come from IK of the goal and
-        the table. With `carry_keeps_to_vias`, only along the paths that leave the table from the turret side the
-        element was grasped from (where the slot has any: the turret cannot cross to the other side holding it),
-        each radian off a path through a planned via, from its lift in, counting VIA_DEVIATION_WEIGHT times."""
-        return self._path_projection()[0]
-
-    def _path_projection(self) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
-        """`path_distance` [n], the waypoints [n, P, 6] of the start path it is measured along, and the path's length
-        from the installation to the point it is measured from [n]."""
-        sp = self._load_start_paths()
-        n = len(self.task_id)
-        w = sp["waypoints"][self.task_id, self.goal_slot].flatten(1, 2)  # [n, M, P, 6], M paths of P waypoints
-        a, seg = w[:, :, :-1], w[:, :, 1:] - w[:, :, :-1]  # [n, M, P - 1, 6]
-        rel = self.agent.robot.get_qpos()[:, None, None, :] - a
-        rel[..., 5] -= self.plate_turn()[:, None, None]
-        period = self._sym_period[self.task_id][:, None, None]
-        # each segment's nearest point by joints 1-5 (joint 6, the plate's roll, is compared modulo the element's
-        # symmetry, which a projection cannot take), and its ends
-        t_near = ((rel[..., :5] * seg[..., :5]).sum(-1) / (seg[..., :5] ** 2).sum(-1).clamp(min=1e-9)).clamp(0, 1)
-        length = seg.abs().sum(-1)
-        before = torch.cumsum(length, -1) - length  # the path's length from the installation to each segment
-        ts = torch.stack([t_near, torch.zeros_like(t_near), torch.ones_like(t_near)])  # [3, n, M, P - 1]
-        diff = rel[None] - ts[..., None] * seg[None]
-        off_path = diff[..., :5].abs().sum(-1) + (torch.remainder(diff[..., 5] + period / 2, period) - period / 2).abs()
-        usable = sp["usable"][self.task_id, self.goal_slot] > 0  # [n, M]
-        weight = torch.full_like(length, self.PATH_DEVIATION_WEIGHT)  # [n, M, P - 1]
-        if self.carry_keeps_to_vias:
-            # from the lift in: the table's segment keeps the lenient weight, where the grasp's posture need not match
-            # the path's and nothing lies across
-            not_table = torch.arange(length.shape[-1], device=length.device) < length.shape[-1] - 1  # [P - 1]
-            detour = (sp["planned"][self.task_id, self.goal_slot] > 0)[..., None] & not_table
-            weight = torch.where(detour, self.VIA_DEVIATION_WEIGHT, weight)
-            side = torch.arange(usable.shape[1], device=usable.device)[None] % 2 == self.carry_side[:, None]  # [n, M]
-            usable = torch.where((usable & side).any(-1, keepdim=True), usable & side, usable)
-        cost = weight[None] * off_path + before + ts * length
-        cost = torch.where(usable[None, :, :, None], cost, torch.full_like(cost, torch.inf))
-        total, best = cost.permute(1, 0, 2, 3).reshape(n, -1).min(-1)
-        k, m, j = torch.unravel_index(best, cost.permute(1, 0, 2, 3).shape[1:])
-        rows = torch.arange(n, device=cost.device)
-        return total, w[rows, m], before[rows, m, j] + ts[k, rows, m, j] * length[rows, m, j]
-
-    PATH_LOOKAHEAD = 0.5
-    """rad; `path_offset` points this far (joint-space, L1) along the path ahead of the arm's nearest point on it."""
+        """[n] rad; how far the arm is from holding its element installed, along the start paths of its goal slot
+        (`CarryGeometry.project`): collision-checked joint paths in from the goal along the plate's axis, up to a lift
+        above the staging table and down to it, from IK of the goal and the table (no demonstrations). A straight joint
+        move to the goal runs the element into the slab, the wall and the barriers beside the staging table; this
+        distance falls on the way up and over them and into the opening along the plate's axis."""
+        return self.projection().distance
 
     def path_offset(self) -> torch.Tensor:
-        """[n, 6] rad; the joint move from the arm's configuration to the point PATH_LOOKAHEAD ahead, toward the
-        installation, of its nearest point on the start path `path_distance` measures along (the installation
-        configuration itself within PATH_LOOKAHEAD of it), joint 6's part taken modulo the element's symmetry, as
-        `install_offset` is for the straight move: which way the path-measured carry falls from here."""
-        _, w, at = self._path_projection()
-        length = (w[:, 1:] - w[:, :-1]).abs().sum(-1).sum(-1)
-        target = self._path_points(w, ((at - self.PATH_LOOKAHEAD).clamp(min=0) / length.clamp(min=1e-9)).clamp(0, 1))
-        diff = target - self.agent.robot.get_qpos()
-        period = self._sym_period[self.task_id]
-        diff[:, 5] = torch.remainder(diff[:, 5] + self.plate_turn() + period / 2, period) - period / 2
-        return diff
-
-    REACH_RANGE = 6.0
-    """rad; with `reach_in_joint_space`, the joint-space reach falls linearly from 1 at a grasp configuration to 0
-    this far (joints 1-5 summed) from the nearest one: the rest pose is 3-4 rad from them."""
-
-    def reach_distance(self) -> torch.Tensor:
-        """[n] rad; how far the arm is, in joint space (joints 1-5 summed: the plate's roll does not matter to the
-        suction grasp, which keeps the element's turn), from the nearest configuration that grasps the element where
-        it lies on the staging table (its centre: `goal_configurations.lift_configurations(0)`, with the turret at
-        about +pi or -pi). Falls along a joint move to the table the way the turret's limits allow, where the
-        bearing around the pedestal turns the turret either way. With `reach_toward_path_sides`, only to those on the
-        turret sides that a usable start path of the env's goal slot leaves the table from: an element grasped
-        from the other side has no collision-free way to its goal along them (the two window openings at y <= 0 only
-        from -pi), and the carry measured along them pulls it nowhere; `reach_avoids_vias` (`_path_sides`) leaves out
-        the side reached only through a planned via (the opening at y = +0.85 from -pi)."""
-        if self._table_q is None:
-            self._table_q = torch.tensor(lift_configurations(0.0), dtype=torch.float32, device=self.device)
-        q = self.agent.robot.get_qpos()
-        distance = (self._table_q[self.task_id][..., :5] - q[:, None, :5]).abs().sum(-1)  # [n, 2 turret sides]
-        if self.reach_toward_path_sides:
-            distance = torch.where(self._path_sides(self.task_id, self.goal_slot), distance, torch.full_like(distance, torch.inf))
-        return distance.amin(-1)
-
-    def _path_sides(self, task: torch.Tensor, slot: torch.Tensor) -> torch.Tensor:
-        """[n, 2] bool: the turret sides (+pi, -pi) a usable start path of each goal slot leaves the table from; both for
-        a slot without usable paths. With `reach_avoids_vias`, only the sides a usable path without a planned via
-        leaves from, where there is one: the way in through a via is a detour of the turret's whole turn past the
-        neighbouring openings (the window opening at y = +0.85 from -pi), the direct way from the other side a short one."""
-        sp = self._load_start_paths()
-        usable = sp["usable"][task, slot]  # [n, configurations x sides]
-        sides = usable.view(len(task), -1, 2).amax(1) > 0
-        if self.reach_avoids_vias:
-            direct = (usable * (1 - sp["planned"][task, slot])).view(len(task), -1, 2).amax(1) > 0
-            sides = torch.where(direct.any(-1, keepdim=True), direct, sides)
-        return sides | ~sides.any(-1, keepdim=True)
+        """[n, 6] rad; the joint move to the point a little ahead along the path the carry is measured along
+        (`CarryGeometry.path_offset`): which way the carry falls from here."""
+        return self.geometry.path_offset(self.agent.robot.get_qpos(), self.plate_turn(), self.task_id, self.projection())
 
     def install_offset(self) -> torch.Tensor:
         """[n, 6] rad; the joint move from the arm's configuration to the nearest one that holds its element
-        installed (the one `carry_distance` measures to), joint 6's part taken modulo the element's symmetry."""
-        if self._install_q is None:
-            # a configuration not kept is replaced by its slot's first kept one (the table repeats them already)
-            table, kept = install_configurations().copy(), self._kept_configurations()
-            first = kept.argmax(-1)[..., None, None].repeat(table.shape[-1], -1)
-            table = np.where(kept[..., None], table, np.take_along_axis(table, first, 2))
-            self._install_q = torch.tensor(table, dtype=torch.float32, device=self.device)
-        q = self.agent.robot.get_qpos()
-        diff = self._install_q[self.task_id, self.goal_slot] - q[:, None, :]  # [n, K, 6]
-        period = self._sym_period[self.task_id][:, None]
-        diff[..., 5] = torch.remainder(diff[..., 5] + self.plate_turn()[:, None] + period / 2, period) - period / 2
-        nearest = diff.abs().sum(-1).argmin(-1)
-        return diff[torch.arange(len(q), device=q.device), nearest]
+        installed, joint 6's part taken modulo the element's symmetry (the projection finds it on the way)."""
+        return self.projection().install_offset
+
+    def reach_distance(self) -> torch.Tensor:
+        """[n] rad; the arm's joint-space distance (joints 1-5) from the nearest configuration that grasps its element
+        on the staging table from a turret side its goal slot's start paths leave from (`CarryGeometry.reach_distance`)."""
+        return self.geometry.reach_distance(self.agent.robot.get_qpos(), self.task_id, self.goal_slot)
+
+    PROGRESS_GAIN = 1.25
+    """per rad; the progress term pays this much per radian the carry distance fell since the last step, within
+    +-0.25 around its 0.25 for standing still (a joint at its full 0.1 rad per step earns 0.125 more)."""
+    CARRY_RANGE = 12.0
+    """rad; the carry term falls linearly from 1 at the installation to 0 this far along the paths from it: a lift
+    above the staging table leaves the arm 2.6-10.3 rad from its goal."""
+    REACH_RANGE = 6.0
+    """rad; the joint-space half of the reach falls linearly from 1 at a table grasp configuration to 0 this far
+    (joints 1-5 summed) from the nearest one: the rest pose is 3-4 rad from them."""
 
     def compute_dense_reward(self, obs: Any, action: torch.Tensor, info: dict):
-        """Staged, as ManiSkill's tasks: reach and face the grasp surface (<= 1); held: 2 + carry (<= 1) + fit
-        (<= 1) + progress (<= 0.5); placed: 10, more than twice any other step, for a learner that bootstraps at success
-        (ManiSkill's convention; see the task card). Carry is linear in the arm's joint-space distance from its
-        installation configuration (`carry_distance`), so it pulls at the same rate from the pick to the goal, the
-        way the turret's limits allow, and turns the element as it carries it; fit is 1 - tanh(5 d) of the
-        element's distance d from its goal, times 1 - tanh of its angle error (rad), which takes over for the last decimetres.
-        Progress is the step's fall of the carry distance (PROGRESS_GAIN per rad, within [0, 0.5], 0.25 standing
-        still): a potential difference, so it sums to the carry's net change over an episode and going back and
-        forth earns nothing, but it pays each step's progress at once instead of through the critic's sums. It
-        keeps the last carry distance per env (`carry_prev`, in the task state): call this once per step."""
+        """Staged, as ManiSkill's tasks (the task card says what each stage pays and why): before the grasp, reach
+        (<= 1): half joint-space toward the table grasp configurations on the turret sides the goal slot's start paths
+        leave from (`reach_distance`), half 1 - tanh of the plate's distance from the grasp face times its facing;
+        held: 2 + carry (<= 1) + fit (<= 1) + progress (<= 0.5); placed: DENSE_REWARD_MAX, more than twice any other
+        step, for a learner that bootstraps at success. Carry is linear in the distance along the start paths
+        (`carry_distance`); fit is 1 - tanh(5 d) of the element's distance d from its goal, times 1 - tanh of its
+        angle error (rad), which takes over for the last decimetres. Progress is the step's fall of the carry
+        distance (PROGRESS_GAIN per rad, within [0, 0.5], 0.25 standing still): a potential difference, so it sums to
+        the carry's net change over an episode and going back and forth earns nothing, but it pays each step's
+        progress at once instead of through the critic's sums. It keeps the last carry distance per env
+        (`carry_prev`, in the task state): call this once per step."""
         tcp = self.agent.tcp.pose.raw_pose
         grasp = self._grasp_frame()
         # tanh(d), not tanh(3d): the element starts about 2 m from the plate and must still pull
-        reach = 1 - torch.tanh(torch.linalg.norm(grasp[:, :3] - tcp[:, :3], dim=-1))
+        near = 1 - torch.tanh(torch.linalg.norm(grasp[:, :3] - tcp[:, :3], dim=-1))
         face = (1 + (qaxis(tcp[:, 3:], 2) * qaxis(grasp[:, 3:], 2)).sum(-1)) / 2
-        # bearing around the pedestal: straight-line distance alone pulls the plate over the
-        # pedestal (a dead end) when the target is behind the arm; turning the turret must pay
-        approach = 0.25 * _bearing(tcp[:, :2], grasp[:, :2]) + 0.75 * reach * (0.5 + 0.5 * face)
-        if self.reach_in_joint_space:  # the turret's way round to the table as its limits allow, as the carry's
-            approach = 0.5 * (1 - (self.reach_distance() / self.REACH_RANGE).clamp(max=1)) + 0.5 * reach * (0.5 + 0.5 * face)
+        approach = 0.5 * (1 - (self.reach_distance() / self.REACH_RANGE).clamp(max=1)) + 0.5 * near * (0.5 + 0.5 * face)
         held = info["is_grasped"]
         distance = self.carry_distance()
         fell = torch.where(held & (self.carry_prev >= 0), self.carry_prev - distance, torch.zeros_like(distance))
@@ -1001,15 +640,3 @@ class ConstructionTaskEnv(BaseEnv):
         if task is not None:
             self._place_goal_markers(torch.arange(self.num_envs, device=self.device))
 
-
-class NearGoalTimeLimit(gym.Wrapper):
-    """Truncates an episode that started near its goal (`set_near_goal_starts`) and has not placed within the
-    `max_steps` given there; other episodes keep the task's step limit. Outside ManiSkill's TimeLimitWrapper,
-    which sets `truncated` from the step limit alone."""
-
-    def step(self, action):
-        obs, reward, terminated, truncated, info = self.env.step(action)
-        u = self.env.unwrapped
-        if u.near_goal_max_steps is not None:
-            truncated = truncated | (u.near_goal_start & (u.elapsed_steps >= u.near_goal_max_steps) & ~terminated)
-        return obs, reward, terminated, truncated, info

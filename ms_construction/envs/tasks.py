@@ -8,6 +8,7 @@ from mani_skill.utils.registration import register_env
 
 from ms_construction.agents.suction_gripper import MAX_GRASP_INCIDENCE_DEG
 from ms_construction.curriculum import FINAL_STAGE, STAGES
+from ms_construction.envs.carry_geometry import PATH_DEVIATION_WEIGHT, PATH_LOOKAHEAD, VIA_DEVIATION_WEIGHT
 from ms_construction.envs.construction_env import ROBOT_INIT_QPOS_NOISE, ConstructionTaskEnv
 from ms_construction.parameters import START_XY_NOISE, START_YAW_NOISE_DEG, SiteParams
 
@@ -42,43 +43,37 @@ over the element's symmetries: {symmetry}). Success ends the episode. Tolerances
 curriculum stage (`curriculum_stage`, Table I; default cp4: {_CP4["pick"]:.2f} m, {_CP4["place"]:.2f} m,
 {_CP4["angle_deg"]:g} degrees).
 
-**Rewards:** sparse = Algorithm 1 (-1/{_STEPS} every step, 1 on the first grasp, 2 on placement);
-dense = staged reach and face (<= 1), held (2 + carry <= 1 + fit <= 1 + progress <= 0.5), placed
-({ConstructionTaskEnv.DENSE_REWARD_MAX:g}, the most any step pays); normalized_dense = dense / {ConstructionTaskEnv.DENSE_REWARD_MAX:g}. Carry falls
-linearly, to 0 at {ConstructionTaskEnv.CARRY_RANGE:g} rad, with the arm's joint-space distance (summed over the joints) from the nearest
-configuration that holds the element installed (IK of the goal; `carry_distance`): it pulls from the staging
-table on, turns the turret the way its limits allow and turns the element with the wrist as it carries it. Fit
-is 1 - tanh(5 d) of the element's distance d from its goal, times 1 - tanh of its angle error in radians. Progress pays
-the step's fall of the carry distance ({ConstructionTaskEnv.PROGRESS_GAIN:g} per rad, in [0, 0.5], 0.25 standing still): a
-potential difference, so going back and forth earns nothing. Convention
-(ManiSkill's): the dense rewards are for a learner that bootstraps at every episode end, success included
-(ManiSkill's PPO `bootstrap_at_done="always"`, ppo.py's default for them), so that a placed element counts
-as a state that keeps paying the most (ppo.py's `--success-value absorbing`, its default, bootstraps it with
-exactly that); a learner that values success as an end with nothing after it finds holding the element near
-its goal worth more than placing it. Results trained before 2026-11-25 on a dense reward (refinement run 8)
-used the earlier one, whose carry was 0.75 (1 - tanh d) + a bearing term and whose orient term was separate.
-`carry_along_paths=True` measures the carry along the start paths below instead (`path_distance`: the path's
-length left, each radian off it counted {ConstructionTaskEnv.PATH_DEVIATION_WEIGHT:g} times), so that it falls on the way up and over the
-site's barriers, not on the straight joint move that runs the element into them. `reach_in_joint_space=True`
-makes half the reach term joint-space too: 1 - d / {ConstructionTaskEnv.REACH_RANGE:g} rad of the arm's distance (joints 1-5) from the nearest
-configuration that grasps the element on the staging table (`reach_distance`), so that the turret turns the way
-its limits allow (the bearing term turns it either way); with `reach_toward_path_sides=True` as well, only to
-those on the turret side(s) that the goal slot's usable start paths leave the table from, so that the element is
-grasped where a collision-free way to its goal begins; with `reach_avoids_vias=True` too, only to the side(s) of
-the paths without a planned via where a slot has such (the window opening at y = +0.85: +pi, not the via's long
-way round from -pi). `carry_counts_lag=True` adds to the carry distance
-{ConstructionTaskEnv.LAG_WEIGHT:g} rad per metre that the held element trails its place on the plate (`hold_lag`: stopped by a slab
-or wall while the arm goes on), so that pushing a jammed element on does not pay. `carry_keeps_to_vias=True`
-measures the carry (and the path offset observed) only along the paths from the turret side the element was
-grasped from, each radian off a path through a planned via (from its lift in) counted {ConstructionTaskEnv.VIA_DEVIATION_WEIGHT:g} times, so that a carry cutting
-across that detour into the wall does not measure nearer its goal than the detour. `install_mirror_branch=True`
-cuts the window opening at y = +0.85's installation configurations (and start paths) to the wrist branch whose
-mirror image in the plane y = 0 is the opening at -0.85's but for joint 6, half a turn off, and until the grasp
-measures its joint moves for the element held half a turn on the plate, for a policy that meets the one as the
-mirror image of the other (ppo.py's `--mirror-windows`): its joint moves then are the mirror image of the other's
-until the grasp. All seven off by default.
+**Rewards:** `normalized_dense` by default (ManiSkill's convention); sparse = Algorithm 1 (-1/{_STEPS} every step, 1
+on the first grasp, 2 on placement), which the paper's setting passes explicitly. One dense reward, the one the
+from-scratch recipe trains on (experiments/from_scratch.py), with no variants behind kwargs; normalized_dense =
+dense / {ConstructionTaskEnv.DENSE_REWARD_MAX:g}. Its stages:
+- before the grasp, reach (<= 1): half is 1 - d / {ConstructionTaskEnv.REACH_RANGE:g} rad of the arm's joint-space distance d (joints 1-5)
+  from the nearest configuration that grasps the element on the staging table from a turret side that the goal
+  slot's start paths leave the table from (`reach_distance`), so that the turret turns the way its limits allow
+  and the element is grasped where a collision-free way to its goal begins; half is 1 - tanh of the plate's
+  distance from the grasp face, times its facing;
+- held: 2 + carry (<= 1) + fit (<= 1) + progress (<= 0.5). Carry falls linearly, to 0 at {ConstructionTaskEnv.CARRY_RANGE:g} rad, with the
+  arm's distance from holding the element installed measured along the goal slot's start paths
+  (`carry_distance`: collision-checked joint paths from the installation configurations, IK of the goal, out
+  along the plate's axis and up to the staging table; each radian off a path counted {PATH_DEVIATION_WEIGHT:g} times, off a
+  path through a planned via {VIA_DEVIATION_WEIGHT:g} times; only the paths from the turret side the element was grasped from),
+  so that it falls on the way up and over the site's barriers and into the opening along the plate's axis, not
+  on a straight joint move that runs the element into the slab or the wall. Fit is 1 - tanh(5 d) of the
+  element's distance d from its goal, times 1 - tanh of its angle error in radians. Progress pays the step's fall
+  of the carry distance ({ConstructionTaskEnv.PROGRESS_GAIN:g} per rad, in [0, 0.5], 0.25 standing still): a potential difference, so
+  going back and forth earns nothing;
+- placed: {ConstructionTaskEnv.DENSE_REWARD_MAX:g}, the most any step pays, more than twice a held step.
 
-**Start states:** `set_near_goal_starts(share, radius)` makes a share of the following resets start with the
+What the site's geometry requires is computed by one rule for every goal slot (ms_construction/envs/carry_geometry.py):
+the turret sides a slot's start paths leave from, a planned via where none leaves from the side its task type's
+other slots are reached from, and, for a slot that is the mirror image of another in the arm's plane y = 0, the
+wrist branch that mirrors its twin's (until the grasp its joint moves are measured as its twin's mirror image).
+Convention (ManiSkill's): the dense rewards are for a learner that bootstraps at every episode end, success
+included (ppo.py's default for them, with `--success-value absorbing`), so that a placed element counts as a
+state that keeps paying the most; a learner that values success as an end with nothing after it finds holding
+the element near its goal worth more than placing it.
+
+**Start states** (training devices, ms_construction/envs/start_states.py): `set_near_goal_starts(share, radius)` makes a share of the following resets start with the
 element held on a collision-free joint path out of its goal (reverse curriculum generation; IK, no
 demonstrations; `info["near_goal_start"]` marks them); for training only, off by default. Its `max_steps`
 truncates such an episode that has not placed by then, in an env wrapped in `NearGoalTimeLimit`.
@@ -93,9 +88,8 @@ that knows how much of it is left can hurry (Pardo et al. 2018, time limits in R
 `obs_install_offset=True` appends, before it, the joint move (6 numbers, rad) from the arm's configuration to
 the nearest one that holds the element installed (`extra/install_offset`: IK of the goal pose, what the dense
 reward's carry term measures; joint 6's part modulo the element's symmetry). Off by default.
-`obs_path_offset=True` appends, after that, the joint move to the point {ConstructionTaskEnv.PATH_LOOKAHEAD:g} rad ahead along the start path that
-`carry_along_paths` measures the carry along (`extra/path_offset`, `path_offset`): which way that carry falls. Off
-by default.
+`obs_path_offset=True` appends, after that, the joint move to the point {PATH_LOOKAHEAD:g} rad ahead along the start path that
+the carry is measured along (`extra/path_offset`, `path_offset`): which way that carry falls. Off by default.
 """
 
 

@@ -1,0 +1,206 @@
+"""The joint-space geometry of a carry, as batched tensors: what the dense reward measures and the start states pose.
+
+Everything here comes from inverse kinematics of the site's poses and collision checks on its model
+(ms_construction/goal_configurations.py), for every task type and goal slot alike; no demonstrations, and nothing
+names a slot, an opening or a turret side:
+
+- the installation configurations of each goal slot (the carry's end), cut, where a slot is the mirror image of
+  another in the arm's plane y = 0, to the wrist branch that mirrors its twin's (`mirror_branch_mask`);
+- the table grasp configurations of each task type, one per turret side (the reach's end);
+- the start paths of each goal slot (`goal_configurations.StartPaths`): collision-checked joint paths from each
+  installation configuration out to the staging table, one per turret side, a planned via where the direct ones
+  run into the site. The turret sides a slot's usable paths leave from are the sides its element is reached and
+  grasped from (`path_sides`); the carry is measured along the grasp side's paths (`project`).
+
+`CarryGeometry.project` is the one projection per step the reward and the observation share: it is the cost of a
+dense-reward step, so it works on per-slot constants gathered in two index operations.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Optional
+
+import numpy as np
+import torch
+
+from ms_construction.goal_configurations import (install_configurations, lift_configurations, mirror_branch_mask,
+                                                  mirror_twins, start_paths, symmetry_period)
+from ms_construction.parameters import ELEMENT_KINDS
+
+JOINT_MIRROR_SIGNS = (-1.0, 1.0, 1.0, -1.0, 1.0, -1.0)
+"""How each arm joint turns in the mirror image of the arm in its base's plane y = 0: joints 1, 4 and 6 turn about
+axes in that plane (z, x, x) and turn the other way, joints 2, 3 and 5 about axes across it (y) the same way; every
+link's offsets lie in the plane (assets/arm/construction_arm.urdf), so the mirrored arm is the arm at these signs."""
+
+PATH_DEVIATION_WEIGHT = 3.0
+"""the carry counts each radian off a start path this many times: cutting across to the goal (or to a later point
+of the path) costs more than going along the path, whose length from a lift above the table to the goal is up to
+about twice the straight joint move's."""
+VIA_DEVIATION_WEIGHT = 25.0
+"""each radian off a path through a planned via, from the lift above the table in, counts this many times: that
+detour exists because cutting across runs the element into the site. At PATH_DEVIATION_WEIGHT a window carried
+into the opening beside its own measured about as near its goal as the via, and the cut across nearer than the lift;
+at this weight both measure farther than the path's table end (`python -m experiments.via_landscape`)."""
+PATH_LOOKAHEAD = 0.5
+"""rad; `path_offset` points this far (joint-space, L1) along the path ahead of the arm's nearest point on it."""
+
+
+def wrap(x: torch.Tensor, period: torch.Tensor) -> torch.Tensor:
+    """x wrapped into [-period / 2, period / 2)."""
+    return torch.remainder(x + period / 2, period) - period / 2
+
+
+def path_points(waypoints: torch.Tensor, fraction: torch.Tensor) -> torch.Tensor:
+    """[m, 6]: the configurations `fraction` [m] of the way along polylines of joint configurations [m, p, 6], by their
+    summed joint-space (L1) length (goal_configurations.path_point, batched)."""
+    seg = (waypoints[:, 1:] - waypoints[:, :-1]).abs().sum(-1)  # [m, p - 1]
+    at = (fraction * seg.sum(-1))[:, None]
+    start = torch.cumsum(seg, -1) - seg
+    w = ((at - start) / seg.clamp(min=1e-9)).clamp(0, 1) * (seg > 0)  # how far along each segment
+    return waypoints[:, 0] + (w[..., None] * (waypoints[:, 1:] - waypoints[:, :-1])).sum(1)
+
+
+@dataclass
+class Projection:
+    """The arm's nearest point on its goal slot's start paths, as the carry measures it."""
+
+    distance: torch.Tensor
+    """[n] rad: the carry distance (`CarryGeometry.project`)."""
+    waypoints: torch.Tensor
+    """[n, P, 6]: the path it is measured along."""
+    at: torch.Tensor
+    """[n] rad: that path's length from the installation to the point it is measured from."""
+    install_offset: torch.Tensor
+    """[n, 6] rad: the joint move to the nearest installation configuration (`CarryGeometry.install_offset`)."""
+
+
+class CarryGeometry:
+    """The tables of the module docstring on a device, and the measures taken on them. Built once per env; the
+    tables are computed once per process (a few seconds, lru-cached in goal_configurations)."""
+
+    def __init__(self, device: torch.device):
+        self.device = device
+        f32 = dict(dtype=torch.float32, device=device)
+        self.period = torch.tensor([symmetry_period(k) for k in ELEMENT_KINDS], **f32)
+        self.kept = mirror_branch_mask(JOINT_MIRROR_SIGNS)  # [kinds, slots, configurations]
+        twins = mirror_twins()
+        # a configuration not kept is replaced by its slot's first kept one (the table repeats them already)
+        table = install_configurations().copy()
+        # how far joint 6 of a mirrored slot's kept installation is from its twin's mirror image (half a turn for a
+        # window, whose head stays up in the mirror; 0 for a slot without a twin)
+        turn = np.zeros(twins.shape, dtype=np.float32)
+        for k, slot in zip(*np.nonzero(twins >= 0)):
+            kept_q = table[k, slot, self.kept[k, slot].argmax()]
+            turn[k, slot] = kept_q[5] - JOINT_MIRROR_SIGNS[5] * table[k, twins[k, slot], 0, 5]
+        self.mirror_turn = torch.tensor(turn, **f32)
+        first = self.kept.argmax(-1)[..., None, None].repeat(table.shape[-1], -1)
+        self.install_q = torch.tensor(np.where(self.kept[..., None], table, np.take_along_axis(table, first, 2)), **f32)
+        self.table_q = torch.tensor(lift_configurations(0.0), **f32)  # [kinds, 2 turret sides, 6]
+        self._paths: Optional[dict] = None
+        self._inf = torch.tensor(torch.inf, device=device)
+
+    # ------------------------------------------------------------------------------------------------- #
+    # start paths
+    # ------------------------------------------------------------------------------------------------- #
+    @property
+    def paths(self) -> dict:
+        """The start paths as tensors [kinds, slots, configurations x 2 sides, ...] (their index: configuration * 2 +
+        side, side 0 leaving the table at turret +pi, 1 at -pi), and the projection's per-slot constants."""
+        if self._paths is None:
+            sp = start_paths()
+            f32 = dict(dtype=torch.float32, device=self.device)
+            k, s = sp.waypoints.shape[:2]
+            w = torch.tensor(sp.waypoints, **f32).flatten(2, 3)  # [k, s, M, P, 6]
+            usable = torch.tensor(sp.usable & self.kept[..., None], device=self.device).flatten(2)  # [k, s, M]
+            planned = torch.tensor(sp.planned, device=self.device).flatten(2)
+            seg = w[..., 1:, :] - w[..., :-1, :]  # [k, s, M, S, 6]
+            length = seg.abs().sum(-1)
+            before = torch.cumsum(length, -1) - length  # the path's length from the installation to each segment
+            # from the lift in, a planned via's path counts VIA_DEVIATION_WEIGHT; the table's segment keeps the lenient
+            # weight (the grasp's posture need not match the path's, and nothing lies across)
+            not_table = torch.arange(seg.shape[-2], device=self.device) < seg.shape[-2] - 1
+            weight = torch.where(planned[..., None] & not_table, VIA_DEVIATION_WEIGHT, PATH_DEVIATION_WEIGHT)
+            # a vertex is the end of the segments either side of it: it counts at the lighter of their weights
+            vertex_weight = torch.minimum(torch.cat([weight[..., :1], weight], -1), torch.cat([weight, weight[..., -1:]], -1))
+            vertex_before = torch.cat([torch.zeros_like(length[..., :1]), torch.cumsum(length, -1)], -1)
+            inv = 1.0 / (seg[..., :5] ** 2).sum(-1).clamp(min=1e-9)
+            sides = usable.view(k, s, -1, 2).any(2)
+            kept = torch.tensor(self.kept, device=self.device).repeat_interleave(2, -1)  # [k, s, M]
+            self._paths = dict(
+                waypoints=w, free=torch.tensor(sp.free, **f32).flatten(2), usable=usable, planned=planned, kept=kept,
+                sides=sides | ~sides.any(-1, keepdim=True),
+                segments=torch.cat([seg, inv[..., None], length[..., None], before[..., None], weight[..., None]], -1),
+                vertices=torch.cat([w, vertex_before[..., None], vertex_weight[..., None]], -1))
+        return self._paths
+
+    def path_sides(self, task: torch.Tensor, slot: torch.Tensor) -> torch.Tensor:
+        """[n, 2] bool: the turret sides (+pi, -pi) a usable start path of each goal slot leaves the table from; both
+        for a slot without usable paths."""
+        return self.paths["sides"][task, slot]
+
+    def project(self, qpos: torch.Tensor, turn: torch.Tensor, task: torch.Tensor, slot: torch.Tensor,
+                side: torch.Tensor) -> Projection:
+        """How far the arm (`qpos` [n, 6], its element turned `turn` [n] on the plate) is from holding its element
+        installed along the nearest usable start path of its goal slot: the least, over the points of the paths,
+        of the path's weight (PATH_DEVIATION_WEIGHT, VIA_DEVIATION_WEIGHT) times the joint-space (L1) distance to
+        the point plus the path's length from there to the installation; joint 6 shifted by the turn and compared
+        modulo the element's symmetry. Only along the paths that leave the table from the turret side `side` [n]
+        (0: +pi, 1: -pi, -1: none) the element was grasped from, where the slot has any: the turret cannot cross to
+        the other side holding it. The candidates are each segment's nearest point by joints 1-5 (joint 6 is
+        compared modulo a period, which a projection cannot take) and every vertex."""
+        p = self.paths
+        segments, vertices = p["segments"][task, slot], p["vertices"][task, slot]  # [n, M, S, 10], [n, M, P, 8]
+        period = self.period[task][:, None, None]
+        q = qpos.clone()
+        q[:, 5] -= turn
+        rel = q[:, None, None, :] - vertices[..., :6]  # [n, M, P, 6]
+        off_vertex = rel[..., :5].abs().sum(-1) + wrap(rel[..., 5], period).abs()
+        seg = segments[..., :6]
+        inv, length, before, weight = segments[..., 6], segments[..., 7], segments[..., 8], segments[..., 9]
+        rel = rel[:, :, :-1]  # from each segment's start
+        t = ((rel[..., :5] * seg[..., :5]).sum(-1) * inv).clamp(0, 1)
+        diff = rel - t[..., None] * seg
+        off_segment = diff[..., :5].abs().sum(-1) + wrap(diff[..., 5], period).abs()
+        usable = p["usable"][task, slot]  # [n, M]
+        on_side = torch.arange(usable.shape[1], device=usable.device)[None] % 2 == side[:, None]
+        usable = torch.where((usable & on_side).any(-1, keepdim=True), usable & on_side, usable)[..., None]
+        inf = self._inf
+        cost_segment = torch.where(usable, weight * off_segment + before + t * length, inf)  # [n, M, S]
+        cost_vertex = torch.where(usable, vertices[..., 7] * off_vertex + vertices[..., 6], inf)  # [n, M, P]
+        n, m, s = cost_segment.shape
+        distance, best = torch.cat([cost_segment.flatten(1), cost_vertex.flatten(1)], 1).min(-1)
+        rows = torch.arange(n, device=qpos.device)
+        is_segment = best < m * s
+        path = torch.where(is_segment, best // s, (best - m * s) // (s + 1))
+        j = torch.where(is_segment, best % s, 0)
+        at = torch.where(is_segment, before[rows, path, j] + t[rows, path, j] * length[rows, path, j],
+                         vertices[rows, path, (best - m * s) % (s + 1), 6])
+        # the installations are the paths' first vertices: the nearest kept one by the same joint-space measure
+        install = torch.where(p["kept"][task, slot], off_vertex[..., 0], inf).argmin(-1)
+        to_install = -rel[rows, install, 0]  # rel: from each segment's start, the first one's the installation
+        to_install[:, 5] = wrap(to_install[:, 5], period[:, 0, 0])
+        return Projection(distance, vertices[rows, path, :, :6], at, to_install)
+
+    def path_offset(self, qpos: torch.Tensor, turn: torch.Tensor, task: torch.Tensor, projection: Projection) -> torch.Tensor:
+        """[n, 6] rad; the joint move from `qpos` to the point PATH_LOOKAHEAD ahead, toward the installation, of the
+        projection's point (the installation itself within PATH_LOOKAHEAD of it), joint 6's part taken modulo the
+        element's symmetry: which way the carry falls from here."""
+        w, at = projection.waypoints, projection.at
+        length = (w[:, 1:] - w[:, :-1]).abs().sum(-1).sum(-1)
+        target = path_points(w, ((at - PATH_LOOKAHEAD).clamp(min=0) / length.clamp(min=1e-9)).clamp(0, 1))
+        diff = target - qpos
+        diff[:, 5] = wrap(diff[:, 5] + turn, self.period[task])
+        return diff
+
+    # ------------------------------------------------------------------------------------------------- #
+    # installation and table configurations
+    # ------------------------------------------------------------------------------------------------- #
+    def reach_distance(self, qpos: torch.Tensor, task: torch.Tensor, slot: torch.Tensor) -> torch.Tensor:
+        """[n] rad; how far the arm is, in joint space (joints 1-5 summed: the plate's roll does not matter to the
+        suction grasp, which keeps the element's turn), from the nearest configuration that grasps its element where
+        it lies on the staging table, on a turret side that a usable start path of its goal slot leaves the table
+        from (`path_sides`): an element grasped from the other side has no collision-free way to its goal along
+        them."""
+        distance = (self.table_q[task][..., :5] - qpos[:, None, :5]).abs().sum(-1)  # [n, 2 turret sides]
+        return torch.where(self.path_sides(task, slot), distance, torch.inf).amin(-1)

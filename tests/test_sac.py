@@ -1,0 +1,162 @@
+"""baselines/sac/sac.py: a short run learns and logs, a resumed run is the uninterrupted one, bad args are refused,
+success is absorbing in the critics' target, and scripts/evaluate.py's loader reads a SAC checkpoint."""
+
+import csv
+import dataclasses
+
+import pytest
+import torch
+
+from baselines.ppo.checkpoints import load_policy
+from baselines.sac import sac
+
+TINY = dict(env_id="ConstructionPickPlace-v1", num_envs=1, hidden_size=32, num_layers=1, batch_size=32,
+            learning_starts=100, buffer_size=1000, utd=1.0, log_freq=100, eval_freq=0, torch_threads=1)
+"""a run that takes seconds: one env in the learner's process, tiny networks, 1 thread (the resume test compares
+weights bit for bit)."""
+
+
+def tiny_args(tmp_path, **kw) -> sac.Args:
+    return sac.Args(**{**TINY, "log_dir": str(tmp_path), **kw})
+
+
+def read_csv(path):
+    with open(path) as f:
+        return list(csv.DictReader(f))
+
+
+def weights(run: sac.Run) -> dict:
+    """Every learnt tensor of a run: networks, target networks, log alpha, optimizers' moments."""
+    state = run.learner.state_dict()
+    out = {f"{net}.{k}": v for net in ("actor", "critics", "critics_target") for k, v in state[net].items()}
+    out["log_alpha"] = state["log_alpha"]
+    for opt in ("actor_optimizer", "q_optimizer", "alpha_optimizer"):
+        for i, s in state[opt]["state"].items():
+            out.update({f"{opt}.{i}.{k}": v for k, v in s.items()})
+    return out
+
+
+def test_a_short_run_changes_the_actor_and_writes_the_csv_columns(tmp_path):
+    args = tiny_args(tmp_path, total_timesteps=400, exp_name="short", checkpoint_freq=400)
+    run = sac.setup(args)
+    before = {k: v.clone() for k, v in run.learner.actor.state_dict().items()}
+    progress = sac.train(run)
+    assert progress.global_step == 400 and run.clock.updates == 300, "utd 1 after 100 random steps"
+    changed = [k for k, v in run.learner.actor.net.state_dict().items() if not torch.equal(v, before[f"net.{k}"])]
+    assert len(changed) == len(before) - 3, "every weight of the actor's network moved (obs_rms aside)"
+    assert not torch.equal(run.learner.actor.obs_rms.mean, before["obs_rms.mean"]), "the observation statistics learnt"
+    rows = read_csv(tmp_path / "short" / "progress.csv")
+    assert [int(r["global_step"]) for r in rows] == [100, 200, 300, 400]
+    plotted = ["global_step", "sps", "place_success", "near_goal_place_success", "stage",
+               *[f"ordinary_place_{k}" for k in ("ceiling", "window", "flooring")],
+               *[f"near_goal_radius_{k}" for k in ("ceiling", "window", "flooring")]]
+    sac_columns = ["wall_s", "update_s", "env_s", "update_share", "alpha", "qf1_loss", "qf2_loss", "actor_loss",
+                   "alpha_loss"]
+    assert set(plotted + sac_columns) <= set(rows[0])
+    last = rows[-1]
+    for key in sac_columns + ["sps"]:
+        assert float(last[key]) == float(last[key]), f"{key} is a number"
+    assert rows[0]["qf1_loss"] == "", "no gradient step before learning starts"
+    assert float(last["near_goal_radius_window"]) == 0.1 and float(last["update_s"]) > 0
+    assert float(last["wall_s"]) >= float(last["env_s"]) + float(last["update_s"]) - 1e-6
+    assert sum(int(r["episodes"]) for r in rows) > 0, "episodes ended (near-goal starts are cut after 80 steps)"
+    assert (tmp_path / "short" / "checkpoint.pt").is_file() and (tmp_path / "short" / "replay_buffer_400.pt").is_file()
+
+
+def test_a_run_resumed_halfway_ends_with_the_uninterrupted_run_s_weights(tmp_path):
+    """Run U: 600 env steps with a checkpoint at 300. Run I: 300 steps, then --resume --extend to 600. Every weight,
+    optimizer moment, log alpha, the replay buffer and the curriculum's progress end the same, bit for bit."""
+    common = dict(checkpoint_freq=300, learning_starts=100)
+    u = sac.setup(tiny_args(tmp_path, total_timesteps=600, exp_name="u", **common))
+    sac.train(u)
+    i = sac.setup(tiny_args(tmp_path, total_timesteps=300, exp_name="i", **common))
+    sac.train(i)
+    ckpt = tmp_path / "i" / "checkpoint.pt"
+    assert (tmp_path / "i" / "replay_buffer_300.pt").is_file()
+    resumed = sac.setup(sac.Args(resume=str(ckpt), extend=True, total_timesteps=600))
+    assert resumed.progress.global_step == 300 and resumed.clock.updates == 200 and resumed.buffer.count == 300
+    sac.train(resumed)
+    assert resumed.progress.global_step == u.progress.global_step == 600
+    assert resumed.clock.updates == u.clock.updates == 500
+    wu, wi = weights(u), weights(resumed)
+    assert wu.keys() == wi.keys() and len(wu) > 20
+    different = [k for k in wu if not torch.equal(wu[k], wi[k])]
+    assert not different, f"differ after the resume: {different}"
+    for key in sac.ReplayBuffer.KEYS:
+        assert torch.equal(getattr(u.buffer, key), getattr(resumed.buffer, key)), key
+    assert resumed.progress.near_goal_radius == u.progress.near_goal_radius
+    assert resumed.progress.near_goal_recent == u.progress.near_goal_recent
+    assert not (tmp_path / "i" / "replay_buffer_300.pt").exists(), "the old buffer goes once the new checkpoint is in"
+    assert (tmp_path / "i" / "replay_buffer_600.pt").is_file()
+    rows = read_csv(tmp_path / "i" / "progress.csv")
+    assert [int(r["global_step"]) for r in rows] == list(range(100, 601, 100)), "the resumed run appends its rows"
+
+
+def test_resume_refuses_a_checkpoint_without_its_buffer_and_a_ppo_checkpoint(tmp_path):
+    run = sac.setup(tiny_args(tmp_path, total_timesteps=100, exp_name="b", learning_starts=50))
+    sac.train(run)
+    (tmp_path / "b" / "replay_buffer_100.pt").unlink()
+    with pytest.raises(SystemExit, match="replay buffer .* is missing"):
+        sac.setup(sac.Args(resume=str(tmp_path / "b" / "checkpoint.pt")))
+    ckpt = torch.load(tmp_path / "b" / "checkpoint.pt", weights_only=False)
+    ckpt["args"]["algorithm"] = None  # as a PPO checkpoint's args
+    torch.save(ckpt, tmp_path / "ppo.pt")
+    with pytest.raises(SystemExit, match="not a SAC checkpoint"):
+        sac.setup(sac.Args(resume=str(tmp_path / "ppo.pt")))
+
+
+@pytest.mark.parametrize("change, message", [
+    (dict(batch_size=512, buffer_size=256, learning_starts=256), "larger than the replay buffer"),
+    (dict(utd=0.0), "--utd 0.0"),
+    (dict(utd=-1.0), "must be > 0"),
+    (dict(learning_starts=10), "--learning-starts 10"),
+    (dict(gamma=1.0), "--gamma"),
+    (dict(tau=0.0), "--tau"),
+    (dict(near_goal_share=1.5), "--near-goal-share"),
+    (dict(env_id="PickCube-v1"), "--env-id"),
+    (dict(num_layers=0), "--num-layers"),
+    (dict(checkpoint="x.pt"), "--evaluate"),
+    (dict(evaluate=True), "--evaluate evaluates --checkpoint"),
+    (dict(extend=True), "--extend"),
+    (dict(log_std_min=2.0), "--log-std-min"),
+])
+def test_bad_args_are_refused_with_a_message(change, message):
+    with pytest.raises(SystemExit, match=message):
+        sac.validate(dataclasses.replace(sac.Args(), **change))
+    sac.validate(sac.Args())  # the defaults pass
+
+
+def test_success_is_absorbing_in_the_critics_target_and_truncations_bootstrap():
+    gamma, alpha = 0.95, torch.tensor(0.2)
+    rewards = torch.tensor([1.0, 0.5, 0.5, 0.0])
+    terminated = torch.tensor([True, False, True, False])
+    next_q = torch.tensor([100.0, 2.0, -7.0, 3.0])  # the critic's guess at s' (ignored where s' is success)
+    next_log_pi = torch.tensor([5.0, -1.0, 5.0, 0.5])
+    y = sac.soft_q_target(rewards, terminated, next_q, next_log_pi, alpha, gamma)
+    expected = torch.tensor([1.0 / 0.05, 0.5 + 0.95 * (2.0 + 0.2), 0.5 / 0.05, 0.95 * (3.0 - 0.1)])
+    torch.testing.assert_close(y, expected)
+
+
+def test_the_squashed_gaussian_s_log_probability_is_the_change_of_variables():
+    torch.manual_seed(0)
+    actor = sac.Actor(obs_dim=5, act_dim=3, hidden=16, layers=1)
+    z = torch.randn(4, 5)
+    torch.manual_seed(1)
+    a, log_pi = actor.sample(z)
+    mean, log_std = actor.mean_log_std(z)
+    u = torch.atanh(a.clamp(-1 + 1e-6, 1 - 1e-6))
+    gauss = torch.distributions.Normal(mean, log_std.exp()).log_prob(u).sum(-1)
+    torch.testing.assert_close(log_pi, gauss - torch.log(1 - a.pow(2)).sum(-1), rtol=1e-3, atol=1e-3)
+    assert a.abs().max() < 1
+    torch.testing.assert_close(actor.get_action(z, deterministic=True), torch.tanh(mean))
+
+
+def test_evaluate_py_s_loader_reads_a_sac_checkpoint_as_its_deterministic_policy(tmp_path):
+    run = sac.setup(tiny_args(tmp_path, total_timesteps=200, exp_name="e", rotation_features=True))
+    sac.train(run)
+    agent, env_kwargs = load_policy(tmp_path / "e" / "checkpoint.pt", "ConstructionPickPlace-v1")
+    assert env_kwargs == dict(control_mode="pd_joint_delta_pos", obs_install_offset=True, obs_path_offset=True)
+    obs = run.buffer.obs[:50]
+    with torch.no_grad():
+        torch.testing.assert_close(agent.get_action(obs, deterministic=True),
+                                   run.learner.actor.get_action(obs, deterministic=True))
