@@ -18,6 +18,7 @@ dense-reward step, so it works on per-slot constants gathered in two index opera
 
 from __future__ import annotations
 
+import functools
 from dataclasses import dataclass
 from typing import Optional
 
@@ -61,18 +62,78 @@ def path_points(waypoints: torch.Tensor, fraction: torch.Tensor) -> torch.Tensor
     return waypoints[:, 0] + (w[..., None] * (waypoints[:, 1:] - waypoints[:, :-1])).sum(1)
 
 
+def _project(qpos: torch.Tensor, turn: torch.Tensor, period: torch.Tensor, segments: torch.Tensor,
+             vertices: torch.Tensor, usable: torch.Tensor, kept: torch.Tensor, side: torch.Tensor, lookahead: float):
+    """`CarryGeometry.project` on the goal slots' constants (segments [n, M, S, 10]: the step to the next vertex, the
+    inverse of its squared length over joints 1-5, its L1 length, the path's length before it, its weight; vertices
+    [n, M, P, 8]: the configuration, the path's length before it, its weight; usable and kept [n, M]): the carry
+    distance [n], the path's length from the installation to the point it is measured from [n], the joint move to the
+    nearest kept installation [n, 6] and the one to the point `lookahead` ahead of it along its path [n, 6]. TorchScript (`_scripted`): at
+    one env per process a dense-reward step is dominated by the per-operation overhead of these few hundred numbers."""
+    q = qpos.clone()
+    q[:, 5] -= turn
+    half = (period / 2)[:, None, None]
+    period = period[:, None, None]
+    rel = q[:, None, None, :] - vertices[..., :6]  # [n, M, P, 6]
+    off_vertex = rel[..., :5].abs().sum(-1) + (torch.remainder(rel[..., 5] + half, period) - half).abs()
+    seg = segments[..., :6]
+    start = rel[:, :, :-1]  # from each segment's start
+    t = ((start[..., :5] * seg[..., :5]).sum(-1) * segments[..., 6]).clamp(0.0, 1.0)
+    diff = start - t[..., None] * seg
+    off_segment = diff[..., :5].abs().sum(-1) + (torch.remainder(diff[..., 5] + half, period) - half).abs()
+    # only along the paths from the grasp side (their index: configuration * 2 + side), where the slot has any
+    m = usable.shape[1]
+    on_side = torch.remainder(torch.arange(m, device=usable.device), 2)[None] == side[:, None]
+    both = usable & on_side
+    usable = torch.where(both.any(-1, keepdim=True), both, usable)[..., None]
+    along = segments[..., 8] + t * segments[..., 7]  # the path's length from the installation to each nearest point
+    inf = torch.full_like(along, float("inf"))
+    cost = torch.cat([torch.where(usable, segments[..., 9] * off_segment + along, inf).flatten(1),
+                      torch.where(usable, vertices[..., 7] * off_vertex + vertices[..., 6], inf[..., :1]).flatten(1)], 1)
+    at_all = torch.cat([along.flatten(1), vertices[..., 6].flatten(1)], 1)
+    distance, best = cost.min(-1)
+    s = seg.shape[2]
+    path = torch.where(best < m * s, torch.div(best, s, rounding_mode="floor"),
+                       torch.div(best - m * s, s + 1, rounding_mode="floor"))
+    rows = torch.arange(q.shape[0], device=q.device)
+    # the installations are the paths' first vertices: the nearest kept one by the same joint-space measure
+    install = torch.where(kept, off_vertex[..., 0], inf[..., 0]).argmin(-1)
+    to_install = -rel[rows, install, 0]
+    to_install[:, 5] = torch.remainder(to_install[:, 5] + half[:, 0, 0], period[:, 0, 0]) - half[:, 0, 0]
+    at = at_all.gather(1, best[:, None])[:, 0]
+    # the point `lookahead` nearer the installation along the same path (goal_configurations.path_point, batched)
+    chosen = segments[rows, path]  # [n, S, 10]
+    length = chosen[..., 7]
+    reach = (at - lookahead).clamp(min=0.0)[:, None]
+    frac = ((reach - chosen[..., 8]) / length.clamp(min=1e-9)).clamp(0.0, 1.0) * (length > 0)
+    target = vertices[rows, path, 0, :6] + (frac[..., None] * chosen[..., :6]).sum(1)
+    to_path = target - q  # q: joint 6 already shifted by the turn
+    to_path[:, 5] = torch.remainder(to_path[:, 5] + half[:, 0, 0], period[:, 0, 0]) - half[:, 0, 0]
+    return distance, at, to_install, to_path
+
+
+@functools.lru_cache(maxsize=None)
+def _scripted(fn):
+    """`fn` compiled by TorchScript, once per process (its interpreter runs a small op several times faster than
+    Python does)."""
+    return torch.jit.script(fn)
+
+
 @dataclass
 class Projection:
-    """The arm's nearest point on its goal slot's start paths, as the carry measures it."""
+    """The arm's nearest point on its goal slot's start paths, as the carry measures it, and the joint moves the
+    observation offers."""
 
     distance: torch.Tensor
     """[n] rad: the carry distance (`CarryGeometry.project`)."""
-    waypoints: torch.Tensor
-    """[n, P, 6]: the path it is measured along."""
     at: torch.Tensor
-    """[n] rad: that path's length from the installation to the point it is measured from."""
+    """[n] rad: the length of the path it is measured along, from the installation to the point it is measured from."""
     install_offset: torch.Tensor
-    """[n, 6] rad: the joint move to the nearest installation configuration (`CarryGeometry.install_offset`)."""
+    """[n, 6] rad: the joint move to the nearest installation configuration."""
+    path_offset: torch.Tensor
+    """[n, 6] rad: the joint move to the point PATH_LOOKAHEAD ahead, toward the installation, of the point the carry is
+    measured from, along its path (the installation itself within PATH_LOOKAHEAD of it): which way the carry falls
+    from here."""
 
 
 class CarryGeometry:
@@ -150,52 +211,10 @@ class CarryGeometry:
         the other side holding it. The candidates are each segment's nearest point by joints 1-5 (joint 6 is
         compared modulo a period, which a projection cannot take) and every vertex."""
         p = self.paths
-        segments, vertices = p["segments"][task, slot], p["vertices"][task, slot]  # [n, M, S, 10], [n, M, P, 8]
-        period = self.period[task][:, None, None]
-        q = qpos.clone()
-        q[:, 5] -= turn
-        rel = q[:, None, None, :] - vertices[..., :6]  # [n, M, P, 6]
-        off_vertex = rel[..., :5].abs().sum(-1) + wrap(rel[..., 5], period).abs()
-        seg = segments[..., :6]
-        inv, length, before, weight = segments[..., 6], segments[..., 7], segments[..., 8], segments[..., 9]
-        rel = rel[:, :, :-1]  # from each segment's start
-        t = ((rel[..., :5] * seg[..., :5]).sum(-1) * inv).clamp(0, 1)
-        diff = rel - t[..., None] * seg
-        off_segment = diff[..., :5].abs().sum(-1) + wrap(diff[..., 5], period).abs()
-        usable = p["usable"][task, slot]  # [n, M]
-        on_side = torch.arange(usable.shape[1], device=usable.device)[None] % 2 == side[:, None]
-        usable = torch.where((usable & on_side).any(-1, keepdim=True), usable & on_side, usable)[..., None]
-        inf = self._inf
-        cost_segment = torch.where(usable, weight * off_segment + before + t * length, inf)  # [n, M, S]
-        cost_vertex = torch.where(usable, vertices[..., 7] * off_vertex + vertices[..., 6], inf)  # [n, M, P]
-        n, m, s = cost_segment.shape
-        distance, best = torch.cat([cost_segment.flatten(1), cost_vertex.flatten(1)], 1).min(-1)
-        rows = torch.arange(n, device=qpos.device)
-        is_segment = best < m * s
-        path = torch.where(is_segment, best // s, (best - m * s) // (s + 1))
-        j = torch.where(is_segment, best % s, 0)
-        at = torch.where(is_segment, before[rows, path, j] + t[rows, path, j] * length[rows, path, j],
-                         vertices[rows, path, (best - m * s) % (s + 1), 6])
-        # the installations are the paths' first vertices: the nearest kept one by the same joint-space measure
-        install = torch.where(p["kept"][task, slot], off_vertex[..., 0], inf).argmin(-1)
-        to_install = -rel[rows, install, 0]  # rel: from each segment's start, the first one's the installation
-        to_install[:, 5] = wrap(to_install[:, 5], period[:, 0, 0])
-        return Projection(distance, vertices[rows, path, :, :6], at, to_install)
+        return Projection(*_scripted(_project)(
+            qpos, turn, self.period[task], p["segments"][task, slot], p["vertices"][task, slot], p["usable"][task, slot],
+            p["kept"][task, slot], side, PATH_LOOKAHEAD))
 
-    def path_offset(self, qpos: torch.Tensor, turn: torch.Tensor, task: torch.Tensor, projection: Projection) -> torch.Tensor:
-        """[n, 6] rad; the joint move from `qpos` to the point PATH_LOOKAHEAD ahead, toward the installation, of the
-        projection's point (the installation itself within PATH_LOOKAHEAD of it), joint 6's part taken modulo the
-        element's symmetry: which way the carry falls from here."""
-        w, at = projection.waypoints, projection.at
-        length = (w[:, 1:] - w[:, :-1]).abs().sum(-1).sum(-1)
-        target = path_points(w, ((at - PATH_LOOKAHEAD).clamp(min=0) / length.clamp(min=1e-9)).clamp(0, 1))
-        diff = target - qpos
-        diff[:, 5] = wrap(diff[:, 5] + turn, self.period[task])
-        return diff
-
-    # ------------------------------------------------------------------------------------------------- #
-    # installation and table configurations
-    # ------------------------------------------------------------------------------------------------- #
     def reach_distance(self, qpos: torch.Tensor, task: torch.Tensor, slot: torch.Tensor) -> torch.Tensor:
         """[n] rad; how far the arm is, in joint space (joints 1-5 summed: the plate's roll does not matter to the
         suction grasp, which keeps the element's turn), from the nearest configuration that grasps its element where

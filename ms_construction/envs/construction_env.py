@@ -525,8 +525,8 @@ class ConstructionTaskEnv(StartStates, BaseEnv):
 
     def path_offset(self) -> torch.Tensor:
         """[n, 6] rad; the joint move to the point a little ahead along the path the carry is measured along
-        (`CarryGeometry.path_offset`): which way the carry falls from here."""
-        return self.geometry.path_offset(self.agent.robot.get_qpos(), self.plate_turn(), self.task_id, self.projection())
+        (`Projection.path_offset`): which way the carry falls from here."""
+        return self.projection().path_offset
 
     def install_offset(self) -> torch.Tensor:
         """[n, 6] rad; the joint move from the arm's configuration to the nearest one that holds its element
