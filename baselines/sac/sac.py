@@ -226,7 +226,7 @@ CSV_FIELDS = [
     "episode_length", "end_place_dist", "end_place_angle_deg", "held_at_end", "eval_pick_success", "eval_place_success",
     "eval_extrinsic_return", "near_goal_radius", "near_goal_episodes", "near_goal_place_success",
     "ordinary_place_success", *[f"ordinary_place_{kind}" for kind in ELEMENT_KINDS],
-    *[f"near_goal_radius_{kind}" for kind in ELEMENT_KINDS],
+    *[f"ordinary_pick_{kind}" for kind in ELEMENT_KINDS], *[f"near_goal_radius_{kind}" for kind in ELEMENT_KINDS],
     "sps", "wall_s", "env_s", "update_s", "eval_s", "checkpoint_s", "update_share", "updates", "buffer_fill",
     "alpha", "entropy", "qf1_loss", "qf2_loss", "q_value", "actor_loss", "alpha_loss",
 ]
@@ -735,15 +735,17 @@ def widen_starts(run: Run, envs: CPUVectorEnv, episodes: dict) -> None:
 
 def episode_columns(args: Args, progress: Progress, episodes: dict) -> dict:
     """progress.csv's columns of the episodes that ended since the last row (ppo.py's names): EPISODE_STATS' means,
-    the place success of ordinary resets (per task type) and of near-goal starts, and the radii now."""
+    the place and pick success of ordinary resets (per task type), the place success of near-goal starts, and the
+    radii now."""
     row = {}
     if episodes["success"]:
         row.update({column: float(np.mean(episodes[key])) for column, key in EPISODE_STATS.items()})
     near, placed = np.asarray(episodes["near_goal"], dtype=bool), np.asarray(episodes["success"], dtype=float)
-    task = np.asarray(episodes["task_id"], dtype=int)
+    task, picked = np.asarray(episodes["task_id"], dtype=int), np.asarray(episodes["picked"], dtype=float)
     for k, kind in enumerate(ELEMENT_KINDS):
         if ((task == k) & ~near).any():
             row[f"ordinary_place_{kind}"] = float(placed[(task == k) & ~near].mean())
+            row[f"ordinary_pick_{kind}"] = float(picked[(task == k) & ~near].mean())
     if args.near_goal_share > 0:
         row.update(near_goal_radius=float(np.mean(progress.near_goal_radius)), near_goal_episodes=int(near.sum()),
                    near_goal_place_success=float(placed[near].mean()) if near.any() else float("nan"),
