@@ -303,7 +303,7 @@ def cpu_sections(args: Args) -> str:
         "",
         f"baselines/ppo/ppo.py training on {GENERAL}: its defaults but the paper's sparse reward, the number of envs "
         "and the curiosity, or (curiosity \"recipe\") the from-scratch recipe (experiments/from_scratch.py: its dense "
-        "reward, the joint moves in its observation, near-goal starts, 2,000-step rollouts); "
+        "reward, the joint moves in its observation, near-goal and reach starts, 2,000-step rollouts); "
         f"{args.train_iterations} timed iterations after an untimed one, each its rollout and its PPO update (and ICM's "
         "where on); free-running steps, or the element held in every training env from every reset on. \"Share\": "
         "training's env steps/s over those of the same processes simulating alone with the sparse reward (the table "
