@@ -76,9 +76,9 @@ def _feature_layout(quat_starts: tuple[int, ...], obs_dim: int, device: torch.de
 
 class CanonicalReach:
     """Until the grasp, a mirrored window's goal orientation as it is: every opening's is the same, and the mirror
-    turns it half a turn about the window's normal, which matters to the installation only. With the tasks'
-    `install_mirror_branch` the joint moves until the grasp are its twin's already, so the reach and the grasp of a
-    mirrored opening see what those of the opening it mirrors see.
+    turns it half a turn about the window's normal, which matters to the installation only. The tasks measure a
+    mirrored slot's joint moves until the grasp as its twin's mirror image (`plate_turn`), so the reach and the grasp
+    of a mirrored opening see what those of the opening it mirrors see.
 
     With `held_half_turn`, once the window is held, the goal's orientation as it is too, and joint 6, the plate and
     the window turned half a turn about the plate's axis: a window is a box, so this is a state of the twin opening
