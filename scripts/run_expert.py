@@ -48,6 +48,9 @@ class Args:
     """seed of the first episode; the others follow."""
     curriculum_stage: str = FINAL_STAGE
     """tolerance stage of the env (cp1..cp4)."""
+    obstacles: Optional[str] = None
+    """the tasks' `obstacles` option: 'static' (a material stack, a scaffold post, a standing worker) or 'moving'
+    (the worker walks across); the expert plans around them and replans around the walking worker."""
     save_trajectory: bool = False
     """record the episodes as ManiSkill trajectories (h5 + json) under --out."""
     save_video: bool = False
@@ -67,20 +70,22 @@ class Args:
     docs/RESULTS.md reports."""
 
 
-def make_env(env_id: str, stage: str, render: bool = False):
+def make_env(env_id: str, stage: str, render: bool = False, obstacles: Optional[str] = None):
     return gym.make(env_id, num_envs=1, obs_mode="state", control_mode="pd_joint_pos", reward_mode="sparse",
-                    sim_backend="physx_cpu", curriculum_stage=stage, render_mode="rgb_array" if render else None)
+                    sim_backend="physx_cpu", curriculum_stage=stage, render_mode="rgb_array" if render else None,
+                    obstacles=obstacles)
 
 
 _worker_experts: dict = {}
 
 
-def _solve(job: tuple[str, str, int, ExpertConfig]) -> dict:
+def _solve(job: tuple[str, str, int, ExpertConfig, Optional[str]]) -> dict:
     """One episode in a worker process, its env and expert kept for the next one."""
-    env_id, stage, seed, config = job
-    if env_id not in _worker_experts:
-        _worker_experts[env_id] = MotionPlanningExpert(make_env(env_id, stage), config)
-    return _worker_experts[env_id].run(seed).to_dict()
+    env_id, stage, seed, config, obstacles = job
+    key = (env_id, obstacles)
+    if key not in _worker_experts:
+        _worker_experts[key] = MotionPlanningExpert(make_env(env_id, stage, obstacles=obstacles), config)
+    return _worker_experts[key].run(seed).to_dict()
 
 
 def run_env(args: Args, env_id: str) -> list[dict]:
@@ -89,12 +94,12 @@ def run_env(args: Args, env_id: str) -> list[dict]:
     results = []
     if args.workers > 1:
         with mp.get_context("spawn").Pool(args.workers) as pool:
-            for r in pool.imap(_solve, [(env_id, args.curriculum_stage, s, args.expert) for s in seeds]):
+            for r in pool.imap(_solve, [(env_id, args.curriculum_stage, s, args.expert, args.obstacles) for s in seeds]):
                 results.append(r)
                 bar.update()
                 bar.set_postfix(placed=sum(x["placed"] for x in results))
     else:
-        env = make_env(env_id, args.curriculum_stage, render=args.save_video)
+        env = make_env(env_id, args.curriculum_stage, render=args.save_video, obstacles=args.obstacles)
         record = args.save_trajectory or args.save_video
         if record:
             env = RecordEpisode(env, str(args.out), save_trajectory=args.save_trajectory, save_video=args.save_video,

@@ -221,8 +221,9 @@ def with_path_offset_inputs(ckpt: dict, path) -> dict:
 
 def policy_env_kwargs(args: dict) -> dict:
     """The env kwargs that a checkpoint's policy (its saved `args`) acts in, beside obs_mode="state": its control
-    mode and the observation's optional entries (install offset, path offset, elapsed time) it was trained with."""
-    return dict(control_mode=args["control_mode"],
+    mode and the observation's optional entries (install offset, path offset, elapsed time, obstacles) it was trained
+    with. A policy trained without obstacles meets a site with them blind (`obs_obstacles=False`)."""
+    return dict(control_mode=args["control_mode"], obs_obstacles=bool(args.get("obs_obstacles", False)),
                 **{k: True for k in ("obs_install_offset", "obs_path_offset", "obs_elapsed_time") if args.get(k)})
 
 

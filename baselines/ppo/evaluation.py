@@ -96,6 +96,9 @@ class Args:
     protocol is the policy's own actions."""
     write_results: bool = False
     """write the table (with how the agent was trained, from its checkpoint) into docs/RESULTS.md."""
+    obstacles: Optional[str] = None
+    """the tasks' `obstacles` option ('static' or 'moving'); a policy trained without them meets them blind. Each
+    episode's record then says whether it collided (which ends it)."""
 
 
 def wilson(successes: int, n: int, z: float = 1.96) -> tuple[float, float]:
@@ -122,7 +125,7 @@ def finished_episodes(infos: dict) -> dict:
     return dict(ended=infos["_final_info"], success=fin["episode"]["success_once"], picked=fin["picked"],
                 ep_return=fin["episode"]["return"], ep_length=fin["episode"]["episode_len"],
                 end_place_dist=fin["place_dist"], end_place_angle_deg=fin["place_angle_deg"], held_at_end=fin["is_grasped"],
-                task_id=fin["task_id"], goal_slot=fin["goal_slot"], near_goal_start=fin.get("near_goal_start", torch.zeros_like(fin["task_id"], dtype=torch.bool)),
+                task_id=fin["task_id"], goal_slot=fin["goal_slot"], collided=fin.get("fail", torch.zeros_like(fin["task_id"], dtype=torch.bool)), near_goal_start=fin.get("near_goal_start", torch.zeros_like(fin["task_id"], dtype=torch.bool)),
                 reach_start=fin.get("reach_start", torch.zeros_like(fin["task_id"], dtype=torch.bool)),
                 reach_start_grasped=fin.get("reach_start_grasped", torch.zeros_like(fin["task_id"], dtype=torch.bool)))
 
@@ -151,7 +154,8 @@ def run_episodes(agent, envs, num_steps: int, seed: int, deterministic: bool = T
                                   picked=bool(ep["picked"][i]),
                                   placed=bool(ep["success"][i]), ret=float(ep["ep_return"][i]), length=int(ep["ep_length"][i]),
                                   policy_time_s=policy_time, final_place_dist=float(ep["end_place_dist"][i]),
-                                  final_place_angle_deg=float(ep["end_place_angle_deg"][i]), held_at_end=bool(ep["held_at_end"][i]))
+                                  final_place_angle_deg=float(ep["end_place_angle_deg"][i]), held_at_end=bool(ep["held_at_end"][i]),
+                                  collided=bool(ep["collided"][i]))
         if all(r is not None for r in records):
             break
     return [r for r in records if r is not None]
@@ -185,16 +189,17 @@ def _episode(job: tuple) -> dict:
     from mani_skill.utils.gym_utils import find_max_episode_steps_value
     from mani_skill.vector.wrappers.gymnasium import ManiSkillVectorEnv
 
-    checkpoint, env_id, stage, seed, video_dir, sample, max_steps, gain = job
+    checkpoint, env_id, stage, seed, video_dir, sample, max_steps, gain, obstacles = job
     torch.set_num_threads(1)
-    key = (checkpoint, env_id, video_dir is not None, max_steps)
+    key = (checkpoint, env_id, video_dir is not None, max_steps, obstacles)
     if key not in _worker:
         for _, old in _worker.values():
             old.close()
         _worker.clear()
         agent, env_kwargs = load_policy(Path(checkpoint), env_id)
         env = gym.make(env_id, obs_mode="state", reward_mode="sparse", num_envs=1, sim_backend="physx_cpu",
-                       curriculum_stage=stage, render_mode="rgb_array" if video_dir else None, **env_kwargs,
+                       curriculum_stage=stage, render_mode="rgb_array" if video_dir else None, obstacles=obstacles,
+                       **env_kwargs,
                        **({"max_episode_steps": max_steps} if max_steps else {}))
         if video_dir:
             from mani_skill.utils.wrappers import RecordEpisode
@@ -234,7 +239,7 @@ def evaluate(args: Args, env_id: str, pool) -> dict:
 
     def job(i: int, video: bool) -> tuple:
         return (str(args.checkpoint), env_id, args.curriculum_stage, args.seed + i, str(args.video_dir) if video else None,
-                args.sample_actions, args.max_episode_steps, args.action_gain)
+                args.sample_actions, args.max_episode_steps, args.action_gain, args.obstacles)
 
     for i in range(min(args.videos, target) if args.video_dir else 0):  # the recorded episodes come first
         episodes.append(pool.apply(_episode, (job(i, True),)))

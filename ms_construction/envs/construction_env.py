@@ -26,6 +26,7 @@ from ms_construction.agents.construction_arm import ConstructionArm
 from ms_construction.agents.suction_gripper import PLATE_ELEMENT_COLLISION_BIT, SuctionGripper, grasp_ray
 from ms_construction.curriculum import FINAL_STAGE, TOLERANCE_KEYS, resolve_tolerances, stage_tolerances, validate_tolerances
 from ms_construction.envs.carry_geometry import CarryGeometry, Projection
+from ms_construction.envs.obstacles import SiteObstacles
 from ms_construction.envs.start_states import StartStates
 from ms_construction.parameters import (
     DROP_CLEARANCE,
@@ -65,7 +66,7 @@ def default_render_backend() -> str:
 
 
 
-class ConstructionTaskEnv(StartStates, BaseEnv):
+class ConstructionTaskEnv(SiteObstacles, StartStates, BaseEnv):
     """Base of the construction tasks; see ms_construction/envs/tasks.py for the task cards."""
 
     SUPPORTED_ROBOTS = ["construction_arm"]
@@ -95,6 +96,8 @@ class ConstructionTaskEnv(StartStates, BaseEnv):
         obs_install_offset: bool = False,
         obs_path_offset: bool = False,
         reach_start_share: float = 0.0,
+        obstacles: Optional[str] = None,
+        obs_obstacles: bool = True,
         **kwargs,
     ):
         self._tol_init = resolve_tolerances(curriculum_stage, tolerances)
@@ -113,6 +116,7 @@ class ConstructionTaskEnv(StartStates, BaseEnv):
         self.obs_install_offset = bool(obs_install_offset)
         self.obs_path_offset = bool(obs_path_offset)
         self._init_start_states(reach_start_share)
+        self._init_obstacles(obstacles, obs_obstacles)
         self.robot_init_qpos_noise = robot_init_qpos_noise
         self._step_cache: dict = {}
         self._in_step_readout = False
@@ -232,6 +236,7 @@ class ConstructionTaskEnv(StartStates, BaseEnv):
         self._task_onehot = torch.eye(len(kinds), **f32)
         # the dense reward's joint-space measures (IK tables, a few seconds once per process: made when first needed)
         self._geometry: Optional[CarryGeometry] = None
+        self._load_obstacles()
 
     def _build_goal_marker(self, kind: str, manifest: dict) -> Actor:
         """A translucent green ghost of the element at its goal (human render only)."""
@@ -290,6 +295,8 @@ class ConstructionTaskEnv(StartStates, BaseEnv):
                 self._start_on_the_way(env_idx)
             if self.near_goal_share > 0:
                 self._start_near_goal(env_idx)
+            # last: an episode draws the same arm, element and goal with and without obstacles
+            self._place_obstacles(env_idx)
 
     def _place_goal_markers(self, env_idx: torch.Tensor) -> None:
         task, goal = self.task_id[env_idx], self._goal_table[self.task_id[env_idx], self.goal_slot[env_idx]]
@@ -410,6 +417,9 @@ class ConstructionTaskEnv(StartStates, BaseEnv):
     def _after_simulation_step(self):
         self._substep += 1
 
+    def _after_control_step(self):
+        self._advance_obstacles()
+
     def _before_simulation_step(self):
         self.gripper.hold(self.obj, self.scene, first_substep=self._substep == 0)
 
@@ -437,6 +447,7 @@ class ConstructionTaskEnv(StartStates, BaseEnv):
             reach_start=self.reach_start_side >= 0,
             # whether a reach start's element was grasped from the turret side the start was on
             reach_start_grasped=self.picked & (self.carry_side == self.reach_start_side),
+            **self.obstacle_info(),
         )
 
     def _get_obs_extra(self, info: dict):
@@ -461,6 +472,8 @@ class ConstructionTaskEnv(StartStates, BaseEnv):
             obs["path_offset"] = self.path_offset()
         if self.obs_elapsed_time:  # last, so that a policy without it reads the rest unchanged
             obs["elapsed"] = (self.elapsed_steps.float() / self.MAX_EPISODE_STEPS)[:, None]
+        if self.obs_obstacles:  # after everything: a policy trained without obstacles reads the rest unchanged
+            obs["obstacles"] = self.obstacle_observation()
         return obs
 
     def compute_sparse_reward(self, obs: Any, action: torch.Tensor, info: dict):
@@ -595,6 +608,7 @@ class ConstructionTaskEnv(StartStates, BaseEnv):
             tolerances=self.tolerances.clone(),
             carry_prev=self.carry_prev[:, None].clone(),
             carry_side=self.carry_side[:, None].clone(),
+            **self.obstacle_state(),
         )
         return state
 
@@ -613,7 +627,8 @@ class ConstructionTaskEnv(StartStates, BaseEnv):
         task = state.pop("task", None)
         if task is not None:
             idx = slice(None) if env_idx is None else env_idx
-            for key in ("task_id", "goal_slot", "held", "picked", "hold_pose_in_tcp", "tolerances", "carry_prev", "carry_side"):
+            for key in ("task_id", "goal_slot", "held", "picked", "hold_pose_in_tcp", "tolerances", "carry_prev", "carry_side",
+                        *self.obstacle_state()):
                 if key not in task:  # a state saved before the key existed (carry_prev: 2026-11-25, carry_side: 2026-11-27)
                     continue
                 dest = getattr(self, key)
@@ -639,4 +654,6 @@ class ConstructionTaskEnv(StartStates, BaseEnv):
         super().set_state_dict(state, env_idx)
         if task is not None:
             self._place_goal_markers(torch.arange(self.num_envs, device=self.device))
+            if self.has_obstacles:
+                self._pose_obstacles()
 

@@ -10,6 +10,15 @@ from ms_construction.agents.suction_gripper import MAX_GRASP_INCIDENCE_DEG
 from ms_construction.curriculum import FINAL_STAGE, STAGES
 from ms_construction.envs.carry_geometry import PATH_DEVIATION_WEIGHT, PATH_LOOKAHEAD, VIA_DEVIATION_WEIGHT
 from ms_construction.envs.construction_env import ROBOT_INIT_QPOS_NOISE, ConstructionTaskEnv
+from ms_construction.envs.obstacles import (
+    OBSTACLE_OBS_SIZE,
+    STACK_HEIGHT,
+    STACK_SIZE,
+    WORKER_HEIGHT,
+    WORKER_RADIUS,
+    WORKER_SPEED,
+    WORKER_START_S,
+)
 from ms_construction.parameters import START_XY_NOISE, START_YAW_NOISE_DEG, SiteParams
 
 _SITE = SiteParams()
@@ -90,6 +99,17 @@ the nearest one that holds the element installed (`extra/install_offset`: IK of 
 reward's carry term measures; joint 6's part modulo the element's symmetry). Off by default.
 `obs_path_offset=True` appends, after that, the joint move to the point {PATH_LOOKAHEAD:g} rad ahead along the start path that
 the carry is measured along (`extra/path_offset`, `path_offset`): which way that carry falls. Off by default.
+
+**Obstacles** (a site that changes, ms_construction/envs/obstacles.py; physx_cpu): `obstacles="static"` puts a material
+stack ({STACK_SIZE[0]:g} x {STACK_SIZE[1]:g} m, {STACK_HEIGHT[0]:g}-{STACK_HEIGHT[1]:g} m high) and a scaffold post (floor to slab) in the arm's
+workspace, seeded per episode, clear of the table, the recesses, the window fronts, the ceiling openings (the post)
+and each other; `obstacles="moving"` adds a worker (a cylinder of radius {WORKER_RADIUS:g} m, {WORKER_HEIGHT:g} m tall) walking across the
+cell once, along the -y barrier at {WORKER_SPEED[0]:g}-{WORKER_SPEED[1]:g} m/s, entering within the first {WORKER_START_S[1]:g} s. Drawn after everything
+else, so a seed gives the same episode with and without them. A touch of the arm or the element on one is
+`info["obstacle_collision"]` and fails the episode (`info["fail"]`). The observation ends with their state
+(`extra/obstacles`, {OBSTACLE_OBS_SIZE} numbers: the stack's place, height and turn, the post's place, the worker's place and
+velocity) unless `obs_obstacles=False` (how a policy trained without them meets them). A layout may block every
+way to a goal: the evaluations keep the seeds the planning expert solves at the start.
 """
 
 

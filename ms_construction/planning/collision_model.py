@@ -110,3 +110,32 @@ def site_collision_objects(manifest: dict) -> dict[str, fcl.CollisionObject]:
 
 def box_object(size, pose: sapien.Pose) -> fcl.CollisionObject:
     return fcl.CollisionObject(fcl.Box(np.asarray(size, float)), np.asarray(pose.p, float), np.asarray(pose.q, float))
+
+
+def obstacle_objects(env, lookahead_s: float = 0.0, margin: float = 0.0) -> dict[str, fcl.CollisionObject]:
+    """The env's obstacles (its `obstacles` option; none without it) as FCL objects where they stand now: the stack,
+    the post, and the worker's envelope swept over the next `lookahead_s` at its velocity now (a box from here to
+    there as wide as it is), each grown by `margin` (m) on every side."""
+    from ms_construction.envs.obstacles import POST_SIZE, STACK_SIZE, WORKER_HEIGHT, WORKER_RADIUS
+
+    u = env.unwrapped if hasattr(env, "unwrapped") else env
+    if not u.has_obstacles:
+        return {}
+    lay = u.obstacle_layout[0].cpu().numpy().astype(float)
+    story = u._obstacle_site.story_height
+    stack_z = lay[2] - STACK_SIZE[2] / 2
+    stack = box_object(np.array(STACK_SIZE) + 2 * margin, sapien.Pose([lay[0], lay[1], stack_z], _quat_z(lay[3])))
+    post = box_object([POST_SIZE + 2 * margin, POST_SIZE + 2 * margin, story], sapien.Pose([lay[4], lay[5], story / 2]))
+    xy = u.worker_xy()[0].cpu().numpy().astype(float)
+    travel = u.worker_velocity()[0].cpu().numpy().astype(float) * lookahead_s
+    length = float(np.linalg.norm(travel))
+    heading = float(np.arctan2(travel[1], travel[0])) if length > 0 else 0.0
+    centre = [*(xy + travel / 2), WORKER_HEIGHT / 2]
+    worker = box_object([length + 2 * (WORKER_RADIUS + margin), 2 * (WORKER_RADIUS + margin), WORKER_HEIGHT + 2 * margin],
+                        sapien.Pose(centre, _quat_z(heading)))
+    return dict(obstacle_stack=stack, obstacle_post=post, obstacle_worker=worker)
+
+
+def _quat_z(yaw: float) -> np.ndarray:
+    return np.array([np.cos(yaw / 2), 0.0, 0.0, np.sin(yaw / 2)])
+

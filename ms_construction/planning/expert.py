@@ -7,6 +7,12 @@
    to a pre-install pose backed off from the goal along the plate's axis;
 5. install: a straight tcp line into the opening, until the task reports success.
 
+With the tasks' `obstacles` option the obstacles where they stand are part of every collision model. With a
+walking worker (`obstacles="moving"`) the expert watches the next `worker_lookahead` of its path against the
+worker's envelope swept that far ahead at its velocity now: where they meet, it replans the phase's sampled path
+around the swept envelope (approach, carry) or, on a straight line or where no path is found, holds still until the
+way is clear.
+
 Plans run on mplib 0.1.1 (OMPL RRTConnect, FCL) against the committed site collision parts with a
 safety margin; every time-parameterized trajectory is checked again, densely, before it runs.
 The install tcp pose is `goal * symmetry * hold^-1` for the element's actual hold pose, over the
@@ -38,6 +44,7 @@ from ms_construction.kinematics import ArmIK
 from ms_construction.planning.arm_planner import ArmPlanner
 from ms_construction.planning.collision_model import (
     box_object,
+    obstacle_objects,
     planning_srdf,
     planning_urdf,
     site_collision_objects,
@@ -103,6 +110,14 @@ class ExpertConfig:
     """... for at most this many control steps."""
     pull_steps: int = 10
     """control steps at most to wait for the grasped element to reach the plate."""
+    worker_lookahead: float = 1.0
+    """s; with a walking worker, how far ahead the path is watched against the worker's swept envelope."""
+    escape_distance: float = 0.3
+    """m; how far the tcp steps aside (or up) out of the walking worker's way, where the worker comes at the arm."""
+    worker_margin: float = 0.05
+    """m; the worker's swept envelope is grown by this much (the arm lags its targets)."""
+    replan_every: int = 5
+    """control steps between replanning attempts while the way is blocked (holding still in between)."""
     branch_preference: str = "nearest"
     """which of several reachable configurations (IK branches, base turns, symmetric goals) a phase heads for:
     `nearest` to the arm, the quickest (the shipped clone's demonstrations), or `fixed`: nearest to
@@ -128,6 +143,14 @@ class EpisodeResult:
     """'phase: what happened' when not placed."""
     phase_steps: dict = field(default_factory=dict)
     """control steps spent in each phase."""
+    collisions: int = 0
+    """control steps that ended with the arm or the element touching an obstacle (the tasks' `obstacles`)."""
+    replans: int = 0
+    """sampled paths planned again because the worker's envelope blocked the one being followed."""
+    waited_steps: int = 0
+    """control steps held still while the worker blocked the way."""
+    escapes: int = 0
+    """times the arm got out of the walking worker's way (towards its rest pose) before replanning."""
 
     def to_dict(self) -> dict:
         return asdict(self)
@@ -171,6 +194,11 @@ class MotionPlanningExpert:
         # the free arm: inflated for sampling, exact for the descent onto the element
         self.free = ArmPlanner(planning_urdf(config.arm_margin), planning_srdf(False), self.workdir, "free", self.site)
         self.free_exact = ArmPlanner(planning_urdf(0.0), planning_srdf(False), self.workdir, "free_exact", self.site)
+        # with a walking worker: the arm among nothing but the worker's swept envelope, for watching the path ahead
+        self.moving = self.u.has_obstacles and self.u.obstacle_mode == "moving"
+        if self.moving:
+            self.free_watch = ArmPlanner(planning_urdf(config.arm_margin), planning_srdf(False), self.workdir,
+                                         "free_watch", {})
 
     def close(self) -> None:
         self._tmp.cleanup()
@@ -193,6 +221,8 @@ class MotionPlanningExpert:
         self.q = u.agent.robot.get_qpos()[0].cpu().numpy().astype(np.float64)
         self.rng = np.random.default_rng(seed)
         self.held_at_start, self.ended = bool(u.held[0]), False
+        self.collisions, self.replans, self.waited_steps, self.escapes = 0, 0, 0, 0
+        self.watch, self.replan = (self.free_watch if self.moving else None), None
         phases = [("approach", self._approach), ("descend", self._descend), ("lift", self._lift),
                   ("carry", self._carry), ("install", self._install)]
         failure = ""
@@ -211,7 +241,9 @@ class MotionPlanningExpert:
                        f"install: no success at the end of the line (element {self.info['place_dist']:.3f} m, "
                        f"{self.info['place_angle_deg']:.1f} deg from the goal, held {self.info['is_grasped']})")
         return EpisodeResult(seed=seed, task=self.kind, picked=bool(u.picked[0]), placed=placed, steps=self.steps,
-                             planning_time=self.plan_time, failure=failure, phase_steps=self.phase_steps)
+                             planning_time=self.plan_time, failure=failure, phase_steps=self.phase_steps,
+                             collisions=self.collisions, replans=self.replans, waited_steps=self.waited_steps,
+                             escapes=self.escapes)
 
     # ------------------------------------------------------------------------------------- #
     # phases
@@ -221,8 +253,10 @@ class MotionPlanningExpert:
         pre = self._grasp_pose() * sapien.Pose([0, 0, -(float(u.tau_pick[0]) + cfg.pregrasp_clearance)])
         with self._planning():
             goals = self._pregrasp_goals(pre)
-            _, traj = self._plan(self.free, goals, "approach")
+        _, traj = self._plan_when_clear(self.free, goals, "approach")
+        self.replan = lambda: self._plan(self.free, goals, "approach", quick=True)[1]
         self._follow(traj, until=lambda: bool(u.held[0]))
+        self.replan = None
         if not bool(u.held[0]):
             self._settle()
 
@@ -259,6 +293,11 @@ class MotionPlanningExpert:
     def _lift(self) -> None:
         """Straight up; a takeover that starts held may skip it where the line up is not free."""
         self.loaded, self.loaded_exact = self._loaded_planners()
+        if self.moving:
+            hold, size = _pose(self.u.hold_pose_in_tcp), self.el_size[self.kind]
+            with self._planning():
+                self.watch = ArmPlanner(planning_urdf(self.cfg.arm_margin, size, hold, self.cfg.element_margin),
+                                        planning_srdf(True), self.workdir, "loaded_watch", {})
         try:
             self._lift_line()
         except PhaseFailure:
@@ -283,10 +322,18 @@ class MotionPlanningExpert:
             installs = [time_parameterize(line, self.cfg.line_speed * self.vmax, self.acc, self.dt) for line in lines]
             # what is left of the episode once the install line and the waits are done
             budget = self.u.MAX_EPISODE_STEPS - self.steps - max(map(len, installs)) - 2 * self.cfg.settle_steps
-            i, traj = self._plan(loaded, [line[0] for line in lines], "carry", max_steps=budget)
-        self._follow(traj)
-        self._settle()
+        i, traj = self._plan_when_clear(loaded, [line[0] for line in lines], "carry", max_steps=budget)
         self.install_traj = installs[i]
+
+        def replan() -> np.ndarray:
+            i, traj = self._plan(loaded, [line[0] for line in lines], "carry", quick=True)
+            self.install_traj = installs[i]
+            return traj
+
+        self.replan = replan
+        self._follow(traj)
+        self.replan = None
+        self._settle()
 
     def _install(self) -> None:
         """Along the install line until the task reports success (which ends the episode)."""
@@ -397,21 +444,23 @@ class MotionPlanningExpert:
             self.plan_time += time.perf_counter() - t
 
     def _plan(self, planner: ArmPlanner, goals: list[np.ndarray], phase: str,
-              max_steps: Optional[int] = None) -> tuple[int, np.ndarray]:
+              max_steps: Optional[int] = None, quick: bool = False) -> tuple[int, np.ndarray]:
         """(index of the goal, joint targets at the control rate) along an RRTConnect path to the
         first reachable of `goals`, checked densely for collisions after time parameterization and
-        taking at most `max_steps` control steps."""
+        taking at most `max_steps` control steps; `quick` (a replan while the arm waits): one RRTConnect call per
+        goal, for the two first goals."""
+        self._place_worker(planner)
         if planner.collides(self.q):
             raise PhaseFailure(f"{phase}: start in collision ({', '.join(planner.contacts(self.q))})")
         if not goals:
             raise PhaseFailure(f"{phase}: no collision-free goal configuration")
-        for i, goal in enumerate(goals[: self.cfg.goal_candidates]):
+        for i, goal in enumerate(goals[: 2 if quick else self.cfg.goal_candidates]):
             best, direct = None, len(time_parameterize(np.array([self.q, goal]), self.vel, self.acc, self.dt))
             for path in self._direct_paths(goal) if self.cfg.direct_first else []:
                 traj = time_parameterize(path, self.vel, self.acc, self.dt)
                 if len(traj) <= (max_steps or np.inf) and not planner.path_collides(np.vstack([self.q, traj])):
                     return i, traj
-            for _ in range(self.cfg.rrt_attempts):
+            for _ in range(1 if quick else self.cfg.rrt_attempts):
                 path = planner.rrt_connect(self.q, goal, self.cfg.rrt_time)
                 if path is None:
                     continue
@@ -436,13 +485,23 @@ class MotionPlanningExpert:
         return [np.array([self.q, goal]), np.array([self.q, turn_first, goal]), np.array([self.q, lift_first, goal])]
 
     def _check_free(self, planner: ArmPlanner, path: np.ndarray, phase: str) -> None:
+        self._place_worker(planner)
         hit = planner.collision_on(path)
         if hit is not None:
             raise PhaseFailure(f"{phase}: the straight line collides ({', '.join(planner.contacts(hit))})")
 
+    def _place_worker(self, planner: ArmPlanner) -> None:
+        """A walking worker's envelope, where it stands and swept `worker_lookahead` ahead, into `planner`."""
+        if self.moving:
+            swept = obstacle_objects(self.u, self.cfg.worker_lookahead, margin=self.cfg.worker_margin)
+            planner.set_obstacle("obstacle_worker", swept["obstacle_worker"])
+
     def _set_obstacles(self) -> None:
         """Every element where it lies: on the table (this episode's, but not for the descent, whose
-        plate meets it) or in storage (the general task's others)."""
+        plate meets it) or in storage (the general task's others); the site's obstacles where they stand."""
+        for key, obj in obstacle_objects(self.u).items():
+            self.free.set_obstacle(key, obj)
+            self.free_exact.set_obstacle(key, obj)
         for kind, actor in self.u.elements.items():
             key, box = f"element_{kind}", box_object(self.el_size[kind], _pose(actor.pose.raw_pose))
             self.free.set_obstacle(key, box)
@@ -454,7 +513,7 @@ class MotionPlanningExpert:
     def _loaded_planners(self) -> tuple[ArmPlanner, ArmPlanner]:
         """The arm with the element at its actual hold pose: inflated and exact."""
         hold, size = _pose(self.u.hold_pose_in_tcp), self.el_size[self.kind]
-        obstacles = dict(self.site)
+        obstacles = {**self.site, **obstacle_objects(self.u)}
         for kind, actor in self.u.elements.items():
             if kind != self.kind:
                 obstacles[f"element_{kind}"] = box_object(self.el_size[kind], _pose(actor.pose.raw_pose))
@@ -479,14 +538,113 @@ class MotionPlanningExpert:
         _, _, terminated, truncated, info = self.env.step(torch.as_tensor(self.q[None], dtype=torch.float32))
         self.steps += 1
         self.info = {k: v.reshape(-1)[0].item() for k, v in info.items() if torch.is_tensor(v)}
+        self.collisions += int(self.info.get("obstacle_collision", False))
         self.ended = bool(terminated) or bool(truncated)
         return self.ended
 
     def _follow(self, traj: np.ndarray, until: Optional[Callable[[], bool]] = None) -> None:
-        """Send the targets one per control step, stopping at the episode's end or once `until()` holds."""
-        for target in traj:
+        """Send the targets one per control step, stopping at the episode's end or once `until()` holds. With a
+        walking worker, where the next `worker_lookahead` of targets meets its swept envelope: replan (every
+        `replan_every` steps, where the phase samples its path), else hold still; where the worker is coming at the
+        arm itself, get out of its way (`_escape`) where the phase samples its path, else go back the way it came
+        (and forward along it again once the way is clear)."""
+        ahead = int(round(self.cfg.worker_lookahead / self.dt))
+        trail, redo = [self.q], []  # the targets sent (the last is where the arm is headed); those gone back from
+        i, blocked, stale = 0, 0, False  # stale: the arm left the path (an escape), a new one is needed
+        while i < len(traj) or redo:
+            if stale or (self.watch is not None and
+                         self._worker_blocks(np.array([*redo[::-1], *traj[i:i + ahead]][:ahead]))):
+                if self.replan is not None and blocked % self.cfg.replan_every == 0:
+                    with self._planning():
+                        try:
+                            traj, i, redo, stale = self.replan(), 0, [], False
+                            self.replans += 1
+                            continue
+                        except PhaseFailure:
+                            pass
+                blocked += 1
+                self.waited_steps += 1
+                in_the_way = self._worker_blocks(self.q[None])
+                if in_the_way and self.replan is not None:
+                    if self._escape():
+                        return
+                    trail, redo, blocked, stale = [self.q], [], 0, True
+                    continue
+                if in_the_way and len(trail) > 1:
+                    redo.append(trail.pop())
+                if self._step(trail[-1]):
+                    return
+                continue
+            if redo:
+                target = redo.pop()
+            else:
+                target, i = traj[i], i + 1
+            trail.append(target)
             if self._step(target) or (until is not None and until()):
                 return
+
+    def _escape(self) -> bool:
+        """The worker is coming at the arm: out of its way, by the first of these that is free (the exact arm among the
+        site and the static obstacles): a straight tcp line `escape_distance` aside, horizontally away from the
+        worker's line of walking; one as far straight up; a path to the rest pose (joint 6 kept). Followed until the
+        arm's target is clear of the worker's swept envelope (or it ends). Returns whether the episode ended."""
+        planner = self.free_exact if self.phase == "approach" else self.loaded_exact
+        tcp = self.ik.fk(self.q)
+        walk = self.u.worker_velocity()[0].cpu().numpy().astype(float)
+        away = tcp.p[:2] - self.u.worker_xy()[0].cpu().numpy().astype(float)
+        if np.linalg.norm(walk) > 0:  # the part of `away` across the worker's line of walking
+            along = walk / np.linalg.norm(walk)
+            away = away - along * (away @ along)
+        away = away / max(np.linalg.norm(away), 1e-6)
+        d = self.cfg.escape_distance
+        rest = REST_QPOS.copy()
+        rest[5] = self.q[5]
+        traj = None
+        with self._planning():
+            planner.remove_obstacle("obstacle_worker")
+            try:
+                for shift in ([d * away[0], d * away[1], 0.0], [0.0, 0.0, d]):
+                    line = tcp_line(self.ik, self.q, sapien.Pose(tcp.p + shift, tcp.q))
+                    if line is not None and planner.collision_on(line) is None:
+                        traj = time_parameterize(line, self.cfg.line_speed * self.vmax, self.acc, self.dt)
+                        break
+                if traj is None and not planner.collides(rest):
+                    path = planner.rrt_connect(self.q, rest, self.cfg.rrt_time)
+                    if path is not None:
+                        traj = time_parameterize(planner.shortcut(path), self.vel, self.acc, self.dt)
+            finally:
+                self._place_worker(planner)
+        if traj is None:
+            return self._step(self.q)
+        self.escapes += 1
+        for target in traj[1:]:
+            if self._step(target):
+                return True
+            if not self._worker_blocks(self.q[None]):
+                break
+        return False
+
+    def _worker_blocks(self, targets: np.ndarray) -> bool:
+        """Whether any of `targets` meets the worker's envelope swept `worker_lookahead` ahead."""
+        with self._planning():
+            self._place_worker(self.watch)
+            return any(self.watch.collides(q) for q in targets[::2])
+
+    def _plan_when_clear(self, planner: ArmPlanner, goals: list[np.ndarray], phase: str,
+                         max_steps: Optional[int] = None) -> tuple[int, np.ndarray]:
+        """`_plan`; with a walking worker in the cell, where no path is found, held still and tried again every
+        `replan_every` steps until the worker has left or the episode ends."""
+        while True:
+            try:
+                with self._planning():
+                    return self._plan(planner, goals, phase, max_steps)
+            except PhaseFailure:
+                if not (self.moving and bool(self.u.worker_walking()[0])):
+                    raise
+            for _ in range(self.cfg.replan_every):
+                self.waited_steps += 1
+                if self._step(self.q):
+                    raise PhaseFailure(f"{phase}: the episode ended while the worker blocked every path")
 
     def _settle(self) -> None:
         """Hold the last target until the arm has caught up with it (not past the episode's end)."""

@@ -1,0 +1,171 @@
+"""A site that changes, zero-shot: the planning expert and the shipped agents among obstacles (the tasks' `obstacles`).
+
+    python -m experiments.obstacles                       # every row; then the RESULTS section and its JSON
+    python -m experiments.obstacles --episodes 20 --workers 1
+
+Protocol, per task (ceiling, window, flooring), on evaluation seeds (from 1,000,000: never trained on):
+1. the planning expert solves each seed's static scene (a material stack and a scaffold post, seeded per episode):
+   the seeds it places are the evaluation set, "solvable at its start";
+2. the expert on those seeds with the worker walking across the cell (`moving`), replanning around it;
+3. each shipped agent on those seeds, without obstacles, static and moving. The agents were trained on a site
+   without obstacles and meet them blind (no obstacle entry in their observation): zero-shot.
+
+An episode with obstacles ends, failed, at the first touch of the arm or the element on one. Every seed draws the
+same arm, element and goal in all three scenes. Each (row, task) is written to --out as it finishes and skipped when
+the file is there with the same seeds, so an interrupted run goes on where it stopped.
+"""
+
+from __future__ import annotations
+
+import json
+import multiprocessing as mp
+import shlex
+import sys
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Optional
+
+import numpy as np
+import torch
+import tyro
+from tqdm import tqdm
+
+from baselines.ppo.evaluation import _episode, pct, wilson
+from ms_construction.curriculum import FINAL_STAGE
+from ms_construction.envs import TASK_ENV_IDS
+from ms_construction.reporting import update_section
+
+AGENTS = {
+    "general agent (imitation: clone + residual PPO)": "assets/checkpoints/general_agent.pt",
+    "scratch general agent (reward alone, the campaign's)": "assets/checkpoints/scratch_general_agent.pt",
+}
+SCENES = ("none", "static", "moving")
+RESULTS_PATH = Path("docs/RESULTS.md")
+
+
+@dataclass
+class Args:
+    episodes: int = 60
+    """seeds per task tried by the expert in the static scene (the evaluation set is those it solves)."""
+    seed: int = 1_000_000
+    """the first seed; the others follow."""
+    workers: int = 2
+    """processes, one env each."""
+    out: Path = Path("docs/data/obstacles")
+    """where each row's episodes go (one JSON per row and task)."""
+    agents: dict[str, str] = field(default_factory=lambda: dict(AGENTS))
+    """label -> checkpoint of the agents to run."""
+    write_results: bool = True
+    """write the table into docs/RESULTS.md (section `obstacles-zero-shot`)."""
+
+
+_experts: dict = {}
+
+
+def _expert_episode(job: tuple[str, str, int]) -> dict:
+    """One seeded expert episode in a worker process (env and expert kept for the next)."""
+    import gymnasium as gym
+
+    from ms_construction.planning import MotionPlanningExpert
+
+    env_id, scene, seed = job
+    torch.set_num_threads(1)
+    if (env_id, scene) not in _experts:
+        env = gym.make(env_id, num_envs=1, obs_mode="state", control_mode="pd_joint_pos", reward_mode="sparse",
+                       sim_backend="physx_cpu", curriculum_stage=FINAL_STAGE, obstacles=scene)
+        _experts[(env_id, scene)] = MotionPlanningExpert(env)
+    return _experts[(env_id, scene)].run(seed).to_dict()
+
+
+def _agent_episode(job: tuple[str, str, str, int]) -> dict:
+    checkpoint, env_id, scene, seed = job
+    return _episode((checkpoint, env_id, FINAL_STAGE, seed, None, False, None, 1.0, None if scene == "none" else scene))
+
+
+def run_row(pool, path: Path, fn, jobs: list[tuple], seeds: list[int], desc: str) -> list[dict]:
+    """The episodes of one row and task: read from `path` when it holds these seeds, else run and written there."""
+    if path.exists():
+        saved = json.loads(path.read_text())
+        if saved["seeds"] == seeds:
+            return saved["episodes"]
+    episodes = []
+    bar = tqdm(total=len(jobs), desc=desc, unit="ep", dynamic_ncols=True)
+    for e in pool.imap(fn, jobs):
+        episodes.append(e)
+        bar.update()
+        bar.set_postfix(placed=f"{sum(x['placed'] for x in episodes)}/{len(episodes)}")
+    bar.close()
+    path.parent.mkdir(parents=True, exist_ok=True)
+    path.write_text(json.dumps({"seeds": seeds, "episodes": episodes}, indent=0) + "\n")
+    return episodes
+
+
+def summarize(episodes: list[dict], expert: bool) -> dict:
+    n = len(episodes)
+    placed = sum(e["placed"] for e in episodes)
+    collided = sum(bool(e["collisions"] if expert else e["collided"]) for e in episodes)
+    steps = sum(e["steps" if expert else "length"] for e in episodes)
+    compute = sum(e["planning_time" if expert else "policy_time_s"] for e in episodes)
+    return dict(episodes=n, place_success=placed / max(n, 1), place_success_ci95=wilson(placed, n),
+                collision_rate=collided / max(n, 1), collision_ci95=wilson(collided, n),
+                compute_per_episode_s=compute / max(n, 1), compute_per_step_ms=1000 * compute / max(steps, 1),
+                replans_per_episode=float(np.mean([e["replans"] for e in episodes])) if expert and n else None)
+
+
+def table(rows: dict[str, dict[str, dict]]) -> str:
+    tasks = list(TASK_ENV_IDS)
+    head = " | ".join(f"{k}: placed % [95% CI] / collided %" for k in tasks)
+    lines = [f"| agent | scene | episodes | {head} | compute per decision (ms) |",
+             "|---|---|---|" + "---|" * len(tasks) + "---|"]
+    for (label, scene), per_task in rows.items():
+        cells = []
+        for kind in tasks:
+            s = per_task[TASK_ENV_IDS[kind]]
+            cells.append(f"{pct(s['place_success'], s['place_success_ci95'])} / {100 * s['collision_rate']:.0f}")
+        n = "/".join(str(per_task[TASK_ENV_IDS[k]]["episodes"]) for k in tasks)
+        ms = np.mean([per_task[TASK_ENV_IDS[k]]["compute_per_step_ms"] for k in tasks])
+        lines.append(f"| {label} | {scene} | {n} | " + " | ".join(cells) + f" | {ms:.2f} |")
+    return "\n".join(lines)
+
+
+def main(args: Args) -> dict:
+    if args.episodes < 1 or args.workers < 1:
+        raise SystemExit("--episodes and --workers must be positive")
+    command = "python -m experiments.obstacles " + " ".join(shlex.quote(a) for a in sys.argv[1:])
+    rows: dict[tuple[str, str], dict[str, dict]] = {}
+    with mp.get_context("spawn").Pool(args.workers) as pool:
+        for kind, env_id in TASK_ENV_IDS.items():
+            tried = list(range(args.seed, args.seed + args.episodes))
+            static = run_row(pool, args.out / f"expert_static_{kind}.json", _expert_episode,
+                             [(env_id, "static", s) for s in tried], tried, f"expert static {kind}")
+            rows.setdefault(("planning expert", "static: which seeds are solvable"), {})[env_id] = summarize(static, True)
+            seeds = [e["seed"] for e in static if e["placed"]]
+            moving = run_row(pool, args.out / f"expert_moving_{kind}.json", _expert_episode,
+                             [(env_id, "moving", s) for s in seeds], seeds, f"expert moving {kind}")
+            rows.setdefault(("planning expert", "moving (solvable seeds)"), {})[env_id] = summarize(moving, True)
+            for label, checkpoint in args.agents.items():
+                name = Path(checkpoint).stem
+                for scene in SCENES:
+                    episodes = run_row(pool, args.out / f"{name}_{scene}_{kind}.json", _agent_episode,
+                                       [(checkpoint, env_id, scene, s) for s in seeds], seeds, f"{name} {scene} {kind}")
+                    rows.setdefault((label, scene + " (solvable seeds)"), {})[env_id] = summarize(episodes, False)
+    body = ("## A site that changes: obstacles, zero-shot\n\n"
+            f"Command: `{command}`\n\n{table(rows)}\n\n"
+            "Scenes: none (the site as trained on), static (a material stack and a scaffold post, seeded per episode), "
+            "moving (the same, and a worker walking across the cell once). Episodes: per task, the seeds of "
+            f"{args.seed}..{args.seed + args.episodes - 1} whose static scene the planning expert solved (the first "
+            "row: how many it solved). A touch on an obstacle ends the episode, failed. The agents meet the obstacles "
+            "blind (trained without them, no obstacle entry in their observation). Compute per decision: the expert's "
+            "planning, replanning and path watching per control step; an agent's forward pass per step (one CPU "
+            "thread).\n")
+    print(body)
+    summary = {f"{label} | {scene}": per_task for (label, scene), per_task in rows.items()}
+    (args.out / "summary.json").write_text(json.dumps({"command": command, "rows": summary}, indent=1) + "\n")
+    if args.write_results:
+        update_section(RESULTS_PATH, "obstacles-zero-shot", title="A site that changes: obstacles, zero-shot", body=body)
+        print(f"wrote {RESULTS_PATH}")
+    return summary
+
+
+if __name__ == "__main__":
+    main(tyro.cli(Args))

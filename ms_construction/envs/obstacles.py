@@ -1,0 +1,282 @@
+"""A site that changes: obstacles in the arm's workspace, seeded per episode (the tasks' `obstacles` option).
+
+- a stack of material on the floor (a box, 0.8 x 0.5 m, of a height drawn per episode);
+- a scaffold post from the floor to the slab above;
+- a worker's envelope (a cylinder of a walking person's size) in a lane along the -y barrier, past the floor recesses.
+
+`obstacles="static"` puts the stack and the post in the workspace, the worker standing outside the work cell;
+`"moving"` is the same scene at the start, and the worker then walks across the cell once, along its lane at walking
+speed, entering at a time drawn per episode, and leaves.
+The stack and the post stand within the arm's reach, clear of the staging table, the floor recesses, the window
+fronts, the arm's rest pose and (the post) the ceiling openings; none of the three overlaps another or the lane. A
+layout may still block every way to a goal: `experiments/generalization.py` keeps the evaluation seeds whose static
+scene the planning expert solves ("solvable at its start").
+
+A touch of the arm or the element on an obstacle is `info["obstacle_collision"]`; `info["fail"]` (ManiSkill's
+failure key, which ends the episode) holds once one happened. The obstacles are kinematic bodies (immovable; the
+static site does not collide with them). physx_cpu only for now: the GPU path (pairwise contact queries, kinematic
+poses applied per step) is not written.
+"""
+
+from __future__ import annotations
+
+from typing import Optional
+
+import numpy as np
+import sapien
+import torch
+
+from mani_skill.utils.structs import Actor, Pose
+
+from ms_construction.parameters import SiteParams
+from ms_construction.rotations import quat_z
+
+OBSTACLE_MODES = ("none", "static", "moving")
+STACK_SIZE = (0.8, 0.5, 0.9)
+"""m; the material stack's box; it stands in the floor so that STACK_HEIGHT of it shows (the slab does not collide
+with the kinematic box)."""
+STACK_HEIGHT = (0.3, 0.9)
+"""m; the stack's visible height, uniform per episode."""
+POST_SIZE = 0.08
+"""m; side of the scaffold post's square tube, floor to slab."""
+WORKER_RADIUS, WORKER_HEIGHT = 0.18, 1.8
+"""m; a walking person's envelope."""
+WORKER_SPEED = (1.0, 1.4)
+"""m/s; walking speed, uniform per episode."""
+WORKER_LANE_Y = (-1.78, -1.74)
+"""m; the lane's y (it runs along x, between the floor recesses and the barrier), uniform per episode."""
+WORKER_LANE_X = (-1.05, 0.9)
+"""m; the lane's ends: clear of the column at -y and of the exterior wall."""
+WORKER_START_S = (0.0, 6.0)
+"""s; when the worker enters its lane (`moving`), uniform per episode."""
+WORKER_PARKED_XY = (0.0, -3.0)
+"""m; where the worker stands when not in its lane: outside the barriers, beyond the arm's reach."""
+PLACE_RADIUS = (0.7, 1.7)
+"""m; the stack's and the post's distance from the arm's axis, uniform (within the arm's reach)."""
+MARGIN = 0.05
+"""m; free space kept between obstacles and what they must not overlap."""
+CANDIDATES = 512
+"""places drawn per obstacle, env and reset; the first that keeps the rules is kept (tests check that one does)."""
+OBSTACLE_OBS_SIZE = 11
+"""the observation's `obstacles` entry: stack (x, y, top z, cos 2 yaw, sin 2 yaw), post (x, y), worker (x, y, vx, vy)."""
+LAYOUT_SIZE = 11
+"""the task state's `obstacle_layout`: stack (x, y, top z, yaw), post (x, y), worker start (x, y), velocity (vx, vy)
+and the control step it sets off at."""
+
+
+def _keep_outs(site: SiteParams) -> tuple[torch.Tensor, torch.Tensor]:
+    """Axis-aligned rectangles (x0, y0, x1, y1) no obstacle footprint may overlap: the staging table, the floor
+    recesses, the columns, the window fronts (the install approaches), the arm at rest; and, for the post only, the
+    ceiling openings' footprints."""
+    cx, cy = site.staging_center
+    sx, sy = site.staging_size
+    rects = [(cx - sx / 2, cy - sy / 2, cx + sx / 2, cy + sy / 2)]
+    half = site.floor_panel.size[0] / 2 + site.clearance
+    rects += [(x - half, y - half, x + half, y + half) for x, y, _ in site.floor_slots]
+    c = site.column_size / 2
+    rects += [(x - c, y - c, x + c, y + c) for x, y in site.column_xy]
+    rects += [(site.wall_x - 0.55, y - 0.45, site.wall_x, y + 0.45) for y in site.window_ys]
+    rects.append((-0.35, -0.35, 0.85, 0.35))
+    ceiling = [(x - 0.55, y - 0.55, x + 0.55, y + 0.55) for x, y, _ in site.ceiling_slots]
+    return torch.tensor(rects), torch.tensor(ceiling)
+
+
+def _rect_distance(p: torch.Tensor, rects: torch.Tensor) -> torch.Tensor:
+    """[..., R] distance from points p [..., 2] to each rectangle (0 inside)."""
+    dx = torch.clamp(torch.maximum(rects[:, 0] - p[..., :1], p[..., :1] - rects[:, 2]), min=0)
+    dy = torch.clamp(torch.maximum(rects[:, 1] - p[..., 1:2], p[..., 1:2] - rects[:, 3]), min=0)
+    return torch.hypot(dx, dy)
+
+
+def _segment_distance(p: torch.Tensor, y: torch.Tensor) -> torch.Tensor:
+    """Distance from points p [..., 2] to the lane's segment along x at height y [...]."""
+    x = p[..., 0].clamp(*WORKER_LANE_X)
+    return torch.hypot(p[..., 0] - x, p[..., 1] - y)
+
+
+R_STACK = float(np.hypot(STACK_SIZE[0], STACK_SIZE[1])) / 2
+R_POST = POST_SIZE / np.sqrt(2)
+"""m; the radii of the circles around the stack's and the post's footprints, which the rules keep clear."""
+
+
+def _inside(p: torch.Tensor, r: float, site: SiteParams) -> torch.Tensor:
+    x0, y0, x1, y1 = site.barrier_extent[0], -site.barrier_extent[2], site.wall_x, site.barrier_extent[2]
+    return (p[..., 0] - r > x0) & (p[..., 0] + r < x1) & (p[..., 1] - r > y0) & (p[..., 1] + r < y1)
+
+
+def stack_keeps_rules(stack: torch.Tensor, lane_y: torch.Tensor, site: SiteParams) -> torch.Tensor:
+    """[...] whether the stack (footprint centres [..., 2]) stands inside the barriers, clear of the keep-outs
+    (`_keep_outs`) and of the lane (its y [...])."""
+    rects, _ = (t.to(stack.device) for t in _keep_outs(site))
+    ok = _inside(stack, R_STACK + MARGIN, site) & (_rect_distance(stack, rects) > R_STACK + MARGIN).all(-1)
+    return ok & (_segment_distance(stack, lane_y) > R_STACK + WORKER_RADIUS + MARGIN)
+
+
+def post_keeps_rules(post: torch.Tensor, lane_y: torch.Tensor, stack: torch.Tensor, site: SiteParams) -> torch.Tensor:
+    """[...] whether the post stands inside the barriers, clear of the keep-outs, the ceiling openings, the lane and
+    the stack."""
+    rects, ceiling = (t.to(post.device) for t in _keep_outs(site))
+    ok = _inside(post, R_POST + MARGIN, site) & (_rect_distance(post, rects) > R_POST + MARGIN).all(-1)
+    ok &= (_rect_distance(post, ceiling) > R_POST).all(-1)
+    ok &= _segment_distance(post, lane_y) > R_POST + WORKER_RADIUS + MARGIN
+    return ok & (torch.linalg.norm(post - stack, dim=-1) > R_STACK + R_POST + MARGIN)
+
+
+def sample_layouts(b: int, site: SiteParams, control_freq: float, device) -> torch.Tensor:
+    """[b, LAYOUT_SIZE] obstacle layouts, from torch's generator (ManiSkill seeds it per reset): the lane, then
+    CANDIDATES stacks per env, the first that keeps the rules, then CANDIDATES posts, the first that keeps them."""
+    with torch.device(device):
+        def in_ring() -> torch.Tensor:
+            r = torch.empty(b, CANDIDATES).uniform_(*PLACE_RADIUS)
+            a = torch.rand(b, CANDIDATES) * 2 * torch.pi
+            return torch.stack([r * torch.cos(a), r * torch.sin(a)], -1)
+
+        def first(candidates: torch.Tensor, ok: torch.Tensor) -> torch.Tensor:
+            return candidates[torch.arange(b), torch.argmax(ok.int(), dim=1)]  # candidate 0 where none keeps them
+
+        lane_y = torch.empty(b).uniform_(*WORKER_LANE_Y)
+        stacks = in_ring()
+        stack = first(stacks, stack_keeps_rules(stacks, lane_y[:, None], site))
+        posts = in_ring()
+        post = first(posts, post_keeps_rules(posts, lane_y[:, None], stack[:, None], site))
+        stack_h = torch.empty(b).uniform_(*STACK_HEIGHT)
+        stack_yaw = torch.rand(b) * torch.pi
+        forward = torch.rand(b) < 0.5  # walking towards +x
+        start_x = torch.where(forward, torch.tensor(WORKER_LANE_X[0]), torch.tensor(WORKER_LANE_X[1]))
+        speed = torch.empty(b).uniform_(*WORKER_SPEED) * torch.where(forward, 1.0, -1.0)
+        set_off = torch.floor(torch.empty(b).uniform_(*WORKER_START_S) * control_freq)
+        return torch.cat([stack, stack_h[:, None], stack_yaw[:, None], post,
+                          torch.stack([start_x, lane_y, speed, torch.zeros(b), set_off], -1)], -1)
+
+
+def keeps_rules(layout: torch.Tensor, site: SiteParams) -> torch.Tensor:
+    """[b] whether each layout [b, LAYOUT_SIZE] keeps every rule of the module docstring."""
+    stack, post, lane_y = layout[:, 0:2], layout[:, 4:6], layout[:, 7]
+    return stack_keeps_rules(stack, lane_y, site) & post_keeps_rules(post, lane_y, stack, site)
+
+
+class SiteObstacles:
+    """The `obstacles` option of ConstructionTaskEnv (a mixin; the module docstring)."""
+
+    def _init_obstacles(self, obstacles: Optional[str], obs_obstacles: bool) -> None:
+        mode = "none" if obstacles is None else obstacles
+        if mode not in OBSTACLE_MODES:
+            raise ValueError(f"obstacles={obstacles!r}: use one of {', '.join(map(repr, OBSTACLE_MODES))} (or None)")
+        self.obstacle_mode = mode
+        self.obs_obstacles = bool(obs_obstacles) and mode != "none"
+
+    @property
+    def has_obstacles(self) -> bool:
+        return self.obstacle_mode != "none"
+
+    def _load_obstacles(self) -> None:
+        if not self.has_obstacles:
+            return
+        if self.gpu_sim_enabled:
+            raise NotImplementedError("obstacles run on physx_cpu only for now (sim_backend='physx_cpu')")
+        site = self._obstacle_site = SiteParams()  # the manifest's (assets.load_manifest checks them equal)
+        material = sapien.render.RenderMaterial
+        stack = self.scene.create_actor_builder()
+        half = np.array(STACK_SIZE) / 2
+        stack.add_box_collision(half_size=half)
+        stack.add_box_visual(half_size=half, material=material(base_color=[0.62, 0.5, 0.36, 1]))
+        post = self.scene.create_actor_builder()
+        half = np.array([POST_SIZE / 2, POST_SIZE / 2, site.story_height / 2])
+        post.add_box_collision(half_size=half)
+        post.add_box_visual(half_size=half, material=material(base_color=[0.55, 0.57, 0.6, 1], metallic=0.8))
+        worker = self.scene.create_actor_builder()
+        # a cylinder's axis is x in SAPIEN: turned upright at placement
+        worker.add_cylinder_collision(radius=WORKER_RADIUS, half_length=WORKER_HEIGHT / 2)
+        worker.add_cylinder_visual(radius=WORKER_RADIUS, half_length=WORKER_HEIGHT / 2,
+                                   material=material(base_color=[1.0, 0.85, 0.1, 0.8]))
+        self.obstacles: dict[str, Actor] = {}
+        for name, builder in (("stack", stack), ("post", post), ("worker", worker)):
+            builder.initial_pose = sapien.Pose(p=[0, 0, -20])
+            self.obstacles[name] = builder.build_kinematic(name=f"obstacle_{name}")
+        self._obstacle_entities = {a._objs[0] for a in self.obstacles.values()}
+        n = self.num_envs
+        self.obstacle_layout = torch.zeros(n, LAYOUT_SIZE, device=self.device)
+        self.obstacle_clock = torch.zeros(n, dtype=torch.long, device=self.device)
+        self.obstacle_collided = torch.zeros(n, dtype=torch.bool, device=self.device)
+        self.obstacle_contact_now = torch.zeros(n, dtype=torch.bool, device=self.device)
+
+    def _place_obstacles(self, env_idx: torch.Tensor) -> None:
+        if not self.has_obstacles:
+            return
+        self.obstacle_layout[env_idx] = sample_layouts(len(env_idx), self._obstacle_site, self.control_freq, self.device)
+        self.obstacle_clock[env_idx] = 0
+        self.obstacle_collided[env_idx] = False
+        self.obstacle_contact_now[env_idx] = False
+        self._pose_obstacles()
+
+    def _pose_obstacles(self) -> None:
+        """Every obstacle at its place by the layout and the clock."""
+        lay = self.obstacle_layout
+        stack_z = lay[:, 2] - STACK_SIZE[2] / 2
+        stack = torch.cat([lay[:, 0:2], stack_z[:, None], quat_z(torch.rad2deg(lay[:, 3]))], -1)
+        post_z = torch.full_like(lay[:, 0], self._obstacle_site.story_height / 2)
+        post = torch.cat([lay[:, 4:6], post_z[:, None], quat_z(torch.zeros_like(post_z))], -1)
+        upright = torch.tensor([np.sqrt(0.5), 0, np.sqrt(0.5), 0], device=self.device).expand(len(lay), 4)
+        worker_z = torch.full_like(post_z, WORKER_HEIGHT / 2)
+        self.obstacles["stack"].set_pose(Pose.create(stack))
+        self.obstacles["post"].set_pose(Pose.create(post))
+        self.obstacles["worker"].set_pose(Pose.create(torch.cat([self.worker_xy(), worker_z[:, None], upright], -1)))
+
+    def worker_walking(self, clock: Optional[torch.Tensor] = None) -> torch.Tensor:
+        """[n] whether the worker is in its lane at control step `clock` of the episode (default: now)."""
+        lay = self.obstacle_layout
+        clock = self.obstacle_clock if clock is None else clock
+        t = (clock.float() - lay[:, 10]) / self.control_freq
+        crossing = (WORKER_LANE_X[1] - WORKER_LANE_X[0]) / lay[:, 8].abs().clamp(min=1e-6)
+        return (t >= 0) & (t <= crossing) & (self.obstacle_mode == "moving")
+
+    def worker_xy(self, clock: Optional[torch.Tensor] = None) -> torch.Tensor:
+        """[n, 2] the worker's place at control step `clock` of the episode (default: now)."""
+        lay = self.obstacle_layout
+        clock = self.obstacle_clock if clock is None else clock
+        t = ((clock.float() - lay[:, 10]) / self.control_freq).clamp(min=0)
+        lane = torch.stack([lay[:, 6] + lay[:, 8] * t, lay[:, 7] + lay[:, 9] * t], -1)
+        parked = torch.tensor(WORKER_PARKED_XY, device=self.device).expand_as(lane)
+        return torch.where(self.worker_walking(clock)[:, None], lane, parked)
+
+    def worker_velocity(self) -> torch.Tensor:
+        """[n, 2] m/s; the worker's velocity now (0 outside its lane)."""
+        return torch.where(self.worker_walking()[:, None], self.obstacle_layout[:, 8:10], 0.0)
+
+    def _advance_obstacles(self) -> None:
+        """After a control step: the clock on, the worker to its next place (`moving`), the step's contacts read."""
+        if not self.has_obstacles:
+            return
+        self.obstacle_clock += 1
+        if self.obstacle_mode == "moving":
+            self._pose_obstacles()
+        self.obstacle_contact_now = self._obstacle_contacts()
+        self.obstacle_collided |= self.obstacle_contact_now
+
+    def _obstacle_contacts(self) -> torch.Tensor:
+        """[n] whether anything (the arm or an element: nothing else collides with a kinematic body) touches an
+        obstacle at the end of the control step's physics."""
+        ents = self._obstacle_entities
+        for c in self.scene.px.get_contacts():
+            a, b = c.bodies[0].entity, c.bodies[1].entity
+            if (a in ents) != (b in ents) and any(p.separation < 2e-3 for p in c.points):
+                return torch.ones(1, dtype=torch.bool, device=self.device)
+        return torch.zeros(1, dtype=torch.bool, device=self.device)
+
+    def obstacle_observation(self) -> torch.Tensor:
+        """[n, OBSTACLE_OBS_SIZE] (the module's OBSTACLE_OBS_SIZE says what)."""
+        lay = self.obstacle_layout
+        two_yaw = 2 * lay[:, 3]  # the box looks the same turned half a turn
+        return torch.cat([lay[:, 0:3], torch.cos(two_yaw)[:, None], torch.sin(two_yaw)[:, None], lay[:, 4:6],
+                          self.worker_xy(), self.worker_velocity()], -1)
+
+    def obstacle_info(self) -> dict:
+        if not self.has_obstacles:
+            return {}
+        return dict(obstacle_collision=self.obstacle_contact_now.clone(), fail=self.obstacle_collided.clone())
+
+    def obstacle_state(self) -> dict:
+        if not self.has_obstacles:
+            return {}
+        return dict(obstacle_layout=self.obstacle_layout.clone(), obstacle_clock=self.obstacle_clock[:, None].clone(),
+                    obstacle_collided=self.obstacle_collided[:, None].clone())

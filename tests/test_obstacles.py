@@ -1,0 +1,154 @@
+"""The tasks' `obstacles` option: valid seeded scenes, the worker's walk, collisions counted and failing the episode,
+the state round trip, the planning expert among the obstacles, and shipped agents meeting them blind."""
+
+import pytest
+import torch
+
+from baselines.ppo.checkpoints import policy_env_kwargs
+from ms_construction.envs.obstacles import (
+    OBSTACLE_OBS_SIZE,
+    STACK_SIZE,
+    WORKER_LANE_X,
+    WORKER_PARKED_XY,
+    keeps_rules,
+    sample_layouts,
+)
+from ms_construction.parameters import SiteParams
+from ms_construction.planning import MotionPlanningExpert
+from tests.helpers import TEST_EXPERT_CONFIG, make_env
+
+
+def test_an_unknown_obstacles_option_raises_naming_the_allowed_ones():
+    with pytest.raises(ValueError, match="'static'.*'moving'"):
+        make_env("Flooring-v1", obstacles="walls")
+
+
+def test_every_sampled_layout_keeps_the_rules():
+    torch.manual_seed(0)
+    layouts = sample_layouts(5000, SiteParams(), 20, "cpu")
+    assert bool(keeps_rules(layouts, SiteParams()).all())
+    # and the layouts vary: the stack's place, its height, the post, the lane's direction
+    assert layouts[:, :6].std(0).min() > 0.05
+    assert set(torch.sign(layouts[:, 8]).tolist()) == {-1.0, 1.0}
+
+
+def test_a_seed_draws_the_same_episode_with_and_without_obstacles_and_the_obstacles_are_seeded():
+    plain, static = make_env("ConstructionPickPlace-v1"), make_env("ConstructionPickPlace-v1", obstacles="static")
+    for seed in (3, 4):
+        obs_plain, _ = plain.reset(seed=seed)
+        obs_static, _ = static.reset(seed=seed)
+        # the obstacles come last: the rest of the observation is the episode without them
+        assert obs_static.shape[-1] == obs_plain.shape[-1] + OBSTACLE_OBS_SIZE
+        torch.testing.assert_close(obs_static[:, :obs_plain.shape[-1]], obs_plain)
+    first = static.unwrapped.obstacle_layout.clone()
+    static.reset(seed=4)
+    torch.testing.assert_close(static.unwrapped.obstacle_layout, first)
+    static.reset(seed=5)
+    assert not torch.allclose(static.unwrapped.obstacle_layout, first)
+    blind = make_env("ConstructionPickPlace-v1", obstacles="static", obs_obstacles=False)
+    obs_blind, _ = blind.reset(seed=3)
+    assert obs_blind.shape == obs_plain.shape
+    for env in (plain, static, blind):
+        env.close()
+
+
+@pytest.mark.parametrize("mode", ["static", "moving"])
+def test_the_worker_walks_its_lane_once_when_moving_and_stays_outside_when_static(mode):
+    env = make_env("Flooring-v1", obstacles=mode)
+    env.reset(seed=1)
+    u = env.unwrapped
+    u.obstacle_layout[0, 10] = 5  # sets off at step 5
+    q = u.agent.robot.get_qpos()
+    places, speeds = [], []
+    for _ in range(60):
+        env.step(q)
+        places.append(u.worker_xy()[0].clone())
+        speeds.append(float(torch.linalg.norm(u.worker_velocity()[0])))
+    places = torch.stack(places)
+    parked = torch.tensor(WORKER_PARKED_XY)
+    if mode == "static":
+        assert torch.allclose(places, parked.expand_as(places)) and max(speeds) == 0
+    else:
+        in_lane = ~torch.isclose(places, parked).all(-1)
+        assert in_lane[5:10].all() and not in_lane[:3].any() and not in_lane[-5:].any()
+        xs = places[in_lane, 0]
+        assert xs.min() >= WORKER_LANE_X[0] - 1e-4 and xs.max() <= WORKER_LANE_X[1] + 1e-4
+        steps = (xs[1:] - xs[:-1]).abs()
+        speed = abs(float(u.obstacle_layout[0, 8]))
+        torch.testing.assert_close(steps, torch.full_like(steps, speed / u.control_freq))  # walking speed
+        obs = u.obstacle_observation()[0]
+        assert obs.shape == (OBSTACLE_OBS_SIZE,)
+    env.close()
+
+
+def test_touching_an_obstacle_is_counted_and_fails_the_episode():
+    env = make_env("CeilingInstallation-v1", obstacles="static")
+    env.reset(seed=0)
+    u = env.unwrapped
+    q = u.agent.robot.get_qpos()
+    _, _, terminated, _, info = env.step(q)
+    assert not bool(info["obstacle_collision"]) and not bool(info["fail"]) and not bool(terminated)
+    # the stack moved under the plate at rest, its top above the plate
+    tcp = u.agent.tcp.pose.raw_pose[0]
+    u.obstacle_layout[0, 0:2] = tcp[:2]
+    u.obstacle_layout[0, 2] = float(tcp[2]) + 0.1
+    u._pose_obstacles()
+    _, _, terminated, _, info = env.step(q)
+    assert bool(info["obstacle_collision"]) and bool(info["fail"]) and bool(terminated)
+    assert float(u.obstacle_layout[0, 2]) - STACK_SIZE[2] < float(tcp[2])
+    env.close()
+
+
+def test_state_round_trip_restores_the_obstacles_and_the_worker_s_clock():
+    env = make_env("Flooring-v1", obstacles="moving")
+    env.reset(seed=2)
+    u = env.unwrapped
+    q = u.agent.robot.get_qpos()
+    for _ in range(10):
+        env.step(q)
+    state = u.get_state_dict()
+    layout, clock = u.obstacle_layout.clone(), u.obstacle_clock.clone()
+    after = [env.step(q)[0] for _ in range(30)]
+    env.reset(seed=9)
+    u.set_state_dict(state)
+    torch.testing.assert_close(u.obstacle_layout, layout)
+    assert torch.equal(u.obstacle_clock, clock)
+    again = [env.step(q)[0] for _ in range(30)]
+    for a, b in zip(after, again):
+        torch.testing.assert_close(a[:, -OBSTACLE_OBS_SIZE:], b[:, -OBSTACLE_OBS_SIZE:])
+    env.close()
+
+
+@pytest.mark.parametrize("mode", ["static", "moving"])
+def test_the_expert_places_among_the_obstacles_without_touching_them(mode):
+    env = make_env("Flooring-v1", obstacles=mode)
+    expert = MotionPlanningExpert(env, TEST_EXPERT_CONFIG)
+    # on these seeds the walking worker crosses the recesses' side while the arm works there: the expert replans or
+    # waits on some of them (on which, depends on the paths RRTConnect finds)
+    results = [expert.run(seed) for seed in (2, 4, 5, 6)]
+    assert sum(r.placed for r in results) >= 3, [r.failure for r in results]
+    assert all(r.collisions == 0 for r in results)
+    if mode == "moving":
+        assert any(r.replans + r.waited_steps + r.escapes > 0 for r in results)
+    else:
+        assert all(r.replans + r.waited_steps + r.escapes == 0 for r in results)
+    expert.close()
+    env.close()
+
+
+def test_a_policy_trained_without_obstacles_meets_them_blind():
+    kwargs = policy_env_kwargs({"control_mode": "pd_joint_delta_pos"})
+    assert kwargs["obs_obstacles"] is False
+    env = make_env("Flooring-v1", obstacles="moving", **kwargs)
+    plain = make_env("Flooring-v1", **kwargs)
+    assert env.observation_space.shape == plain.observation_space.shape
+    env.close()
+    plain.close()
+    assert policy_env_kwargs({"control_mode": "pd_joint_delta_pos", "obs_obstacles": True})["obs_obstacles"] is True
+
+
+def test_obstacles_are_refused_on_the_gpu_until_written_there():
+    if not torch.cuda.is_available():
+        pytest.skip("needs a CUDA device (physx_cuda)")
+    with pytest.raises(NotImplementedError, match="physx_cpu"):
+        make_env("Flooring-v1", obstacles="static", sim_backend="physx_cuda", num_envs=2)
