@@ -20,7 +20,10 @@ from __future__ import annotations
 
 import dataclasses
 import functools
+import hashlib
 import json
+import os
+from pathlib import Path
 from typing import Optional
 
 import numpy as np
@@ -251,8 +254,44 @@ def load_vias() -> dict:
 
 @functools.lru_cache(maxsize=None)
 def start_paths() -> StartPaths:
-    """The start paths (see StartPaths), with the shipped planned vias. Needs mplib: a few seconds, once per process."""
-    return _start_paths(json.dumps(load_vias()))
+    """The start paths (see StartPaths), with the shipped planned vias. Needs mplib: a few seconds the first time on a
+    machine, then read from the disk cache (`cached_start_paths`)."""
+    return cached_start_paths(json.dumps(load_vias()))
+
+
+CACHE_ENV = "MS_CONSTRUCTION_CACHE"
+"""where the start paths are cached (default ~/.cache/ms_construction); empty: no disk cache."""
+_INPUTS = ("goal_configurations.py", "kinematics.py", "parameters.py", "planning/collision_model.py",
+           "planning/arm_planner.py")
+"""the source files (below ms_construction/) the start paths are computed by: the cache key reads them."""
+
+
+def cached_start_paths(vias_json: str) -> StartPaths:
+    """`_start_paths`, from a file of the disk cache whose name is the hash of everything it is computed from (the
+    vias, the manifest, the arm's URDF and SRDF, the code of `_INPUTS`), written there the first time: a changed
+    input is a new file, never a stale read. A cache that cannot be written is skipped."""
+    folder = os.environ.get(CACHE_ENV, str(Path.home() / ".cache" / "ms_construction"))
+    if not folder:
+        return _start_paths(vias_json)
+    from ms_construction.assets import ARM_SRDF_PATH, ARM_URDF_PATH, MANIFEST_PATH
+
+    here = Path(__file__).parent
+    key = hashlib.sha256(vias_json.encode())
+    for path in [MANIFEST_PATH, ARM_URDF_PATH, ARM_SRDF_PATH] + [here / name for name in _INPUTS]:
+        key.update(Path(path).read_bytes())
+    path = Path(folder) / f"start_paths-{key.hexdigest()[:20]}.npz"
+    if path.is_file():
+        with np.load(path) as saved:
+            return StartPaths(**{f.name: saved[f.name] for f in dataclasses.fields(StartPaths)})
+    paths = _start_paths(vias_json)
+    try:
+        path.parent.mkdir(parents=True, exist_ok=True)
+        tmp = path.with_suffix(f".{os.getpid()}.npz")
+        np.savez(tmp, **dataclasses.asdict(paths))
+        os.replace(tmp, path)  # whole or not at all, whichever process writes it
+    except OSError:
+        pass
+    return paths
 
 
 @functools.lru_cache(maxsize=None)

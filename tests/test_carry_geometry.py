@@ -11,6 +11,7 @@
 """
 
 import dataclasses
+import json
 
 import numpy as np
 import pytest
@@ -137,3 +138,17 @@ def test_the_projection_is_the_least_cost_over_every_point_of_every_usable_path(
     above = np.array(above)
     assert above.min() > -0.05, "never below the definition"
     assert (np.abs(above) < 1e-3).mean() >= 0.75, np.round(np.sort(above), 3)
+
+
+def test_start_paths_are_cached_on_disk_under_the_hash_of_what_they_are_computed_from(tmp_path, monkeypatch):
+    monkeypatch.setenv(gc.CACHE_ENV, str(tmp_path))
+    vias = json.dumps(gc.load_vias())
+    computed = gc.cached_start_paths(vias)
+    [written] = tmp_path.glob("start_paths-*.npz")
+    read = gc.cached_start_paths(vias)
+    for f in dataclasses.fields(computed):
+        np.testing.assert_array_equal(getattr(read, f.name), getattr(computed, f.name))
+    # another input is another file, never the stale one
+    monkeypatch.setattr(gc, "_start_paths", lambda v: computed)
+    gc.cached_start_paths(json.dumps({}))
+    assert len(list(tmp_path.glob("start_paths-*.npz"))) == 2 and written.is_file()

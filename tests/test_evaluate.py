@@ -105,6 +105,18 @@ def test_a_checkpoint_of_the_wrong_shape_is_a_clear_error(tmp_path):
         evaluation.main(evaluation.Args(checkpoint=path, env_id="Flooring-v1", episodes=1))
 
 
+def test_goal_slots_evaluate_only_those_openings_and_the_json_breaks_placing_down_by_slot(tmp_path):
+    out = tmp_path / "eval.json"
+    evaluation.main(evaluation.Args(env_id="ConstructionPickPlace-v1", episodes=6, seed=1_000_000, json=out, workers=1,
+                                    goal_slots=(1,)))
+    data = json.loads(out.read_text())
+    assert {e["goal_slot"] for e in data["episode_results"]} == {1}
+    assert list(data["place_success_by_goal_slot"]) == ["1"]
+    assert data["place_success_by_goal_slot"]["1"] == data["place_success"]
+    with pytest.raises(SystemExit, match="distinct indices in 0..2"):
+        evaluation.main(evaluation.Args(env_id="Flooring-v1", goal_slots=(3,)))
+
+
 def test_bad_arguments_are_refused_with_the_allowed_values(tmp_path):
     with pytest.raises(SystemExit, match="allowed: ConstructionPickPlace-v1"):
         evaluation.main(evaluation.Args(env_id="Roofing-v1"))

@@ -37,6 +37,8 @@ from baselines.ppo.checkpoints import load_checkpoint, load_policy
 from ms_construction.curriculum import FINAL_STAGE, STAGE_NAMES, stage_tolerances
 from ms_construction.envs import ENV_IDS, TASK_ENV_IDS
 from ms_construction.envs.construction_env import ConstructionTaskEnv
+from baselines.ppo.start_states import GOAL_SLOTS
+from ms_construction.parameters import ELEMENT_KINDS
 from ms_construction.reporting import update_section
 from ms_construction.rollout import rollout
 
@@ -96,6 +98,9 @@ class Args:
     protocol is the policy's own actions."""
     write_results: bool = False
     """write the table (with how the agent was trained, from its checkpoint) into docs/RESULTS.md."""
+    goal_slots: tuple[int, ...] = ()
+    """evaluate on these goal slots only (indices 0-2, the same for every task type; default: all): the openings a
+    run held out in training (ppo.py's `--starts.goal-slot-weights` with zeros there)."""
     obstacles: Optional[str] = None
     """the tasks' `obstacles` option ('static' or 'moving'); a policy trained without them meets them blind. Each
     episode's record then says whether it collided (which ends it)."""
@@ -189,9 +194,9 @@ def _episode(job: tuple) -> dict:
     from mani_skill.utils.gym_utils import find_max_episode_steps_value
     from mani_skill.vector.wrappers.gymnasium import ManiSkillVectorEnv
 
-    checkpoint, env_id, stage, seed, video_dir, sample, max_steps, gain, obstacles = job
+    checkpoint, env_id, stage, seed, video_dir, sample, max_steps, gain, obstacles, goal_slots = job
     torch.set_num_threads(1)
-    key = (checkpoint, env_id, video_dir is not None, max_steps, obstacles)
+    key = (checkpoint, env_id, video_dir is not None, max_steps, obstacles, goal_slots)
     if key not in _worker:
         for _, old in _worker.values():
             old.close()
@@ -199,7 +204,7 @@ def _episode(job: tuple) -> dict:
         agent, env_kwargs = load_policy(Path(checkpoint), env_id)
         env = gym.make(env_id, obs_mode="state", reward_mode="sparse", num_envs=1, sim_backend="physx_cpu",
                        curriculum_stage=stage, render_mode="rgb_array" if video_dir else None, obstacles=obstacles,
-                       **env_kwargs,
+                       goal_slot_weights=slot_weights(goal_slots), **env_kwargs,
                        **({"max_episode_steps": max_steps} if max_steps else {}))
         if video_dir:
             from mani_skill.utils.wrappers import RecordEpisode
@@ -216,8 +221,18 @@ def _episode(job: tuple) -> dict:
     return episode
 
 
+def slot_weights(goal_slots: tuple[int, ...]) -> Optional[dict]:
+    """The tasks' `goal_slot_weights` that draw only `goal_slots` of every task type (None: all)."""
+    if not goal_slots:
+        return None
+    return {kind: [float(i in goal_slots) for i in range(GOAL_SLOTS)] for kind in ELEMENT_KINDS}
+
+
 def summarize(episodes: list[dict]) -> dict:
     n = len(episodes)
+    by_slot = {}
+    for e in episodes:
+        by_slot.setdefault(e["goal_slot"], []).append(e["placed"])
     picks, places = sum(e["picked"] for e in episodes), sum(e["placed"] for e in episodes)
     return dict(
         episodes=n, steps=int(sum(e["length"] for e in episodes)),
@@ -226,6 +241,7 @@ def summarize(episodes: list[dict]) -> dict:
         mean_return=float(np.mean([e["ret"] for e in episodes])),
         mean_length=float(np.mean([e["length"] for e in episodes])),
         policy_time_per_episode_s=float(np.mean([e["policy_time_s"] for e in episodes])),
+        place_success_by_goal_slot={slot: float(np.mean(p)) for slot, p in sorted(by_slot.items())},
     )
 
 
@@ -239,7 +255,7 @@ def evaluate(args: Args, env_id: str, pool) -> dict:
 
     def job(i: int, video: bool) -> tuple:
         return (str(args.checkpoint), env_id, args.curriculum_stage, args.seed + i, str(args.video_dir) if video else None,
-                args.sample_actions, args.max_episode_steps, args.action_gain, args.obstacles)
+                args.sample_actions, args.max_episode_steps, args.action_gain, args.obstacles, args.goal_slots)
 
     for i in range(min(args.videos, target) if args.video_dir else 0):  # the recorded episodes come first
         episodes.append(pool.apply(_episode, (job(i, True),)))
@@ -332,6 +348,8 @@ def main(args: Args) -> dict[str, dict]:
         raise SystemExit(f"--env-id {args.env_id}: unknown; allowed: {', '.join(ENV_IDS)}")
     if args.curriculum_stage not in STAGE_NAMES:
         raise SystemExit(f"--curriculum-stage {args.curriculum_stage}: use one of {', '.join(STAGE_NAMES)}")
+    if any(not 0 <= s < GOAL_SLOTS for s in args.goal_slots) or len(set(args.goal_slots)) != len(args.goal_slots):
+        raise SystemExit(f"--goal-slots {' '.join(map(str, args.goal_slots))}: give distinct indices in 0..{GOAL_SLOTS - 1}")
     if args.episodes < 1 or (args.steps is not None and args.steps < 1) or args.workers < 1:
         raise SystemExit("--episodes, --steps and --workers must be positive")
     if args.action_gain <= 0 or (args.action_gain != 1 and args.write_results):
