@@ -152,3 +152,52 @@ def test_obstacles_are_refused_on_the_gpu_until_written_there():
         pytest.skip("needs a CUDA device (physx_cuda)")
     with pytest.raises(NotImplementedError, match="physx_cpu"):
         make_env("Flooring-v1", obstacles="static", sim_backend="physx_cuda", num_envs=2)
+
+
+def test_the_dense_reward_measures_the_carry_along_the_paths_clear_of_the_obstacles():
+    env = make_env("CeilingInstallation-v1", obstacles="static", reward_mode="dense")
+    u = env.unwrapped
+    for seed in range(20):  # an episode where the stack or the post blocks one of its goal slot's usable paths
+        env.reset(seed=seed)
+        usable, clear = u.geometry.paths["usable"][u.task_id, u.goal_slot], u.clear_paths()
+        if (usable & ~clear).any() and (usable & clear).any():
+            break
+    else:
+        pytest.fail("no seed of 20 with a usable start path blocked and another clear")
+    blocked = int((usable & ~clear)[0].nonzero()[0, 0])
+    path = u.geometry.paths["waypoints"][u.task_id, u.goal_slot][0, blocked]  # [P, 6]
+    on_path = path[len(path) // 2][None]
+    turn, side = torch.zeros(1), torch.full((1,), -1)
+    along_all = u.geometry.project(on_path, turn, u.task_id, u.goal_slot, side)
+    along_clear = u.geometry.project(on_path, turn, u.task_id, u.goal_slot, side, clear)
+    # on the blocked path the arm is on a usable path, but off every path the reward now measures along
+    assert float(along_clear.distance) > float(along_all.distance) + 0.1
+    # and the obstacles parked far away block nothing
+    state = u.get_state_dict()
+    state["task"]["obstacle_layout"][0, 0:2] = torch.tensor([-5.0, 5.0])
+    state["task"]["obstacle_layout"][0, 4:6] = torch.tensor([5.0, 5.0])
+    u.set_state_dict(state)
+    assert bool(u.clear_paths().all())
+    env.close()
+
+
+def test_near_goal_starts_pose_the_arm_on_the_paths_clear_of_the_obstacles():
+    env = make_env("CeilingInstallation-v1", obstacles="static", reward_mode="dense")
+    u = env.unwrapped
+    u.set_near_goal_starts(1.0, 1.0)
+    touched, starts, blocked = 0, 0, 0
+    for seed in range(12):
+        env.reset(seed=seed)
+        clear, usable = u.clear_paths(), u.geometry.paths["usable"][u.task_id, u.goal_slot]
+        if not (usable & clear).any():  # every way out of this goal blocked: an ordinary reset instead
+            assert not bool(u.near_goal_start[0])
+            blocked += 1
+            continue
+        assert bool(u.near_goal_start[0])
+        sides = (usable & clear).view(-1, 2).any(0)  # the start's grasp side is a side of a clear path
+        assert bool(sides[u.carry_side[0]])
+        _, _, _, _, info = env.step(u.agent.robot.get_qpos())
+        touched += int(info["obstacle_collision"])
+        starts += 1
+    assert touched == 0 and starts >= 8, (touched, starts, blocked)
+    env.close()

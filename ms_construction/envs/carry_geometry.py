@@ -195,13 +195,25 @@ class CarryGeometry:
                 vertices=torch.cat([w, vertex_before[..., None], vertex_weight[..., None]], -1))
         return self._paths
 
-    def path_sides(self, task: torch.Tensor, slot: torch.Tensor) -> torch.Tensor:
-        """[n, 2] bool: the turret sides (+pi, -pi) a usable start path of each goal slot leaves the table from; both
-        for a slot without usable paths."""
-        return self.paths["sides"][task, slot]
+    def usable(self, task: torch.Tensor, slot: torch.Tensor, clear: Optional[torch.Tensor] = None) -> torch.Tensor:
+        """[n, M] bool: the usable start paths of each env's goal slot; with `clear` [n, M] (the paths clear of a
+        site's obstacles, `SiteObstacles.clear_paths`), those of them that are clear, where any is."""
+        usable = self.paths["usable"][task, slot]
+        if clear is None:
+            return usable
+        both = usable & clear
+        return torch.where(both.any(-1, keepdim=True), both, usable)
+
+    def path_sides(self, task: torch.Tensor, slot: torch.Tensor, clear: Optional[torch.Tensor] = None) -> torch.Tensor:
+        """[n, 2] bool: the turret sides (+pi, -pi) a usable start path (`usable`) of each goal slot leaves the table
+        from; both for a slot without usable paths."""
+        if clear is None:
+            return self.paths["sides"][task, slot]
+        sides = self.usable(task, slot, clear).view(len(task), -1, 2).any(1)
+        return torch.where(sides.any(-1, keepdim=True), sides, True)
 
     def project(self, qpos: torch.Tensor, turn: torch.Tensor, task: torch.Tensor, slot: torch.Tensor,
-                side: torch.Tensor) -> Projection:
+                side: torch.Tensor, clear: Optional[torch.Tensor] = None) -> Projection:
         """How far the arm (`qpos` [n, 6], its element turned `turn` [n] on the plate) is from holding its element
         installed along the nearest usable start path of its goal slot: the least, over the points of the paths,
         of the path's weight (PATH_DEVIATION_WEIGHT, VIA_DEVIATION_WEIGHT) times the joint-space (L1) distance to
@@ -209,17 +221,19 @@ class CarryGeometry:
         modulo the element's symmetry. Only along the paths that leave the table from the turret side `side` [n]
         (0: +pi, 1: -pi, -1: none) the element was grasped from, where the slot has any: the turret cannot cross to
         the other side holding it. The candidates are each segment's nearest point by joints 1-5 (joint 6 is
-        compared modulo a period, which a projection cannot take) and every vertex."""
+        compared modulo a period, which a projection cannot take) and every vertex. With `clear`, only along the
+        paths clear of the site's obstacles (`usable`)."""
         p = self.paths
         return Projection(*_scripted(_project)(
-            qpos, turn, self.period[task], p["segments"][task, slot], p["vertices"][task, slot], p["usable"][task, slot],
-            p["kept"][task, slot], side, PATH_LOOKAHEAD))
+            qpos, turn, self.period[task], p["segments"][task, slot], p["vertices"][task, slot],
+            self.usable(task, slot, clear), p["kept"][task, slot], side, PATH_LOOKAHEAD))
 
-    def reach_distance(self, qpos: torch.Tensor, task: torch.Tensor, slot: torch.Tensor) -> torch.Tensor:
+    def reach_distance(self, qpos: torch.Tensor, task: torch.Tensor, slot: torch.Tensor,
+                       clear: Optional[torch.Tensor] = None) -> torch.Tensor:
         """[n] rad; how far the arm is, in joint space (joints 1-5 summed: the plate's roll does not matter to the
         suction grasp, which keeps the element's turn), from the nearest configuration that grasps its element where
         it lies on the staging table, on a turret side that a usable start path of its goal slot leaves the table
         from (`path_sides`): an element grasped from the other side has no collision-free way to its goal along
         them."""
         distance = (self.table_q[task][..., :5] - qpos[:, None, :5]).abs().sum(-1)  # [n, 2 turret sides]
-        return torch.where(self.path_sides(task, slot), distance, torch.inf).amin(-1)
+        return torch.where(self.path_sides(task, slot, clear), distance, torch.inf).amin(-1)

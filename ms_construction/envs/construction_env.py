@@ -291,12 +291,13 @@ class ConstructionTaskEnv(SiteObstacles, StartStates, BaseEnv):
             self.reach_start_side[env_idx] = -1
             self.carry_prev[env_idx] = -1.0
             self.carry_side[env_idx] = -1
+            # after the arm, element and goal: a seed draws the same episode with and without obstacles; before the
+            # start states (training devices), which pose the arm on the start paths clear of them
+            self._place_obstacles(env_idx)
             if bool((self.reach_start_share > 0).any()):
                 self._start_on_the_way(env_idx)
             if self.near_goal_share > 0:
                 self._start_near_goal(env_idx)
-            # last: an episode draws the same arm, element and goal with and without obstacles
-            self._place_obstacles(env_idx)
 
     def _place_goal_markers(self, env_idx: torch.Tensor) -> None:
         task, goal = self.task_id[env_idx], self._goal_table[self.task_id[env_idx], self.goal_slot[env_idx]]
@@ -526,7 +527,8 @@ class ConstructionTaskEnv(SiteObstacles, StartStates, BaseEnv):
         """The arm's nearest point on its goal slot's start paths, the grasp side's where it has any
         (`CarryGeometry.project`): what the carry and the path offset measure."""
         return self._per_step("projection", lambda: self.geometry.project(
-            self.agent.robot.get_qpos(), self.plate_turn(), self.task_id, self.goal_slot, self.carry_side))
+            self.agent.robot.get_qpos(), self.plate_turn(), self.task_id, self.goal_slot, self.carry_side,
+            self.clear_paths()))
 
     def carry_distance(self) -> torch.Tensor:
         """[n] rad; how far the arm is from holding its element installed, along the start paths of its goal slot
@@ -549,7 +551,7 @@ class ConstructionTaskEnv(SiteObstacles, StartStates, BaseEnv):
     def reach_distance(self) -> torch.Tensor:
         """[n] rad; the arm's joint-space distance (joints 1-5) from the nearest configuration that grasps its element
         on the staging table from a turret side its goal slot's start paths leave from (`CarryGeometry.reach_distance`)."""
-        return self.geometry.reach_distance(self.agent.robot.get_qpos(), self.task_id, self.goal_slot)
+        return self.geometry.reach_distance(self.agent.robot.get_qpos(), self.task_id, self.goal_slot, self.clear_paths())
 
     PROGRESS_GAIN = 1.25
     """per rad; the progress term pays this much per radian the carry distance fell since the last step, within
@@ -656,4 +658,5 @@ class ConstructionTaskEnv(SiteObstacles, StartStates, BaseEnv):
             self._place_goal_markers(torch.arange(self.num_envs, device=self.device))
             if self.has_obstacles:
                 self._pose_obstacles()
+                self._clear_paths = None
 

@@ -12,6 +12,7 @@ fronts, the arm's rest pose and (the post) the ceiling openings; none of the thr
 layout may still block every way to a goal: `experiments/generalization.py` keeps the evaluation seeds whose static
 scene the planning expert solves ("solvable at its start").
 
+The dense reward measures its carry along the start paths that keep clear of the stack and the post (`clear_paths`).
 A touch of the arm or the element on an obstacle is `info["obstacle_collision"]`; `info["fail"]` (ManiSkill's
 failure key, which ends the episode) holds once one happened. The obstacles are kinematic bodies (immovable; the
 static site does not collide with them). physx_cpu only for now: the GPU path (pairwise contact queries, kinematic
@@ -20,6 +21,7 @@ poses applied per step) is not written.
 
 from __future__ import annotations
 
+import tempfile
 from typing import Optional
 
 import numpy as np
@@ -164,6 +166,7 @@ class SiteObstacles:
             raise ValueError(f"obstacles={obstacles!r}: use one of {', '.join(map(repr, OBSTACLE_MODES))} (or None)")
         self.obstacle_mode = mode
         self.obs_obstacles = bool(obs_obstacles) and mode != "none"
+        self._clear_paths: Optional[torch.Tensor] = None
 
     @property
     def has_obstacles(self) -> bool:
@@ -201,6 +204,7 @@ class SiteObstacles:
         self.obstacle_contact_now = torch.zeros(n, dtype=torch.bool, device=self.device)
 
     def _place_obstacles(self, env_idx: torch.Tensor) -> None:
+        self._clear_paths = None
         if not self.has_obstacles:
             return
         self.obstacle_layout[env_idx] = sample_layouts(len(env_idx), self._obstacle_site, self.control_freq, self.device)
@@ -262,6 +266,43 @@ class SiteObstacles:
             if (a in ents) != (b in ents) and any(p.separation < 2e-3 for p in c.points):
                 return torch.ones(1, dtype=torch.bool, device=self.device)
         return torch.zeros(1, dtype=torch.bool, device=self.device)
+
+    def clear_paths(self) -> Optional[torch.Tensor]:
+        """[n, M] bool: which start paths of each env's goal slot (`CarryGeometry.paths`) keep the arm and its element
+        clear of the stack and the post as they stand (None without obstacles): the dense reward measures the carry
+        along those, where any is (`CarryGeometry.usable`), so that it does not lead the arm into them. Checked as the
+        start paths are against the site (goal_configurations: the same points, turns and margins), once per
+        episode when the reward first asks; the walking worker is left out (it is outside the cell at the start)."""
+        if not self.has_obstacles:
+            return None
+        if self._clear_paths is None:
+            self._clear_paths = self._check_paths()
+        return self._clear_paths
+
+    def _check_paths(self) -> torch.Tensor:
+        from ms_construction.goal_configurations import PATH_CHECKS, START_TURNS_DEG, _path_planners, path_point
+        from ms_construction.parameters import ELEMENT_KINDS
+        from ms_construction.planning.collision_model import obstacle_objects
+
+        kind = int(self.task_id[0])
+        if not hasattr(self, "_path_checkers"):
+            self._path_checkers_dir = tempfile.TemporaryDirectory(prefix="ms_construction_obstacles_")
+            self._path_checkers = {}
+        if kind not in self._path_checkers:
+            self._path_checkers[kind] = _path_planners(self._path_checkers_dir.name, ELEMENT_KINDS[kind], {})
+        planners = self._path_checkers[kind]
+        static = {k: v for k, v in obstacle_objects(self).items() if k != "obstacle_worker"}
+        for planner in planners:
+            for key, obj in static.items():
+                planner.set_obstacle(key, obj)
+        waypoints = self.geometry.paths["waypoints"][kind, int(self.goal_slot[0])].cpu().numpy().astype(float)
+        turns = [float(np.deg2rad(t)) for t in START_TURNS_DEG]
+        clear = []
+        for path in waypoints:
+            points = [path_point(path, a) for a in np.linspace(0.0, 1.0, PATH_CHECKS + 1)]
+            clear.append(not any(planner.collides(q + [0, 0, 0, 0, 0, t]) for q in points
+                                 for planner, t in zip(planners, turns)))
+        return torch.tensor([clear], device=self.device)
 
     def obstacle_observation(self) -> torch.Tensor:
         """[n, OBSTACLE_OBS_SIZE] (the module's OBSTACLE_OBS_SIZE says what)."""

@@ -70,11 +70,16 @@ class StartStates:
     def _start_near_goal(self, env_idx: torch.Tensor) -> None:
         paths, b = self.geometry.paths, len(env_idx)
         chosen = torch.rand(b) < self.near_goal_share
+        usable = paths["usable"][self.task_id[env_idx], self.goal_slot[env_idx]]
+        clear = self._clear_paths_of(env_idx)
+        if clear is not None:  # with obstacles: on a path clear of them, and an ordinary reset where none is
+            usable = usable & clear
+            chosen &= usable.any(-1)
         if not bool(chosen.any()):
             return
         idx = env_idx[chosen]
         task, slot = self.task_id[idx], self.goal_slot[idx]
-        path = torch.multinomial(paths["usable"][task, slot].float(), 1)[:, 0]  # a usable (configuration, side)
+        path = torch.multinomial(usable[chosen].float(), 1)[:, 0]  # a usable (configuration, side)
         frac = torch.rand(len(idx)) * torch.minimum(paths["free"][task, slot, path], self.near_goal_radius[task])
         q = path_points(paths["waypoints"][task, slot, path], frac)
         turn = (torch.rand(len(idx)) * 2 - 1) * START_YAW_NOISE_DEG  # the element's turn on the plate
@@ -94,6 +99,11 @@ class StartStates:
         self.carry_side[idx] = path % 2
         self.near_goal_start[idx] = True
         self.reach_start_side[idx] = -1  # a near-goal start takes the place of a reach start drawn before it
+
+    def _clear_paths_of(self, idx: torch.Tensor) -> Optional[torch.Tensor]:
+        """`clear_paths` (the start paths clear of the site's obstacles; None without them) of the envs `idx`."""
+        clear = self.clear_paths()
+        return None if clear is None else clear[idx]
 
     def _pose_arm(self, qpos: torch.Tensor) -> None:
         """Set the arm of the envs being reset to `qpos`, its links posed at once (on the GPU they follow the new
@@ -141,7 +151,8 @@ class StartStates:
             return
         idx = env_idx[chosen]
         task = self.task_id[idx]
-        side = torch.multinomial(self.geometry.path_sides(task, self.goal_slot[idx]).float(), 1)[:, 0]
+        side = torch.multinomial(self.geometry.path_sides(task, self.goal_slot[idx], self._clear_paths_of(idx)).float(),
+                                 1)[:, 0]
         qpos = self.agent.robot.get_qpos()[env_idx].clone()
         if self.reach_start_radius is not None:
             if self._grasp_start_q is None:

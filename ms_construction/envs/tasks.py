@@ -108,8 +108,10 @@ cell once, along the -y barrier at {WORKER_SPEED[0]:g}-{WORKER_SPEED[1]:g} m/s, 
 else, so a seed gives the same episode with and without them. A touch of the arm or the element on one is
 `info["obstacle_collision"]` and fails the episode (`info["fail"]`). The observation ends with their state
 (`extra/obstacles`, {OBSTACLE_OBS_SIZE} numbers: the stack's place, height and turn, the post's place, the worker's place and
-velocity) unless `obs_obstacles=False` (how a policy trained without them meets them). A layout may block every
-way to a goal: the evaluations keep the seeds the planning expert solves at the start.
+velocity) unless `obs_obstacles=False` (how a policy trained without them meets them). The dense reward measures
+the carry and the reach along the goal slot's start paths that keep clear of the stack and the post (checked once
+per episode; along all of them where none does). A layout may block every way to a goal: the evaluations keep the
+seeds the planning expert solves at the start.
 """
 
 
