@@ -79,7 +79,7 @@ def _expert_episode(job: tuple[str, str, int]) -> dict:
 
 def _agent_episode(job: tuple[str, str, str, int]) -> dict:
     checkpoint, env_id, scene, seed = job
-    return _episode((checkpoint, env_id, FINAL_STAGE, seed, None, False, None, 1.0, None if scene == "none" else scene))
+    return _episode((checkpoint, env_id, FINAL_STAGE, seed, None, False, None, 1.0, None if scene == "none" else scene, ()))
 
 
 def run_row(pool, path: Path, fn, jobs: list[tuple], seeds: list[int], desc: str) -> list[dict]:
@@ -109,7 +109,8 @@ def summarize(episodes: list[dict], expert: bool) -> dict:
     return dict(episodes=n, place_success=placed / max(n, 1), place_success_ci95=wilson(placed, n),
                 collision_rate=collided / max(n, 1), collision_ci95=wilson(collided, n),
                 compute_per_episode_s=compute / max(n, 1), compute_per_step_ms=1000 * compute / max(steps, 1),
-                replans_per_episode=float(np.mean([e["replans"] for e in episodes])) if expert and n else None)
+                **({f"{k}_per_episode": float(np.mean([e[k] for e in episodes])) for k in ("replans", "escapes", "waited_steps")}
+                   if expert and n else {}))
 
 
 def table(rows: dict[str, dict[str, dict]]) -> str:
@@ -133,6 +134,7 @@ def main(args: Args) -> dict:
         raise SystemExit("--episodes and --workers must be positive")
     command = "python -m experiments.obstacles " + " ".join(shlex.quote(a) for a in sys.argv[1:])
     rows: dict[tuple[str, str], dict[str, dict]] = {}
+    giving_way = []
     with mp.get_context("spawn").Pool(args.workers) as pool:
         for kind, env_id in TASK_ENV_IDS.items():
             tried = list(range(args.seed, args.seed + args.episodes))
@@ -142,7 +144,9 @@ def main(args: Args) -> dict:
             seeds = [e["seed"] for e in static if e["placed"]]
             moving = run_row(pool, args.out / f"expert_moving_{kind}.json", _expert_episode,
                              [(env_id, "moving", s) for s in seeds], seeds, f"expert moving {kind}")
-            rows.setdefault(("planning expert", "moving (solvable seeds)"), {})[env_id] = summarize(moving, True)
+            rows.setdefault(("planning expert", "moving (solvable seeds)"), {})[env_id] = s = summarize(moving, True)
+            giving_way.append(f"{kind} {s['replans_per_episode']:.2f} / {s['escapes_per_episode']:.2f} / "
+                              f"{s['waited_steps_per_episode']:.1f}")
             for label, checkpoint in args.agents.items():
                 name = Path(checkpoint).stem
                 for scene in SCENES:
@@ -157,7 +161,9 @@ def main(args: Args) -> dict:
             "row: how many it solved). A touch on an obstacle ends the episode, failed. The agents meet the obstacles "
             "blind (trained without them, no obstacle entry in their observation). Compute per decision: the expert's "
             "planning, replanning and path watching per control step; an agent's forward pass per step (one CPU "
-            "thread).\n")
+            "thread).\n\n"
+            "The expert giving way to the walking worker, per episode (replans / steps out of its way / control steps "
+            f"held still): {'; '.join(giving_way)}.\n")
     print(body)
     summary = {f"{label} | {scene}": per_task for (label, scene), per_task in rows.items()}
     (args.out / "summary.json").write_text(json.dumps({"command": command, "rows": summary}, indent=1) + "\n")

@@ -21,7 +21,7 @@ from ms_construction.envs import TASK_ENV_IDS
 from ms_construction.kinematics import ArmIK
 
 
-OBSTACLES_SEED = 2
+OBSTACLES_SEED = 1_000_010
 """the obstacle picture's episode: its worker walks past while the expert carries the panel."""
 
 
