@@ -1,0 +1,116 @@
+"""Openings no agent trained on (issue 53, part 2): the from-scratch recipe with one goal opening of every task type
+held out of training, evaluated with the paper's protocol on the openings it never saw and on those it trained on.
+
+    python -m experiments.unseen_openings --seed 1 --dry-run     # the plan, and where that seed's run stands
+    python -m experiments.unseen_openings --seed 1               # train (or resume) to the recipe's budget
+    python -m experiments.unseen_openings --seed 1 --evaluate    # the paper's protocol, unseen and seen openings
+    python -m experiments.unseen_openings --report               # RESULTS' section from the evaluations
+
+The recipe is experiments/from_scratch.py's, unchanged, but for the goal openings its training envs draw
+(`--starts.goal-slot-weights`: HELD_OUT never); its evaluations during training draw every opening. Held out: the
+middle opening of every task type. The window openings at y = -0.85 and +0.85 are each other's mirror image, which
+the recipe's policy meets as one (`mirror_twins`): only the middle one is unseen in every form.
+"""
+
+from __future__ import annotations
+
+import json
+import shlex
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Optional
+
+import tyro
+
+from baselines.ppo import evaluation
+from baselines.ppo.args import command_line
+from baselines.ppo.evaluation import pct
+from baselines.ppo.start_states import GOAL_SLOTS
+from experiments.campaign import Run, checkpoint_of, describe, run_or_resume
+from experiments.from_scratch import METHOD, scratch_args
+from ms_construction.envs import TASK_ENV_IDS
+from ms_construction.parameters import ELEMENT_KINDS
+from ms_construction.reporting import update_section
+
+HELD_OUT = (1,)
+"""the goal openings (slot indices, every task type) training never draws."""
+TRAINED = tuple(s for s in range(GOAL_SLOTS) if s not in HELD_OUT)
+COMMAND = "python -m experiments.unseen_openings"
+EVAL_DIR = Path("docs/data/unseen_openings")
+EVAL_STEPS = 50_000
+"""env steps per task and set of openings: the paper's protocol."""
+
+
+def seed_run(seed: int, num_envs: Optional[int] = None) -> Run:
+    """The recipe from nothing on `seed`, its training envs never drawing the HELD_OUT openings."""
+    weights = tuple(float(s not in HELD_OUT) for _ in ELEMENT_KINDS for s in range(GOAL_SLOTS))
+    name = f"unseen_s{seed}"
+    return Run(name, scratch_args(num_envs, seed=seed, exp_name=name, goal_slot_weights=weights),
+               f"the recipe from nothing, seed {seed}, goal openings {', '.join(map(str, HELD_OUT))} held out",
+               f"{COMMAND} --seed {seed}", None, method=METHOD)
+
+
+def evaluation_json(seed: int, seen: bool) -> Path:
+    return EVAL_DIR / f"unseen_s{seed}_{'seen' if seen else 'unseen'}.json"
+
+
+def evaluate(run: Run, seed: int, steps: int = EVAL_STEPS, workers: int = 2) -> None:
+    """The paper's protocol (test seeds, `steps` per task, cp4) on the held-out openings, then on the trained ones."""
+    for seen, slots in ((False, HELD_OUT), (True, TRAINED)):
+        evaluation.main(evaluation.Args(checkpoint=checkpoint_of(run), all=True, steps=steps, goal_slots=slots,
+                                        workers=workers, json=evaluation_json(seed, seen)))
+
+
+def report(results: Path = Path("docs/RESULTS.md"), seeds: tuple[int, ...] = (1, 2)) -> str:
+    """RESULTS' section: per seed evaluated, place success on the unseen and the seen openings per task."""
+    lines = ["| seed | openings | " + " | ".join(f"{k}: placed % [95% CI]" for k in TASK_ENV_IDS) + " |",
+             "|---|---|" + "---|" * len(TASK_ENV_IDS)]
+    for seed in seeds:
+        for seen in (False, True):
+            path = evaluation_json(seed, seen)
+            if not path.is_file():
+                continue
+            tasks = json.loads(path.read_text())["tasks"]
+            cells = [pct(tasks[e]["place_success"], tasks[e]["place_success_ci95"]) for e in TASK_ENV_IDS.values()]
+            which = f"{'trained on' if seen else 'never trained on'} ({', '.join(map(str, TRAINED if seen else HELD_OUT))})"
+            lines.append(f"| {seed} | {which} | " + " | ".join(cells) + " |")
+    table = "\n".join(lines) if len(lines) > 2 else "No seed has been evaluated yet."
+    body = ("## Openings no agent trained on\n\n"
+            f"Commands: `{COMMAND} --seed S` (training), `{COMMAND} --seed S --evaluate`, `{COMMAND} --report`. The "
+            "from-scratch recipe, its training envs never drawing the held-out goal opening of any task type; the "
+            f"paper's protocol ({EVAL_STEPS:,} env steps per task, cp4, test seeds) on each set of openings.\n\n{table}\n")
+    update_section(results, "unseen-openings", title="Results", body=body)
+    return body
+
+
+@dataclass
+class Args:
+    seed: Optional[int] = None
+    """the run's seed (campaign/unseen_s<seed>/)."""
+    num_envs: Optional[int] = None
+    """env processes (default: one per CPU core); a resumed run keeps its own."""
+    dry_run: bool = False
+    """print the plan and where the run stands, and exit."""
+    evaluate: bool = False
+    """evaluate the seed's run (the paper's protocol on unseen and seen openings), and exit."""
+    report: bool = False
+    """write RESULTS' section from the evaluations there are, and exit."""
+
+
+def main(args: Args) -> None:
+    if args.report:
+        print(report())
+        return
+    if args.seed is None:
+        raise SystemExit("give --seed S (to train, or --evaluate its run), or --report")
+    run = seed_run(args.seed, args.num_envs)
+    print(describe(run))
+    print("as one ppo.py command: python baselines/ppo/ppo.py " + shlex.join(command_line(run.args)))
+    if args.evaluate:
+        evaluate(run, args.seed)
+    elif not args.dry_run:
+        run_or_resume(run)
+
+
+if __name__ == "__main__":
+    main(tyro.cli(Args))
