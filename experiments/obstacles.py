@@ -109,8 +109,8 @@ def summarize(episodes: list[dict], expert: bool) -> dict:
     return dict(episodes=n, place_success=placed / max(n, 1), place_success_ci95=wilson(placed, n),
                 collision_rate=collided / max(n, 1), collision_ci95=wilson(collided, n),
                 compute_per_episode_s=compute / max(n, 1), compute_per_step_ms=1000 * compute / max(steps, 1),
-                **({f"{k}_per_episode": float(np.mean([e[k] for e in episodes])) for k in ("replans", "escapes", "waited_steps")}
-                   if expert and n else {}))
+                **({f"{k}_per_episode": float(np.mean([e[k] for e in episodes])) if n else float("nan")
+                    for k in ("replans", "escapes", "waited_steps")} if expert else {}))
 
 
 def table(rows: dict[str, dict[str, dict]]) -> str:

@@ -261,36 +261,43 @@ def start_paths() -> StartPaths:
 
 CACHE_ENV = "MS_CONSTRUCTION_CACHE"
 """where the start paths are cached (default ~/.cache/ms_construction); empty: no disk cache."""
-_INPUTS = ("goal_configurations.py", "kinematics.py", "parameters.py", "planning/collision_model.py",
-           "planning/arm_planner.py")
-"""the source files (below ms_construction/) the start paths are computed by: the cache key reads them."""
+def cache_inputs() -> list[Path]:
+    """The files the start paths are computed from: the manifest, the arm's URDF and SRDF, and the code (the tables'
+    IK and collision checks, the arm's rest pose and joints, the site's and the arm's parameters)."""
+    from ms_construction.assets import ARM_SRDF_PATH, ARM_URDF_PATH, MANIFEST_PATH
+
+    here = Path(__file__).parent
+    code = ("goal_configurations.py", "kinematics.py", "parameters.py", "assets.py", "agents/construction_arm.py",
+            "planning/collision_model.py", "planning/arm_planner.py")
+    return [MANIFEST_PATH, ARM_URDF_PATH, ARM_SRDF_PATH] + [here / name for name in code]
 
 
 def cached_start_paths(vias_json: str) -> StartPaths:
     """`_start_paths`, from a file of the disk cache whose name is the hash of everything it is computed from (the
-    vias, the manifest, the arm's URDF and SRDF, the code of `_INPUTS`), written there the first time: a changed
-    input is a new file, never a stale read. A cache that cannot be written is skipped."""
+    vias, `cache_inputs`, the versions of mplib and numpy), written there the first time: a changed input is a new
+    file, never a stale read. A cache that cannot be read is computed again; one that cannot be written, skipped."""
     folder = os.environ.get(CACHE_ENV, str(Path.home() / ".cache" / "ms_construction"))
     if not folder:
         return _start_paths(vias_json)
-    from ms_construction.assets import ARM_SRDF_PATH, ARM_URDF_PATH, MANIFEST_PATH
+    from importlib.metadata import version
 
-    here = Path(__file__).parent
-    key = hashlib.sha256(vias_json.encode())
-    for path in [MANIFEST_PATH, ARM_URDF_PATH, ARM_SRDF_PATH] + [here / name for name in _INPUTS]:
+    key = hashlib.sha256(f"{vias_json} mplib {version('mplib')} numpy {np.__version__}".encode())
+    for path in cache_inputs():
         key.update(Path(path).read_bytes())
     path = Path(folder) / f"start_paths-{key.hexdigest()[:20]}.npz"
-    if path.is_file():
+    try:
         with np.load(path) as saved:
             return StartPaths(**{f.name: saved[f.name] for f in dataclasses.fields(StartPaths)})
+    except Exception:  # absent, or unreadable (a disk that filled up): computed again below
+        pass
     paths = _start_paths(vias_json)
+    tmp = path.with_suffix(f".{os.getpid()}.npz")
     try:
         path.parent.mkdir(parents=True, exist_ok=True)
-        tmp = path.with_suffix(f".{os.getpid()}.npz")
         np.savez(tmp, **dataclasses.asdict(paths))
         os.replace(tmp, path)  # whole or not at all, whichever process writes it
     except OSError:
-        pass
+        tmp.unlink(missing_ok=True)
     return paths
 
 

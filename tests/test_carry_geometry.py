@@ -148,7 +148,20 @@ def test_start_paths_are_cached_on_disk_under_the_hash_of_what_they_are_computed
     read = gc.cached_start_paths(vias)
     for f in dataclasses.fields(computed):
         np.testing.assert_array_equal(getattr(read, f.name), getattr(computed, f.name))
-    # another input is another file, never the stale one
+    # another input is another file, never the stale one: other vias, or a changed source file
     monkeypatch.setattr(gc, "_start_paths", lambda v: computed)
     gc.cached_start_paths(json.dumps({}))
     assert len(list(tmp_path.glob("start_paths-*.npz"))) == 2 and written.is_file()
+    source = tmp_path / "code.py"
+    source.write_text("A = 1\n")
+    inputs = gc.cache_inputs()
+    monkeypatch.setattr(gc, "cache_inputs", lambda: inputs + [source])
+    gc.cached_start_paths(vias)
+    source.write_text("A = 2\n")
+    gc.cached_start_paths(vias)
+    assert len(list(tmp_path.glob("start_paths-*.npz"))) == 4
+    # an unreadable file is computed again (and written whole)
+    written.write_bytes(b"not a cache")
+    monkeypatch.setattr(gc, "cache_inputs", lambda: inputs)
+    read = gc.cached_start_paths(vias)
+    np.testing.assert_array_equal(read.waypoints, computed.waypoints)

@@ -1,9 +1,12 @@
 """The tasks' `obstacles` option: valid seeded scenes, the worker's walk, collisions counted and failing the episode,
 the state round trip, the planning expert among the obstacles, and shipped agents meeting them blind."""
 
+import json
+
 import pytest
 import torch
 
+from baselines.ppo import evaluation
 from baselines.ppo.checkpoints import policy_env_kwargs
 from ms_construction.envs.obstacles import (
     OBSTACLE_OBS_SIZE,
@@ -70,7 +73,8 @@ def test_the_worker_walks_its_lane_once_when_moving_and_stays_outside_when_stati
         assert torch.allclose(places, parked.expand_as(places)) and max(speeds) == 0
     else:
         in_lane = ~torch.isclose(places, parked).all(-1)
-        assert in_lane[5:10].all() and not in_lane[:3].any() and not in_lane[-5:].any()
+        # places[j] is after step j + 1: in the lane from the step the clock reads 5
+        assert in_lane[4:10].all() and not in_lane[:4].any() and not in_lane[-5:].any()
         xs = places[in_lane, 0]
         assert xs.min() >= WORKER_LANE_X[0] - 1e-4 and xs.max() <= WORKER_LANE_X[1] + 1e-4
         steps = (xs[1:] - xs[:-1]).abs()
@@ -106,13 +110,14 @@ def test_state_round_trip_restores_the_obstacles_and_the_worker_s_clock():
     q = u.agent.robot.get_qpos()
     for _ in range(10):
         env.step(q)
+    u.obstacle_collided[:] = True  # as after a touch
     state = u.get_state_dict()
     layout, clock = u.obstacle_layout.clone(), u.obstacle_clock.clone()
     after = [env.step(q)[0] for _ in range(30)]
     env.reset(seed=9)
     u.set_state_dict(state)
     torch.testing.assert_close(u.obstacle_layout, layout)
-    assert torch.equal(u.obstacle_clock, clock)
+    assert torch.equal(u.obstacle_clock, clock) and bool(u.obstacle_collided.all())
     again = [env.step(q)[0] for _ in range(30)]
     for a, b in zip(after, again):
         torch.testing.assert_close(a[:, -OBSTACLE_OBS_SIZE:], b[:, -OBSTACLE_OBS_SIZE:])
@@ -136,15 +141,17 @@ def test_the_expert_places_among_the_obstacles_without_touching_them(mode):
     env.close()
 
 
-def test_a_policy_trained_without_obstacles_meets_them_blind():
-    kwargs = policy_env_kwargs({"control_mode": "pd_joint_delta_pos"})
-    assert kwargs["obs_obstacles"] is False
-    env = make_env("Flooring-v1", obstacles="moving", **kwargs)
-    plain = make_env("Flooring-v1", **kwargs)
-    assert env.observation_space.shape == plain.observation_space.shape
-    env.close()
-    plain.close()
+def test_a_policy_trained_without_obstacles_meets_them_blind(tmp_path):
+    assert "obs_obstacles" not in policy_env_kwargs({"control_mode": "pd_joint_delta_pos"})
     assert policy_env_kwargs({"control_mode": "pd_joint_delta_pos", "obs_obstacles": True})["obs_obstacles"] is True
+    # scripts/evaluate.py runs the shipped agent (trained without obstacles) among them on its own observation
+    out = tmp_path / "eval.json"
+    evaluation.main(evaluation.Args(env_id="Flooring-v1", episodes=2, seed=1_000_000, workers=1, obstacles="static",
+                                    json=out))
+    episodes = json.loads(out.read_text())["episode_results"]
+    assert len(episodes) == 2 and all(isinstance(e["collided"], bool) for e in episodes)
+    with pytest.raises(SystemExit, match="other episodes than the published table"):
+        evaluation.main(evaluation.Args(env_id="Flooring-v1", obstacles="static", write_results=True))
 
 
 def test_obstacles_are_refused_on_the_gpu_until_written_there():

@@ -222,9 +222,11 @@ def with_path_offset_inputs(ckpt: dict, path) -> dict:
 def policy_env_kwargs(args: dict) -> dict:
     """The env kwargs that a checkpoint's policy (its saved `args`) acts in, beside obs_mode="state": its control
     mode and the observation's optional entries (install offset, path offset, elapsed time, obstacles) it was trained
-    with. A policy trained without obstacles meets a site with them blind (`obs_obstacles=False`)."""
-    return dict(control_mode=args["control_mode"], obs_obstacles=bool(args.get("obs_obstacles", False)),
-                **{k: True for k in ("obs_install_offset", "obs_path_offset", "obs_elapsed_time") if args.get(k)})
+    with (`obs_obstacles` only where it was: an env without obstacles has no such entry; scripts/evaluate.py passes
+    `obs_obstacles=False` otherwise, so a policy trained without obstacles meets them blind)."""
+    return dict(control_mode=args["control_mode"],
+                **{k: True for k in ("obs_install_offset", "obs_path_offset", "obs_elapsed_time", "obs_obstacles")
+                   if args.get(k)})
 
 
 def load_policy(path, env_id: str) -> tuple[Agent, dict]:

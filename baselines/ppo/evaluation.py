@@ -204,7 +204,7 @@ def _episode(job: tuple) -> dict:
         agent, env_kwargs = load_policy(Path(checkpoint), env_id)
         env = gym.make(env_id, obs_mode="state", reward_mode="sparse", num_envs=1, sim_backend="physx_cpu",
                        curriculum_stage=stage, render_mode="rgb_array" if video_dir else None, obstacles=obstacles,
-                       goal_slot_weights=slot_weights(goal_slots), **env_kwargs,
+                       goal_slot_weights=slot_weights(goal_slots), **{"obs_obstacles": False, **env_kwargs},
                        **({"max_episode_steps": max_steps} if max_steps else {}))
         if video_dir:
             from mani_skill.utils.wrappers import RecordEpisode
@@ -355,6 +355,9 @@ def main(args: Args) -> dict[str, dict]:
     if args.action_gain <= 0 or (args.action_gain != 1 and args.write_results):
         raise SystemExit(f"--action-gain {args.action_gain}: a positive diagnostic; the published table (--write-results) "
                          "takes the policy's own actions")
+    if (args.goal_slots or args.obstacles) and args.write_results:
+        raise SystemExit("--goal-slots and --obstacles evaluate other episodes than the published table's "
+                         "(--write-results): write their JSON (--json) and report it where it belongs")
     if args.sample_actions and args.write_results:
         raise SystemExit("--sample-actions is a diagnostic: the published table (--write-results) takes the policy's mean")
     if args.max_episode_steps is not None and (args.max_episode_steps < 1 or args.write_results or args.steps is not None):

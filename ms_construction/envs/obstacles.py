@@ -280,7 +280,7 @@ class SiteObstacles:
         return self._clear_paths
 
     def _check_paths(self) -> torch.Tensor:
-        from ms_construction.goal_configurations import PATH_CHECKS, START_TURNS_DEG, _path_planners, path_point
+        from ms_construction.goal_configurations import START_TURNS_DEG, _clear_fraction, _path_planners
         from ms_construction.parameters import ELEMENT_KINDS
         from ms_construction.planning.collision_model import obstacle_objects
 
@@ -297,12 +297,7 @@ class SiteObstacles:
                 planner.set_obstacle(key, obj)
         waypoints = self.geometry.paths["waypoints"][kind, int(self.goal_slot[0])].cpu().numpy().astype(float)
         turns = [float(np.deg2rad(t)) for t in START_TURNS_DEG]
-        clear = []
-        for path in waypoints:
-            points = [path_point(path, a) for a in np.linspace(0.0, 1.0, PATH_CHECKS + 1)]
-            clear.append(not any(planner.collides(q + [0, 0, 0, 0, 0, t]) for q in points
-                                 for planner, t in zip(planners, turns)))
-        return torch.tensor([clear], device=self.device)
+        return torch.tensor([[_clear_fraction(planners, path, turns) == 1.0 for path in waypoints]], device=self.device)
 
     def obstacle_observation(self) -> torch.Tensor:
         """[n, OBSTACLE_OBS_SIZE] (the module's OBSTACLE_OBS_SIZE says what)."""
@@ -320,4 +315,5 @@ class SiteObstacles:
         if not self.has_obstacles:
             return {}
         return dict(obstacle_layout=self.obstacle_layout.clone(), obstacle_clock=self.obstacle_clock[:, None].clone(),
-                    obstacle_collided=self.obstacle_collided[:, None].clone())
+                    obstacle_collided=self.obstacle_collided[:, None].clone(),
+                    obstacle_contact_now=self.obstacle_contact_now[:, None].clone())

@@ -104,8 +104,9 @@ the carry is measured along (`extra/path_offset`, `path_offset`): which way that
 stack ({STACK_SIZE[0]:g} x {STACK_SIZE[1]:g} m, {STACK_HEIGHT[0]:g}-{STACK_HEIGHT[1]:g} m high) and a scaffold post (floor to slab) in the arm's
 workspace, seeded per episode, clear of the table, the recesses, the window fronts, the ceiling openings (the post)
 and each other; `obstacles="moving"` adds a worker (a cylinder of radius {WORKER_RADIUS:g} m, {WORKER_HEIGHT:g} m tall) walking across the
-cell once, along the -y barrier at {WORKER_SPEED[0]:g}-{WORKER_SPEED[1]:g} m/s, entering within the first {WORKER_START_S[1]:g} s. Drawn after everything
-else, so a seed gives the same episode with and without them. A touch of the arm or the element on one is
+cell once, along the -y barrier at {WORKER_SPEED[0]:g}-{WORKER_SPEED[1]:g} m/s, entering within the first {WORKER_START_S[1]:g} s. Drawn after the arm,
+the element and the goal (before the training start states), so a seed gives the same episode with and without
+them where no start states are set (as in every evaluation). A touch of the arm or the element on one is
 `info["obstacle_collision"]` and fails the episode (`info["fail"]`). The observation ends with their state
 (`extra/obstacles`, {OBSTACLE_OBS_SIZE} numbers: the stack's place, height and turn, the post's place, the worker's place and
 velocity) unless `obs_obstacles=False` (how a policy trained without them meets them). The dense reward measures

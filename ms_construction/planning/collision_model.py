@@ -23,7 +23,7 @@ from typing import Optional
 import numpy as np
 import sapien
 from mplib.pymp.collision_detection import fcl
-from transforms3d.euler import quat2euler
+from transforms3d.euler import euler2quat, quat2euler
 
 from ms_construction.assets import ARM_SRDF_PATH, ARM_URDF_PATH, ASSET_DIR
 
@@ -124,7 +124,7 @@ def obstacle_objects(env, lookahead_s: float = 0.0, margin: float = 0.0) -> dict
     lay = u.obstacle_layout[0].cpu().numpy().astype(float)
     story = u._obstacle_site.story_height
     stack_z = lay[2] - STACK_SIZE[2] / 2
-    stack = box_object(np.array(STACK_SIZE) + 2 * margin, sapien.Pose([lay[0], lay[1], stack_z], _quat_z(lay[3])))
+    stack = box_object(np.array(STACK_SIZE) + 2 * margin, sapien.Pose([lay[0], lay[1], stack_z], euler2quat(0, 0, lay[3])))
     post = box_object([POST_SIZE + 2 * margin, POST_SIZE + 2 * margin, story], sapien.Pose([lay[4], lay[5], story / 2]))
     xy = u.worker_xy()[0].cpu().numpy().astype(float)
     travel = u.worker_velocity()[0].cpu().numpy().astype(float) * lookahead_s
@@ -132,10 +132,6 @@ def obstacle_objects(env, lookahead_s: float = 0.0, margin: float = 0.0) -> dict
     heading = float(np.arctan2(travel[1], travel[0])) if length > 0 else 0.0
     centre = [*(xy + travel / 2), WORKER_HEIGHT / 2]
     worker = box_object([length + 2 * (WORKER_RADIUS + margin), 2 * (WORKER_RADIUS + margin), WORKER_HEIGHT + 2 * margin],
-                        sapien.Pose(centre, _quat_z(heading)))
+                        sapien.Pose(centre, euler2quat(0, 0, heading)))
     return dict(obstacle_stack=stack, obstacle_post=post, obstacle_worker=worker)
-
-
-def _quat_z(yaw: float) -> np.ndarray:
-    return np.array([np.cos(yaw / 2), 0.0, 0.0, np.sin(yaw / 2)])
 

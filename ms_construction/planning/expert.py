@@ -320,9 +320,9 @@ class MotionPlanningExpert:
         with self._planning():
             lines = self._install_lines(loaded, loaded_exact)
             installs = [time_parameterize(line, self.cfg.line_speed * self.vmax, self.acc, self.dt) for line in lines]
-            # what is left of the episode once the install line and the waits are done
-            budget = self.u.MAX_EPISODE_STEPS - self.steps - max(map(len, installs)) - 2 * self.cfg.settle_steps
-        i, traj = self._plan_when_clear(loaded, [line[0] for line in lines], "carry", max_steps=budget)
+        # what is left of the episode once the install line and the waits are done (after any wait for the worker)
+        budget = lambda: self.u.MAX_EPISODE_STEPS - self.steps - max(map(len, installs)) - 2 * self.cfg.settle_steps  # noqa: E731
+        i, traj = self._plan_when_clear(loaded, [line[0] for line in lines], "carry", budget)
         self.install_traj = installs[i]
 
         def replan() -> np.ndarray:
@@ -485,10 +485,16 @@ class MotionPlanningExpert:
         return [np.array([self.q, goal]), np.array([self.q, turn_first, goal]), np.array([self.q, lift_first, goal])]
 
     def _check_free(self, planner: ArmPlanner, path: np.ndarray, phase: str) -> None:
-        self._place_worker(planner)
+        """A straight line's collision check: the exact planners hold the static obstacles, not the walking worker
+        (`_follow` watches it while the line is driven)."""
         hit = planner.collision_on(path)
         if hit is not None:
             raise PhaseFailure(f"{phase}: the straight line collides ({', '.join(planner.contacts(hit))})")
+
+    def _standing_obstacles(self) -> dict:
+        """The obstacles as they stand, for the collision models; a walking worker is not among them: `_plan` puts
+        its swept envelope into the planner it samples with, and `_follow` watches it."""
+        return {k: v for k, v in obstacle_objects(self.u).items() if not (self.moving and k == "obstacle_worker")}
 
     def _place_worker(self, planner: ArmPlanner) -> None:
         """A walking worker's envelope, where it stands and swept `worker_lookahead` ahead, into `planner`."""
@@ -499,9 +505,10 @@ class MotionPlanningExpert:
     def _set_obstacles(self) -> None:
         """Every element where it lies: on the table (this episode's, but not for the descent, whose
         plate meets it) or in storage (the general task's others); the site's obstacles where they stand."""
-        for key, obj in obstacle_objects(self.u).items():
+        for key, obj in self._standing_obstacles().items():
             self.free.set_obstacle(key, obj)
             self.free_exact.set_obstacle(key, obj)
+        self._place_worker(self.free)  # where it is now (not where the last episode's last plan saw it)
         for kind, actor in self.u.elements.items():
             key, box = f"element_{kind}", box_object(self.el_size[kind], _pose(actor.pose.raw_pose))
             self.free.set_obstacle(key, box)
@@ -513,7 +520,7 @@ class MotionPlanningExpert:
     def _loaded_planners(self) -> tuple[ArmPlanner, ArmPlanner]:
         """The arm with the element at its actual hold pose: inflated and exact."""
         hold, size = _pose(self.u.hold_pose_in_tcp), self.el_size[self.kind]
-        obstacles = {**self.site, **obstacle_objects(self.u)}
+        obstacles = {**self.site, **self._standing_obstacles()}
         for kind, actor in self.u.elements.items():
             if kind != self.kind:
                 obstacles[f"element_{kind}"] = box_object(self.el_size[kind], _pose(actor.pose.raw_pose))
@@ -600,20 +607,16 @@ class MotionPlanningExpert:
         rest = REST_QPOS.copy()
         rest[5] = self.q[5]
         traj = None
-        with self._planning():
-            planner.remove_obstacle("obstacle_worker")
-            try:
-                for shift in ([d * away[0], d * away[1], 0.0], [0.0, 0.0, d]):
-                    line = tcp_line(self.ik, self.q, sapien.Pose(tcp.p + shift, tcp.q))
-                    if line is not None and planner.collision_on(line) is None:
-                        traj = time_parameterize(line, self.cfg.line_speed * self.vmax, self.acc, self.dt)
-                        break
-                if traj is None and not planner.collides(rest):
-                    path = planner.rrt_connect(self.q, rest, self.cfg.rrt_time)
-                    if path is not None:
-                        traj = time_parameterize(planner.shortcut(path), self.vel, self.acc, self.dt)
-            finally:
-                self._place_worker(planner)
+        with self._planning():  # the exact planners hold the standing obstacles, not the worker
+            for shift in ([d * away[0], d * away[1], 0.0], [0.0, 0.0, d]):
+                line = tcp_line(self.ik, self.q, sapien.Pose(tcp.p + shift, tcp.q))
+                if line is not None and planner.collision_on(line) is None:
+                    traj = time_parameterize(line, self.cfg.line_speed * self.vmax, self.acc, self.dt)
+                    break
+            if traj is None and not planner.collides(rest):
+                path = planner.rrt_connect(self.q, rest, self.cfg.rrt_time)
+                if path is not None:
+                    traj = time_parameterize(planner.shortcut(path), self.vel, self.acc, self.dt)
         if traj is None:
             return self._step(self.q)
         self.escapes += 1
@@ -631,13 +634,14 @@ class MotionPlanningExpert:
             return any(self.watch.collides(q) for q in targets[::2])
 
     def _plan_when_clear(self, planner: ArmPlanner, goals: list[np.ndarray], phase: str,
-                         max_steps: Optional[int] = None) -> tuple[int, np.ndarray]:
-        """`_plan`; with a walking worker in the cell, where no path is found, held still and tried again every
-        `replan_every` steps until the worker has left or the episode ends."""
+                         max_steps: Optional[Callable[[], int]] = None) -> tuple[int, np.ndarray]:
+        """`_plan` (within `max_steps()` control steps, asked at each try); with a walking worker in the cell, where
+        no path is found, held still and tried again every `replan_every` steps until the worker has left or the
+        episode ends."""
         while True:
             try:
                 with self._planning():
-                    return self._plan(planner, goals, phase, max_steps)
+                    return self._plan(planner, goals, phase, max_steps() if max_steps else None)
             except PhaseFailure:
                 if not (self.moving and bool(self.u.worker_walking()[0])):
                     raise
