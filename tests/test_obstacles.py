@@ -1,5 +1,5 @@
 """The tasks' `obstacles` option: valid seeded scenes, the worker's walk, collisions counted and failing the episode,
-the state round trip, the planning expert among the obstacles, and shipped agents meeting them blind."""
+the state round trip, the planning expert among the obstacles, shipped agents meeting them blind, PPO training among them."""
 
 import json
 
@@ -16,6 +16,7 @@ from ms_construction.envs.obstacles import (
     keeps_rules,
     sample_layouts,
 )
+from ms_construction.envs.state_layout import state_mirror_signs
 from ms_construction.parameters import SiteParams
 from ms_construction.planning import MotionPlanningExpert
 from tests.helpers import TEST_EXPERT_CONFIG, make_env
@@ -143,7 +144,7 @@ def test_the_expert_places_among_the_obstacles_without_touching_them(mode):
 
 def test_a_policy_trained_without_obstacles_meets_them_blind(tmp_path):
     assert "obs_obstacles" not in policy_env_kwargs({"control_mode": "pd_joint_delta_pos"})
-    assert policy_env_kwargs({"control_mode": "pd_joint_delta_pos", "obs_obstacles": True})["obs_obstacles"] is True
+    assert policy_env_kwargs({"control_mode": "pd_joint_delta_pos", "obstacles": "static"})["obs_obstacles"] is True
     # scripts/evaluate.py runs the shipped agent (trained without obstacles) among them on its own observation
     out = tmp_path / "eval.json"
     evaluation.main(evaluation.Args(env_id="Flooring-v1", episodes=2, seed=1_000_000, workers=1, obstacles="static",
@@ -208,3 +209,49 @@ def test_near_goal_starts_pose_the_arm_on_the_paths_clear_of_the_obstacles():
         starts += 1
     assert touched == 0 and starts >= 8, (touched, starts, blocked)
     env.close()
+
+
+def test_the_obstacles_entry_is_zeros_without_obstacles_and_mirrors_with_the_scene():
+    plain = make_env("Flooring-v1")
+    forced = make_env("Flooring-v1", obs_obstacles=True)
+    obs_plain, _ = plain.reset(seed=1)
+    obs_forced, _ = forced.reset(seed=1)
+    assert torch.equal(obs_forced[:, -OBSTACLE_OBS_SIZE:], torch.zeros(1, OBSTACLE_OBS_SIZE))
+    torch.testing.assert_close(obs_forced[:, :-OBSTACLE_OBS_SIZE], obs_plain)
+    plain.close()
+    forced.close()
+    # the mirror's signs turn the entry into the one of the scene mirrored in the plane y = 0
+    env = make_env("Flooring-v1", obstacles="moving")
+    env.reset(seed=3)
+    u = env.unwrapped
+    u.obstacle_layout[0, 10] = 0  # walking from the first step
+    q = u.agent.robot.get_qpos()
+    obs = env.step(q)[0][0]
+    mirrored = u.obstacle_layout.clone()
+    mirrored[:, [1, 5, 7, 9]] *= -1  # the stack's, the post's and the lane's y, the worker's vy
+    mirrored[:, 3] = -mirrored[:, 3]  # the stack's yaw
+    state = u.get_state_dict()
+    state["task"]["obstacle_layout"] = mirrored
+    u.set_state_dict(state)
+    signs = state_mirror_signs(obs.shape[-1], obstacles=True)[-OBSTACLE_OBS_SIZE:]
+    torch.testing.assert_close(u.obstacle_observation()[0], obs[-OBSTACLE_OBS_SIZE:] * signs)
+    env.close()
+
+
+def test_ppo_trains_among_obstacles_and_its_policy_sees_them_wherever_it_is_evaluated(tmp_path):
+    from baselines.ppo import ppo
+    from baselines.ppo.checkpoints import load_policy
+
+    args = ppo.Args.of(num_envs=2, num_eval_envs=1, num_steps=20, num_minibatches=2, update_epochs=1, eval_freq=100,
+                       checkpoint_freq=1, env_id="Flooring-v1", sim_backend="physx_cpu", log_dir=str(tmp_path),
+                       exp_name="among", total_timesteps=80, obstacles="moving", mirror_twins=True)
+    ppo.main(args)
+    checkpoint = tmp_path / "among" / "checkpoint.pt"
+    agent, kwargs = load_policy(checkpoint, "Flooring-v1")
+    assert kwargs["obs_obstacles"] is True and agent.mirror is not None
+    for obstacles in (None, "static"):
+        out = tmp_path / f"{obstacles}.json"
+        evaluation.main(evaluation.Args(checkpoint=checkpoint, env_id="Flooring-v1", episodes=1, workers=1,
+                                        obstacles=obstacles, json=out))
+        assert json.loads(out.read_text())["episodes"] == 1
+

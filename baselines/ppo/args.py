@@ -81,6 +81,9 @@ class RunArgs:
     """evaluate every this many iterations (and at stage ends)."""
     checkpoint_freq: int = 10
     """write a checkpoint every this many iterations (and at stage changes, the end, and Ctrl-C)."""
+    obstacles: Optional[Literal["static", "moving"]] = None
+    """the tasks' `obstacles` option (a site that changes), in training and evaluation; the policy observes them
+    (`obs_obstacles`), and a checkpoint of it acts on any site with that entry (zeros without obstacles)."""
     obs_elapsed_time: bool = False
     """append the episode's elapsed steps / 250 to the observation (the tasks' `obs_elapsed_time`), in training
     and evaluation: a policy that knows how much of the step limit is left can hurry. A residual's base (trained

@@ -59,7 +59,8 @@ def make_agent(args, obs_dim: int, act_dim: int, base_args: Optional[dict] = Non
         if get("mirror_canonical_reach", False):
             tcp, goal, obj = STATE_QUATERNION_STARTS
             canonical = CanonicalReach(STATE_IS_GRASPED, goal, bool(get("mirror_held_half_turn", False)), tcp, obj)
-        mirror = Mirror(state_mirror_signs(obs_dim), torch.tensor(JOINT_MIRROR_SIGNS), mirrored_goals(), canonical)
+        mirror = Mirror(state_mirror_signs(obs_dim, bool(get("obstacles"))), torch.tensor(JOINT_MIRROR_SIGNS),
+                        mirrored_goals(), canonical)
     return Agent(obs_dim, act_dim, get("hidden_size"), starts, value_heads(args), get("num_layers", 3),
                  bool(get("bounded_mean", False)), mirror)
 
@@ -222,11 +223,11 @@ def with_path_offset_inputs(ckpt: dict, path) -> dict:
 def policy_env_kwargs(args: dict) -> dict:
     """The env kwargs that a checkpoint's policy (its saved `args`) acts in, beside obs_mode="state": its control
     mode and the observation's optional entries (install offset, path offset, elapsed time, obstacles) it was trained
-    with (`obs_obstacles` only where it was: an env without obstacles has no such entry; scripts/evaluate.py passes
-    `obs_obstacles=False` otherwise, so a policy trained without obstacles meets them blind)."""
+    with: `obs_obstacles=True` for a policy trained among obstacles (`obstacles`), whatever site it acts on
+    (scripts/evaluate.py passes `obs_obstacles=False` otherwise, so a policy trained without them meets them blind)."""
     return dict(control_mode=args["control_mode"],
-                **{k: True for k in ("obs_install_offset", "obs_path_offset", "obs_elapsed_time", "obs_obstacles")
-                   if args.get(k)})
+                **{k: True for k in ("obs_install_offset", "obs_path_offset", "obs_elapsed_time") if args.get(k)},
+                **({"obs_obstacles": True} if args.get("obstacles") else {}))
 
 
 def load_policy(path, env_id: str) -> tuple[Agent, dict]:

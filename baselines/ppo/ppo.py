@@ -73,6 +73,8 @@ def make_envs(args: Args, num_envs: int, device: torch.device, eval_mode: bool =
     physx_cpu (one env each), ManiSkillVectorEnv on physx_cuda. With `video_dir`, evaluation videos."""
     kwargs = dict(obs_mode="state", reward_mode=args.reward_mode, render_mode="rgb_array" if video_dir else None)
     kwargs.update(policy_env_kwargs(args.flat()))
+    if args.obstacles is not None:
+        kwargs["obstacles"] = args.obstacles
     if args.task_weights is not None and not eval_mode:
         kwargs["task_weights"] = dict(zip(ELEMENT_KINDS, args.task_weights))
     if args.starts.goal_slot_weights is not None and not eval_mode:

@@ -97,7 +97,7 @@ class ConstructionTaskEnv(SiteObstacles, StartStates, BaseEnv):
         obs_path_offset: bool = False,
         reach_start_share: float = 0.0,
         obstacles: Optional[str] = None,
-        obs_obstacles: bool = True,
+        obs_obstacles: Optional[bool] = None,
         **kwargs,
     ):
         self._tol_init = resolve_tolerances(curriculum_stage, tolerances)

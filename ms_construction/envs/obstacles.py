@@ -160,12 +160,14 @@ def keeps_rules(layout: torch.Tensor, site: SiteParams) -> torch.Tensor:
 class SiteObstacles:
     """The `obstacles` option of ConstructionTaskEnv (a mixin; the module docstring)."""
 
-    def _init_obstacles(self, obstacles: Optional[str], obs_obstacles: bool) -> None:
+    def _init_obstacles(self, obstacles: Optional[str], obs_obstacles: Optional[bool]) -> None:
         mode = "none" if obstacles is None else obstacles
         if mode not in OBSTACLE_MODES:
             raise ValueError(f"obstacles={obstacles!r}: use one of {', '.join(map(repr, OBSTACLE_MODES))} (or None)")
         self.obstacle_mode = mode
-        self.obs_obstacles = bool(obs_obstacles) and mode != "none"
+        # None: the entry where there are obstacles; True: always (zeros without them: a policy trained among
+        # obstacles on a site without); False: never (a policy trained without them meets them blind)
+        self.obs_obstacles = mode != "none" if obs_obstacles is None else bool(obs_obstacles)
         self._clear_paths: Optional[torch.Tensor] = None
 
     @property
@@ -300,7 +302,9 @@ class SiteObstacles:
         return torch.tensor([[_clear_fraction(planners, path, turns) == 1.0 for path in waypoints]], device=self.device)
 
     def obstacle_observation(self) -> torch.Tensor:
-        """[n, OBSTACLE_OBS_SIZE] (the module's OBSTACLE_OBS_SIZE says what)."""
+        """[n, OBSTACLE_OBS_SIZE] (the module's OBSTACLE_OBS_SIZE says what); zeros without obstacles."""
+        if not self.has_obstacles:
+            return torch.zeros(self.num_envs, OBSTACLE_OBS_SIZE, device=self.device)
         lay = self.obstacle_layout
         two_yaw = 2 * lay[:, 3]  # the box looks the same turned half a turn
         return torch.cat([lay[:, 0:3], torch.cos(two_yaw)[:, None], torch.sin(two_yaw)[:, None], lay[:, 4:6],

@@ -34,14 +34,20 @@ STATE_GOAL_Y, STATE_IS_GRASPED = STATE_START["goal_pose"] + 1, STATE_START["is_g
 """Where the goal's y and is_grasped are."""
 
 
-def state_mirror_signs(obs_dim: int) -> torch.Tensor:
+OBSTACLE_MIRROR_SIGNS = (1.0, -1.0, 1.0, 1.0, -1.0, 1.0, -1.0, 1.0, -1.0, 1.0, -1.0)
+"""The obstacles' entry (`obs_obstacles`, last) in the mirror image: the stack's x, y, top z, cos and sin of twice
+its yaw (the yaw turns the other way), the post's x, y, the worker's x, y and velocity."""
+
+
+def state_mirror_signs(obs_dim: int, obstacles: bool = False) -> torch.Tensor:
     """[obs_dim] the signs that turn a flat `state` observation into the one of its mirror image in the plane y = 0:
-    each entry of STATE_LAYOUT by its kind's MIRROR_SIGNS, then the joint moves by JOINT_MIRROR_SIGNS and the elapsed
-    time unchanged."""
-    extra, elapsed = divmod(obs_dim - STATE_SIZE, 6)
-    if obs_dim < STATE_SIZE or elapsed > 1:
-        raise ValueError(f"state_mirror_signs: a state observation has {STATE_SIZE} numbers, then 6 per joint move and "
-                         f"1 for the elapsed time, not {obs_dim}")
+    each entry of STATE_LAYOUT by its kind's MIRROR_SIGNS, then the joint moves by JOINT_MIRROR_SIGNS, the elapsed
+    time unchanged and, with `obstacles`, their entry by OBSTACLE_MIRROR_SIGNS."""
+    tail = list(OBSTACLE_MIRROR_SIGNS) if obstacles else []
+    extra, elapsed = divmod(obs_dim - STATE_SIZE - len(tail), 6)
+    if obs_dim < STATE_SIZE + len(tail) or elapsed > 1:
+        raise ValueError(f"state_mirror_signs: a state observation has {STATE_SIZE} numbers, then 6 per joint move, "
+                         f"1 for the elapsed time and {len(OBSTACLE_MIRROR_SIGNS)} for the obstacles, not {obs_dim}")
     signs = [x for _, size, kind in STATE_LAYOUT for x in MIRROR_SIGNS[kind] * (size // len(MIRROR_SIGNS[kind]))]
-    return torch.tensor(signs + list(JOINT_MIRROR_SIGNS) * extra + [1.0] * elapsed)
+    return torch.tensor(signs + list(JOINT_MIRROR_SIGNS) * extra + [1.0] * elapsed + tail)
 
