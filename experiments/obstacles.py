@@ -23,14 +23,13 @@ import shlex
 import sys
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Optional
 
 import numpy as np
 import torch
 import tyro
 from tqdm import tqdm
 
-from baselines.ppo.evaluation import _episode, pct, wilson
+from baselines.ppo.evaluation import episode_job, pct, wilson
 from ms_construction.curriculum import FINAL_STAGE
 from ms_construction.envs import TASK_ENV_IDS
 from ms_construction.reporting import update_section
@@ -79,7 +78,8 @@ def _expert_episode(job: tuple[str, str, int]) -> dict:
 
 def _agent_episode(job: tuple[str, str, str, int]) -> dict:
     checkpoint, env_id, scene, seed = job
-    return _episode((checkpoint, env_id, FINAL_STAGE, seed, None, False, None, 1.0, None if scene == "none" else scene, ()))
+    obstacles = None if scene == "none" else scene
+    return episode_job((checkpoint, env_id, FINAL_STAGE, seed, None, False, None, 1.0, obstacles, ()))
 
 
 def run_row(pool, path: Path, fn, jobs: list[tuple], seeds: list[int], desc: str) -> list[dict]:
@@ -140,7 +140,8 @@ def main(args: Args) -> dict:
             tried = list(range(args.seed, args.seed + args.episodes))
             static = run_row(pool, args.out / f"expert_static_{kind}.json", _expert_episode,
                              [(env_id, "static", s) for s in tried], tried, f"expert static {kind}")
-            rows.setdefault(("planning expert", "static: which seeds are solvable"), {})[env_id] = summarize(static, True)
+            solvable = ("planning expert", "static: which seeds are solvable")
+            rows.setdefault(solvable, {})[env_id] = summarize(static, True)
             seeds = [e["seed"] for e in static if e["placed"]]
             moving = run_row(pool, args.out / f"expert_moving_{kind}.json", _expert_episode,
                              [(env_id, "moving", s) for s in seeds], seeds, f"expert moving {kind}")
@@ -168,7 +169,7 @@ def main(args: Args) -> dict:
     summary = {f"{label} | {scene}": per_task for (label, scene), per_task in rows.items()}
     (args.out / "summary.json").write_text(json.dumps({"command": command, "rows": summary}, indent=1) + "\n")
     if args.write_results:
-        update_section(RESULTS_PATH, "obstacles-zero-shot", title="A site that changes: obstacles, zero-shot", body=body)
+        update_section(RESULTS_PATH, "obstacles-zero-shot", title="Results", body=body)
         print(f"wrote {RESULTS_PATH}")
     return summary
 

@@ -72,13 +72,15 @@ def report(results: Path = Path("docs/RESULTS.md"), seeds: tuple[int, ...] = (1,
                 continue
             tasks = json.loads(path.read_text())["tasks"]
             cells = [pct(tasks[e]["place_success"], tasks[e]["place_success_ci95"]) for e in TASK_ENV_IDS.values()]
-            which = f"{'trained on' if seen else 'never trained on'} ({', '.join(map(str, TRAINED if seen else HELD_OUT))})"
+            slots = ", ".join(map(str, TRAINED if seen else HELD_OUT))
+            which = f"{'trained on' if seen else 'never trained on'} ({slots})"
             lines.append(f"| {seed} | {which} | " + " | ".join(cells) + " |")
     table = "\n".join(lines) if len(lines) > 2 else "No seed has been evaluated yet."
     body = ("## Openings no agent trained on\n\n"
             f"Commands: `{COMMAND} --seed S` (training), `{COMMAND} --seed S --evaluate`, `{COMMAND} --report`. The "
             "from-scratch recipe, its training envs never drawing the held-out goal opening of any task type; the "
-            f"paper's protocol ({EVAL_STEPS:,} env steps per task, cp4, test seeds) on each set of openings.\n\n{table}\n")
+            f"paper's protocol ({EVAL_STEPS:,} env steps per task, cp4, test seeds) on each set of openings.\n\n"
+            f"{table}\n")
     update_section(results, "unseen-openings", title="Results", body=body)
     return body
 

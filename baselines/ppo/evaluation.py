@@ -188,7 +188,7 @@ class Gain:
         return self.gain * self.agent.get_action(x, deterministic=deterministic)
 
 
-def _episode(job: tuple) -> dict:
+def episode_job(job: tuple) -> dict:
     """One seeded episode in a worker process (env and policy kept for the next job)."""
     import gymnasium as gym
     from mani_skill.utils.gym_utils import find_max_episode_steps_value
@@ -258,13 +258,13 @@ def evaluate(args: Args, env_id: str, pool) -> dict:
                 args.sample_actions, args.max_episode_steps, args.action_gain, args.obstacles, args.goal_slots)
 
     for i in range(min(args.videos, target) if args.video_dir else 0):  # the recorded episodes come first
-        episodes.append(pool.apply(_episode, (job(i, True),)))
+        episodes.append(pool.apply(episode_job, (job(i, True),)))
         bar.update(min(target, progress()) - bar.n)
     while progress() < target:
         # in batches, so that no worker runs past the target; by steps, as many episodes as still fit
         left = target - progress()
         batch = len(episodes) + (left if not by_steps else max(args.workers, left // 250 + 1))
-        for e in pool.imap(_episode, [job(i, False) for i in range(len(episodes), batch)]):
+        for e in pool.imap(episode_job, [job(i, False) for i in range(len(episodes), batch)]):
             if progress() >= target:
                 break
             episodes.append(e)

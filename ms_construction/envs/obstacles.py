@@ -60,7 +60,8 @@ MARGIN = 0.05
 CANDIDATES = 512
 """places drawn per obstacle, env and reset; the first that keeps the rules is kept (tests check that one does)."""
 OBSTACLE_OBS_SIZE = 11
-"""the observation's `obstacles` entry: stack (x, y, top z, cos 2 yaw, sin 2 yaw), post (x, y), worker (x, y, vx, vy)."""
+"""the observation's `obstacles` entry: stack (x, y, top z, cos 2 yaw, sin 2 yaw), post (x, y), worker (x, y, vx,
+vy)."""
 LAYOUT_SIZE = 11
 """the task state's `obstacle_layout`: stack (x, y, top z, yaw), post (x, y), worker start (x, y), velocity (vx, vy)
 and the control step it sets off at."""
@@ -209,7 +210,8 @@ class SiteObstacles:
         self._clear_paths = None
         if not self.has_obstacles:
             return
-        self.obstacle_layout[env_idx] = sample_layouts(len(env_idx), self._obstacle_site, self.control_freq, self.device)
+        layouts = sample_layouts(len(env_idx), self._obstacle_site, self.control_freq, self.device)
+        self.obstacle_layout[env_idx] = layouts
         self.obstacle_clock[env_idx] = 0
         self.obstacle_collided[env_idx] = False
         self.obstacle_contact_now[env_idx] = False

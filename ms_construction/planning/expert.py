@@ -320,8 +320,12 @@ class MotionPlanningExpert:
         with self._planning():
             lines = self._install_lines(loaded, loaded_exact)
             installs = [time_parameterize(line, self.cfg.line_speed * self.vmax, self.acc, self.dt) for line in lines]
-        # what is left of the episode once the install line and the waits are done (after any wait for the worker)
-        budget = lambda: self.u.MAX_EPISODE_STEPS - self.steps - max(map(len, installs)) - 2 * self.cfg.settle_steps  # noqa: E731
+
+        def budget() -> int:
+            """What is left of the episode once the install line and the waits are done (after any wait for the
+            worker)."""
+            return self.u.MAX_EPISODE_STEPS - self.steps - max(map(len, installs)) - 2 * self.cfg.settle_steps
+
         i, traj = self._plan_when_clear(loaded, [line[0] for line in lines], "carry", budget)
         self.install_traj = installs[i]
 
@@ -593,8 +597,9 @@ class MotionPlanningExpert:
     def _escape(self) -> bool:
         """The worker is coming at the arm: out of its way, by the first of these that is free (the exact arm among the
         site and the static obstacles): a straight tcp line `escape_distance` aside, horizontally away from the
-        worker's line of walking; one as far straight up; a path to the rest pose (joint 6 kept). Followed until the
-        arm's target is clear of the worker's swept envelope (or it ends). Returns whether the episode ended."""
+        worker's line of walking; one as far straight up; a path to the rest pose (joint 6 kept). Followed at the
+        sampled paths' speed until the arm and its target are clear of the worker's swept envelope (or it ends).
+        Returns whether the episode ended."""
         planner = self.free_exact if self.phase == "approach" else self.loaded_exact
         tcp = self.ik.fk(self.q)
         walk = self.u.worker_velocity()[0].cpu().numpy().astype(float)
@@ -611,7 +616,7 @@ class MotionPlanningExpert:
             for shift in ([d * away[0], d * away[1], 0.0], [0.0, 0.0, d]):
                 line = tcp_line(self.ik, self.q, sapien.Pose(tcp.p + shift, tcp.q))
                 if line is not None and planner.collision_on(line) is None:
-                    traj = time_parameterize(line, self.cfg.line_speed * self.vmax, self.acc, self.dt)
+                    traj = time_parameterize(line, self.vel, self.acc, self.dt)  # as fast as sampled paths
                     break
             if traj is None and not planner.collides(rest):
                 path = planner.rrt_connect(self.q, rest, self.cfg.rrt_time)
@@ -623,7 +628,8 @@ class MotionPlanningExpert:
         for target in traj[1:]:
             if self._step(target):
                 return True
-            if not self._worker_blocks(self.q[None]):
+            arm = self.u.agent.robot.get_qpos()[0].cpu().numpy().astype(np.float64)  # where it is, not its target
+            if not self._worker_blocks(np.array([arm, self.q])):
                 break
         return False
 
