@@ -237,7 +237,8 @@ class MotionPlanningExpert:
             failure = str(e)
         placed = bool(self.info.get("success"))
         if not placed and not failure:
-            failure = (f"{self.phase}: the episode was truncated after {self.steps} steps" if self.ended else
+            failure = (f"{self.phase}: touched an obstacle at step {self.steps}" if self.info.get("fail") else
+                       f"{self.phase}: the episode was truncated after {self.steps} steps" if self.ended else
                        f"install: no success at the end of the line (element {self.info['place_dist']:.3f} m, "
                        f"{self.info['place_angle_deg']:.1f} deg from the goal, held {self.info['is_grasped']})")
         return EpisodeResult(seed=seed, task=self.kind, picked=bool(u.picked[0]), placed=placed, steps=self.steps,
