@@ -428,7 +428,7 @@ class ConstructionTaskEnv(SiteObstacles, StartStates, BaseEnv):
     # evaluation, observations, rewards
     # ------------------------------------------------------------------------------------- #
     def evaluate(self) -> dict:
-        el = self.obj.pose.raw_pose
+        el = self._obj_pose()
         goal = self._goal_table[self.task_id, self.goal_slot]
         place_dist = torch.linalg.norm(el[:, :3] - goal[:, :3], dim=-1)
         # error rotation in the element frame, minimised over the element's symmetries
@@ -453,7 +453,7 @@ class ConstructionTaskEnv(SiteObstacles, StartStates, BaseEnv):
 
     def _get_obs_extra(self, info: dict):
         goal = self._goal_table[self.task_id, self.goal_slot]
-        tcp = self.agent.tcp.pose.raw_pose
+        tcp = self._tcp_pose()
         obs = dict(
             is_grasped=info["is_grasped"].float()[:, None],
             tcp_pose=tcp,
@@ -461,7 +461,7 @@ class ConstructionTaskEnv(SiteObstacles, StartStates, BaseEnv):
             task=self._task_onehot[self.task_id],
         )
         if "state" in self.obs_mode:
-            el = self.obj.pose.raw_pose
+            el = self._obj_pose()
             obs.update(
                 obj_pose=el,
                 tcp_to_grasp_pos=self._grasp_frame()[:, :3] - tcp[:, :3],
@@ -507,7 +507,16 @@ class ConstructionTaskEnv(SiteObstacles, StartStates, BaseEnv):
     def _grasp_frame(self) -> torch.Tensor:
         """Raw world pose [n, 7] of the grasp face's centre, z pointing into the element (on physx_cpu reading a pose
         costs about a twentieth of a step: the observation and the dense reward share it)."""
-        return self._per_step("grasp_frame", lambda: pose_mul(self.obj.pose.raw_pose, self._grasp_in_el[self.task_id]))
+        return self._per_step("grasp_frame", lambda: pose_mul(self._obj_pose(), self._grasp_in_el[self.task_id]))
+
+    def _obj_pose(self) -> torch.Tensor:
+        """Raw world pose [n, 7] of each env's element (read once per step: evaluate, the observation and the reward
+        share it)."""
+        return self._per_step("obj_pose", lambda: self.obj.pose.raw_pose)
+
+    def _tcp_pose(self) -> torch.Tensor:
+        """Raw world pose [n, 7] of the plate's tcp (read once per step, as `_obj_pose`)."""
+        return self._per_step("tcp_pose", lambda: self.agent.tcp.pose.raw_pose)
 
     def plate_turn(self) -> torch.Tensor:
         """[n] rad; how far the held element is turned on the plate about the plate's axis (the grasp keeps the
@@ -575,7 +584,7 @@ class ConstructionTaskEnv(SiteObstacles, StartStates, BaseEnv):
         the carry's net change over an episode and going back and forth earns nothing, but it pays each step's
         progress at once instead of through the critic's sums. It keeps the last carry distance per env
         (`carry_prev`, in the task state): call this once per step."""
-        tcp = self.agent.tcp.pose.raw_pose
+        tcp = self._tcp_pose()
         grasp = self._grasp_frame()
         # tanh(d), not tanh(3d): the element starts about 2 m from the plate and must still pull
         near = 1 - torch.tanh(torch.linalg.norm(grasp[:, :3] - tcp[:, :3], dim=-1))
