@@ -34,10 +34,10 @@ import torch
 from tqdm import tqdm
 
 from baselines.ppo.checkpoints import load_checkpoint, load_policy
+from baselines.ppo.start_states import GOAL_SLOTS
 from ms_construction.curriculum import FINAL_STAGE, STAGE_NAMES, stage_tolerances
 from ms_construction.envs import ENV_IDS, TASK_ENV_IDS
 from ms_construction.envs.construction_env import ConstructionTaskEnv
-from baselines.ppo.start_states import GOAL_SLOTS
 from ms_construction.parameters import ELEMENT_KINDS
 from ms_construction.reporting import update_section
 from ms_construction.rollout import rollout

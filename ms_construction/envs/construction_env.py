@@ -471,7 +471,7 @@ class ConstructionTaskEnv(SiteObstacles, StartStates, BaseEnv):
             obs["install_offset"] = self.install_offset()
         if self.obs_path_offset:  # after it, for the same reason
             obs["path_offset"] = self.path_offset()
-        if self.obs_elapsed_time:  # last, so that a policy without it reads the rest unchanged
+        if self.obs_elapsed_time:  # last but the obstacles, so that a policy without it reads the rest unchanged
             obs["elapsed"] = (self.elapsed_steps.float() / self.MAX_EPISODE_STEPS)[:, None]
         if self.obs_obstacles:  # after everything: a policy trained without obstacles reads the rest unchanged
             obs["obstacles"] = self.obstacle_observation()
