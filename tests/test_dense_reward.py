@@ -82,6 +82,14 @@ def test_placing_beats_holding_still_anywhere_along_the_expert_s_episode(env_id)
 @pytest.mark.parametrize("env_id, slot", [(e, s) for e in ("CeilingInstallation-v1", "WindowInstallation-v1", "Flooring-v1")
                                           for s in range(3)])
 def test_the_dense_reward_rises_along_the_expert_s_carry_to_every_goal_slot(env_id, slot):
-    dense, held = expert_rewards(env_id, slot)
-    assert_rises_while_carried(dense, held, (env_id, slot))
-    assert dense[-1].item() == 10.0 and dense[:-1].max() < 10.0
+    # RRTConnect's path differs from run to run, and one in a few swings away from the start paths mid-carry: the
+    # reward must rise along one of PLAN_TRIES of the expert's placed episodes (a reward that does not rise fails all)
+    for attempt in range(PLAN_TRIES):
+        dense, held = expert_rewards(env_id, slot)
+        assert dense[-1].item() == 10.0 and dense[:-1].max() < 10.0
+        try:
+            assert_rises_while_carried(dense, held, (env_id, slot))
+            break
+        except AssertionError:
+            if attempt == PLAN_TRIES - 1:
+                raise
