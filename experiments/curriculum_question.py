@@ -41,7 +41,7 @@ from experiments.campaign import Run, checkpoint_of, choose, describe
 from experiments.from_scratch import VALIDATION_EPISODES, csv_column, moving_mean, scratch_args, train
 from experiments.refine import VALIDATION_SEED, validate
 from ms_construction.curriculum import FINAL_STAGE, STAGE_NAMES
-from ms_construction.envs import TASK_ENV_IDS
+from ms_construction.envs import PAPER_TASK_ENV_IDS
 from ms_construction.reporting import update_section
 
 STAGE_STEPS = 150_000
@@ -124,7 +124,7 @@ def draw_curves(runs: list[Run], validations: dict[str, dict[int, dict]], out: P
 
     fig, axes = plt.subplots(3, 3, figsize=(12, 9), sharex=True)
     colors = {"question_cp4": "tab:blue", "question_curriculum": "tab:red"}
-    for col, (kind, env_id) in enumerate(TASK_ENV_IDS.items()):
+    for col, (kind, env_id) in enumerate(PAPER_TASK_ENV_IDS.items()):
         for run in runs:
             vals = validations[run.name]
             steps = np.array(sorted(vals)) / 1e6
@@ -167,7 +167,7 @@ def training_table(runs: list[Run]) -> str:
     """Where each arm's training stood at the end of its CSV: its stage, its near-goal start radii (and when each first
     reached the whole path), and the share of its last SMOOTH iterations' episodes placed, from near-goal starts and
     from ordinary resets (at that stage's tolerance)."""
-    kinds = " / ".join(TASK_ENV_IDS)
+    kinds = " / ".join(PAPER_TASK_ENV_IDS)
     lines = [f"| arm | env steps | stage | near-goal start radius: {kinds} | the whole path first drawn from at, env "
              f"steps: {kinds} | placed from near-goal starts % | placed from ordinary resets: {kinds} % |",
              "|---|---|---|---|---|---|---|"]
@@ -178,10 +178,10 @@ def training_table(runs: list[Run]) -> str:
             continue
         recent = lambda key: moving_mean(csv_column(rows, key), SMOOTH)[-1]  # noqa: E731
         lines.append(f"| {run.name} | {int(rows[-1]['global_step']):,} | {rows[-1]['stage']} | "
-                     + " / ".join(f"{float(rows[-1].get(f'near_goal_radius_{k}') or 0):.1f}" for k in TASK_ENV_IDS)
-                     + " | " + " / ".join(_whole_path_at(rows, k) for k in TASK_ENV_IDS)
+                     + " / ".join(f"{float(rows[-1].get(f'near_goal_radius_{k}') or 0):.1f}" for k in PAPER_TASK_ENV_IDS)
+                     + " | " + " / ".join(_whole_path_at(rows, k) for k in PAPER_TASK_ENV_IDS)
                      + f" | {fmt(recent('near_goal_place_success'))} | "
-                     + " / ".join(fmt(recent(f"ordinary_place_{k}")) for k in TASK_ENV_IDS)
+                     + " / ".join(fmt(recent(f"ordinary_place_{k}")) for k in PAPER_TASK_ENV_IDS)
                      + " |")
     return "\n".join(lines)
 
@@ -194,8 +194,8 @@ def report(runs: list[Run], results: Path = Path("docs/RESULTS.md")) -> str:
     for run in runs:
         validations[run.name], finals[run.name] = evaluated(run)
     draw_curves(runs, validations, CURVE)
-    tasks = list(TASK_ENV_IDS.values())
-    head = "| agent | env steps | " + " | ".join(f"{k}: pick / place % [95% CI]" for k in TASK_ENV_IDS) + " |"
+    tasks = list(PAPER_TASK_ENV_IDS.values())
+    head = "| agent | env steps | " + " | ".join(f"{k}: pick / place % [95% CI]" for k in PAPER_TASK_ENV_IDS) + " |"
     lines = [f"Command: `{COMMAND} --report` (each arm's last checkpoint, the paper's protocol: {PAPER_STEPS:,} env "
              "steps per task, the test seeds, the policy's mean, at cp4). One seed per arm; demonstrations: none.", "",
              head, "|---|---|" + "---|" * len(tasks)]
@@ -223,7 +223,7 @@ def report(runs: list[Run], results: Path = Path("docs/RESULTS.md")) -> str:
     update_section(results, "curriculum-question", body, "Results")
     steps = sorted(set().union(*validations.values()))
     snap = ["| env steps | curriculum arm's stage | " + " | ".join(f"{r.name}: placed at cp4, "
-                                                                     + " / ".join(TASK_ENV_IDS) + " %" for r in runs)
+                                                                     + " / ".join(PAPER_TASK_ENV_IDS) + " %" for r in runs)
             + " |", "|---|---|" + "---|" * len(runs)]
     for step in steps:
         stage = STAGE_NAMES[min((step - 1) // STAGE_STEPS, len(STAGE_NAMES) - 1)]

@@ -49,7 +49,7 @@ from experiments.campaign import CAMPAIGN_DIR, SHIPPED_DIR, Run, checkpoint_of, 
 from experiments.expert_modes import placed_per_slot
 from experiments.refine import (CONFIRMATION_SEED, VALIDATION_SEED, best_snapshot, content_tag, ranked_snapshots,
                                validate)
-from ms_construction.parameters import ELEMENT_KINDS
+from ms_construction.parameters import PAPER_KINDS
 from ms_construction.reporting import update_section
 from ms_construction.curriculum import FINAL_STAGE
 
@@ -140,13 +140,13 @@ def draw_curve(rows: list[dict], out: Path) -> None:
 
     steps = csv_column(rows, "global_step") / 1e6
     fig, ax = plt.subplots(figsize=(8, 4.2))
-    for kind, color in zip(ELEMENT_KINDS, ("tab:blue", "tab:orange", "tab:green")):
+    for kind, color in zip(PAPER_KINDS, ("tab:blue", "tab:orange", "tab:green")):
         ax.plot(steps, 100 * moving_mean(csv_column(rows, f"ordinary_place_{kind}"), WINDOW), color=color,
                 label=f"placed, ordinary resets: {kind}")
     ax.plot(steps, 100 * moving_mean(csv_column(rows, "near_goal_place_success"), WINDOW), color="gray", ls="--",
             label="placed, near-goal starts (all tasks)")
     ax2 = ax.twinx()
-    for kind, color in zip(ELEMENT_KINDS, ("tab:blue", "tab:orange", "tab:green")):
+    for kind, color in zip(PAPER_KINDS, ("tab:blue", "tab:orange", "tab:green")):
         ax2.plot(steps, csv_column(rows, f"near_goal_radius_{kind}"), color=color, lw=0.8, ls=":",
                  label=f"start radius: {kind} (right axis)")
     for step, what in STARTS.items():
@@ -182,8 +182,8 @@ def standing(run: Run, progress: Path) -> tuple[list[dict], list[str]]:
 
     wall = training_wall_s(progress, run.args.num_envs * run.args.num_steps)
     return rows, [f"{done:,} / {run.args.total_timesteps:,}", f"{wall / 3600:.1f} h",
-                  " / ".join(f"{float(rows[-1].get(f'near_goal_radius_{k}') or 0):.1f}" for k in ELEMENT_KINDS),
-                  " / ".join(pct_of(f"ordinary_place_{k}") for k in ELEMENT_KINDS), pct_of("near_goal_place_success"),
+                  " / ".join(f"{float(rows[-1].get(f'near_goal_radius_{k}') or 0):.1f}" for k in PAPER_KINDS),
+                  " / ".join(pct_of(f"ordinary_place_{k}") for k in PAPER_KINDS), pct_of("near_goal_place_success"),
                   pct_of("pick_success")]
 
 
@@ -258,7 +258,7 @@ def seeds_report(results: Path = Path("docs/RESULTS.md"), log_dir: Path = CAMPAI
         rows, cells = standing(run, progress)
         lines.append(f"| {seed} | " + " | ".join(cells[:5]) + " |")
         steps = csv_column(rows, "global_step") / 1e6
-        for kind, color in zip(ELEMENT_KINDS, ("tab:blue", "tab:orange", "tab:green")):
+        for kind, color in zip(PAPER_KINDS, ("tab:blue", "tab:orange", "tab:green")):
             ax.plot(steps, 100 * moving_mean(csv_column(rows, f"ordinary_place_{kind}"), WINDOW), color=color,
                     label=f"placed, ordinary resets: {kind}")
             ax.plot(steps, 100 * csv_column(rows, f"near_goal_radius_{kind}"), color=color, lw=0.8, ls=":",

@@ -31,7 +31,7 @@ from tqdm import tqdm
 
 from baselines.ppo.evaluation import episode_job, pct, wilson
 from ms_construction.curriculum import FINAL_STAGE
-from ms_construction.envs import TASK_ENV_IDS
+from ms_construction.envs import PAPER_TASK_ENV_IDS
 from ms_construction.reporting import update_section
 
 AGENTS = {
@@ -114,17 +114,17 @@ def summarize(episodes: list[dict], expert: bool) -> dict:
 
 
 def table(rows: dict[str, dict[str, dict]]) -> str:
-    tasks = list(TASK_ENV_IDS)
+    tasks = list(PAPER_TASK_ENV_IDS)
     head = " | ".join(f"{k}: placed % [95% CI] / collided %" for k in tasks)
     lines = [f"| agent | scene | episodes | {head} | compute per decision (ms) |",
              "|---|---|---|" + "---|" * len(tasks) + "---|"]
     for (label, scene), per_task in rows.items():
         cells = []
         for kind in tasks:
-            s = per_task[TASK_ENV_IDS[kind]]
+            s = per_task[PAPER_TASK_ENV_IDS[kind]]
             cells.append(f"{pct(s['place_success'], s['place_success_ci95'])} / {100 * s['collision_rate']:.0f}")
-        n = "/".join(str(per_task[TASK_ENV_IDS[k]]["episodes"]) for k in tasks)
-        ms = np.mean([per_task[TASK_ENV_IDS[k]]["compute_per_step_ms"] for k in tasks])
+        n = "/".join(str(per_task[PAPER_TASK_ENV_IDS[k]]["episodes"]) for k in tasks)
+        ms = np.mean([per_task[PAPER_TASK_ENV_IDS[k]]["compute_per_step_ms"] for k in tasks])
         lines.append(f"| {label} | {scene} | {n} | " + " | ".join(cells) + f" | {ms:.2f} |")
     return "\n".join(lines)
 
@@ -136,7 +136,7 @@ def main(args: Args) -> dict:
     rows: dict[tuple[str, str], dict[str, dict]] = {}
     giving_way = []
     with mp.get_context("spawn").Pool(args.workers) as pool:
-        for kind, env_id in TASK_ENV_IDS.items():
+        for kind, env_id in PAPER_TASK_ENV_IDS.items():
             tried = list(range(args.seed, args.seed + args.episodes))
             static = run_row(pool, args.out / f"expert_static_{kind}.json", _expert_episode,
                              [(env_id, "static", s) for s in tried], tried, f"expert static {kind}")

@@ -52,7 +52,7 @@ import tyro
 
 from baselines.ppo.args import Args as PPOArgs
 from experiments.campaign import CAMPAIGN_DIR, SHIPPED_DIR, Run, choose, describe, run_or_resume
-from ms_construction.envs import TASK_ENV_IDS
+from ms_construction.envs import PAPER_TASK_ENV_IDS
 from ms_construction.curriculum import FINAL_STAGE, STAGE_NAMES
 
 STAGE_STEPS = 2_000_000
@@ -109,7 +109,7 @@ def control_group_runs(total_timesteps: int = STAGE_STEPS, num_envs: Optional[in
         Run(f"control_{kind}", paper_args(num_envs, seed=seed, env_id=env_id, exp_name=f"control_{kind}", curriculum=stages,
                                           total_timesteps=total_timesteps),
             f"{CONTROL_GROUPS[kind]}: {env_id}, cp4 from the first step", command, SHIPPED_DIR / f"control_{kind}{suffix}.pt")
-        for kind, env_id in TASK_ENV_IDS.items()
+        for kind, env_id in PAPER_TASK_ENV_IDS.items()
     ]
 
 
@@ -120,7 +120,7 @@ class Args:
     control_groups: bool = False
     """run the control groups 4.1 / 4.2 / 4.3 instead: one agent each on CeilingInstallation-v1,
     WindowInstallation-v1 and Flooring-v1, at cp4 from the first step."""
-    tasks: tuple[str, ...] = tuple(TASK_ENV_IDS)
+    tasks: tuple[str, ...] = tuple(PAPER_TASK_ENV_IDS)
     """which control groups, in this order: ceiling (4.1), window (4.2), flooring (4.3)."""
     total_timesteps: int = STAGE_STEPS
     """per control group, a multiple of 2M: 2M (the general agent's cp4 stage) or 8M (its whole budget). A run is
@@ -136,9 +136,9 @@ class Args:
 
 def main(args: Args) -> None:
     if args.control_groups:
-        unknown = [t for t in args.tasks if t not in TASK_ENV_IDS]
+        unknown = [t for t in args.tasks if t not in PAPER_TASK_ENV_IDS]
         if unknown:
-            raise SystemExit(f"--tasks {' '.join(unknown)}: use among {', '.join(TASK_ENV_IDS)}")
+            raise SystemExit(f"--tasks {' '.join(unknown)}: use among {', '.join(PAPER_TASK_ENV_IDS)}")
         plan = {r.name: r for r in control_group_runs(args.total_timesteps, args.num_envs, args.seed)}
         runs = [plan[f"control_{t}"] for t in args.tasks]
     else:

@@ -29,7 +29,7 @@ from experiments import paper
 from baselines.ppo.evaluation import EXPERT_RESULTS, PAPER_CONTROL_GROUPS, PAPER_TABLE_II, pct, wilson
 from experiments.campaign import CAMPAIGN_DIR
 from experiments.paper import STAGE_STEPS, control_group_runs, general_runs
-from ms_construction.envs import TASK_ENV_IDS
+from ms_construction.envs import PAPER_TASK_ENV_IDS
 from ms_construction.reporting import update_section
 
 LAST = 200_000
@@ -136,7 +136,7 @@ class TableRow:
     pending: str = ""
     """why the JSON is not there yet."""
     paper: Optional[dict] = None
-    env_ids: tuple[str, ...] = tuple(TASK_ENV_IDS.values())
+    env_ids: tuple[str, ...] = tuple(PAPER_TASK_ENV_IDS.values())
     """the tasks the agent is judged on (a control group: its own only)."""
 
 
@@ -159,14 +159,14 @@ def table_ii_rows(campaign_dir: Path, eval_dir: Path = EVAL_DIR) -> list[TableRo
             TableRow("paper: control groups 4.1 / 4.2 / 4.3", "PPO + ICM, cp4 from the first step, one agent per task",
                      paper=PAPER_CONTROL_GROUPS),
             _evaluation_row("ours: paper setting, general agent", f"{general.what}; 8M env steps", general.shipped,
-                            general.name, tuple(TASK_ENV_IDS.values()), done(general), eval_dir)]
+                            general.name, tuple(PAPER_TASK_ENV_IDS.values()), done(general), eval_dir)]
     for k, stage in enumerate(general.args.stages.curriculum[:-1], start=1):
         snapshot = campaign_dir / general.name / f"checkpoint_stage{k}_{stage}.pt"
         reached = (f"the end of {stage} comes at step {k * STAGE_STEPS:,}" if not k * STAGE_STEPS <= last_step(
             campaign_dir / general.name / "progress.csv") else "that stage's final policy was not kept (ppo.py keeps them since 3.42M)")
         rows.append(_evaluation_row(f"ours: paper setting, end of {stage}", f"the general agent after {k * STAGE_STEPS:,} env "
                                     f"steps, judged at cp4", snapshot, f"{general.name}_stage{k}_{stage}",
-                                    tuple(TASK_ENV_IDS.values()), reached if not snapshot.is_file() else "not evaluated yet",
+                                    tuple(PAPER_TASK_ENV_IDS.values()), reached if not snapshot.is_file() else "not evaluated yet",
                                     eval_dir))
     for total in (STAGE_STEPS, 4 * STAGE_STEPS):
         runs = control_group_runs(total)
@@ -191,7 +191,7 @@ def scratch_row(eval_dir: Path = EVAL_DIR) -> TableRow:
                if not run.shipped.is_file() else "not evaluated yet")
     return _evaluation_row("ours: from reward alone", "PPO on the dense reward with near-goal start states; no "
                            "demonstrations (docs/RESULTS.md, its section)", run.shipped, run.shipped.stem,
-                           tuple(TASK_ENV_IDS.values()), pending, eval_dir)
+                           tuple(PAPER_TASK_ENV_IDS.values()), pending, eval_dir)
 
 
 HEADLINE_AGENTS = ("ours: shipped general agent", "ours: from reward alone", "paper: general agent",
@@ -201,7 +201,7 @@ HEADLINE_AGENTS = ("ours: shipped general agent", "ours: from reward alone", "pa
 
 def headline(campaign_dir: Path, eval_dir: Path = EVAL_DIR) -> str:
     """The README's table: pick / place % per task of the agents a reader compares first (Table II's rows)."""
-    env_ids = list(TASK_ENV_IDS.values())
+    env_ids = list(PAPER_TASK_ENV_IDS.values())
     rows = {r.agent: r for r in table_ii_rows(campaign_dir, eval_dir)}
     lines = ["| agent | " + " | ".join(f"{e.split('-')[0].replace('Installation', '')}: pick / place % [95% CI]"
                                        for e in env_ids) + " |", "|---|" + "---|" * len(env_ids)]
@@ -235,7 +235,7 @@ def _cells(row: TableRow) -> Optional[dict[str, str]]:
 
 def table_ii(campaign_dir: Path, eval_dir: Path = EVAL_DIR) -> str:
     """Table II: pick / place success % per task and agent (ours with 95% intervals, the paper's as printed)."""
-    env_ids = list(TASK_ENV_IDS.values())
+    env_ids = list(PAPER_TASK_ENV_IDS.values())
     lines = ["| agent | method; env steps | " + " | ".join(f"{e}: pick / place % [95% CI]" for e in env_ids) + " |",
              "|---|---|" + "---|" * len(env_ids)]
     notes = []

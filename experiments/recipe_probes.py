@@ -25,7 +25,7 @@ import tyro
 from baselines.ppo import ppo
 from baselines.ppo.checkpoints import load_checkpoint
 from experiments.from_scratch import PAGE, csv_column, scratch_args
-from ms_construction.parameters import ELEMENT_KINDS
+from ms_construction.parameters import PAPER_KINDS
 from ms_construction.reporting import update_section
 
 PROBE_STEPS = 300_000
@@ -90,10 +90,10 @@ def table(data_dir: Path = DATA_DIR) -> str:
             x = csv_column(late, key)
             return f"{100 * np.nanmean(x):.1f}" if np.isfinite(x).any() else "-"
 
-        reached = [first_step(rows, f"near_goal_radius_{k}", 1.0) for k in ELEMENT_KINDS]
+        reached = [first_step(rows, f"near_goal_radius_{k}", 1.0) for k in PAPER_KINDS]
         lines.append(f"| {name}: {what} | {done:,} | " + " / ".join("-" if s is None else f"{s:,}" for s in reached)
-                     + " | " + " / ".join(pct(f"ordinary_pick_{k}") for k in ELEMENT_KINDS) + " | "
-                     + " / ".join(pct(f"ordinary_place_{k}") for k in ELEMENT_KINDS)
+                     + " | " + " / ".join(pct(f"ordinary_pick_{k}") for k in PAPER_KINDS) + " | "
+                     + " / ".join(pct(f"ordinary_place_{k}") for k in PAPER_KINDS)
                      + f" | {pct('near_goal_place_success')} |")
     return "\n".join(lines)
 

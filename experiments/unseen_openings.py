@@ -28,8 +28,8 @@ from baselines.ppo.evaluation import pct
 from baselines.ppo.start_states import GOAL_SLOTS
 from experiments.campaign import Run, checkpoint_of, describe, run_or_resume
 from experiments.from_scratch import METHOD, scratch_args
-from ms_construction.envs import TASK_ENV_IDS
-from ms_construction.parameters import ELEMENT_KINDS
+from ms_construction.envs import PAPER_TASK_ENV_IDS
+from ms_construction.parameters import PAPER_KINDS
 from ms_construction.reporting import update_section
 
 HELD_OUT = (1,)
@@ -43,7 +43,7 @@ EVAL_STEPS = 50_000
 
 def seed_run(seed: int, num_envs: Optional[int] = None) -> Run:
     """The recipe from nothing on `seed`, its training envs never drawing the HELD_OUT openings."""
-    weights = tuple(float(s not in HELD_OUT) for _ in ELEMENT_KINDS for s in range(GOAL_SLOTS))
+    weights = tuple(float(s not in HELD_OUT) for _ in PAPER_KINDS for s in range(GOAL_SLOTS))
     name = f"unseen_s{seed}"
     return Run(name, scratch_args(num_envs, seed=seed, exp_name=name, goal_slot_weights=weights),
                f"the recipe from nothing, seed {seed}, goal openings {', '.join(map(str, HELD_OUT))} held out",
@@ -63,15 +63,15 @@ def evaluate(run: Run, seed: int, steps: int = EVAL_STEPS, workers: int = 2) -> 
 
 def report(results: Path = Path("docs/RESULTS.md"), seeds: tuple[int, ...] = (1, 2)) -> str:
     """RESULTS' section: per seed evaluated, place success on the unseen and the seen openings per task."""
-    lines = ["| seed | openings | " + " | ".join(f"{k}: placed % [95% CI]" for k in TASK_ENV_IDS) + " |",
-             "|---|---|" + "---|" * len(TASK_ENV_IDS)]
+    lines = ["| seed | openings | " + " | ".join(f"{k}: placed % [95% CI]" for k in PAPER_TASK_ENV_IDS) + " |",
+             "|---|---|" + "---|" * len(PAPER_TASK_ENV_IDS)]
     for seed in seeds:
         for seen in (False, True):
             path = evaluation_json(seed, seen)
             if not path.is_file():
                 continue
             tasks = json.loads(path.read_text())["tasks"]
-            cells = [pct(tasks[e]["place_success"], tasks[e]["place_success_ci95"]) for e in TASK_ENV_IDS.values()]
+            cells = [pct(tasks[e]["place_success"], tasks[e]["place_success_ci95"]) for e in PAPER_TASK_ENV_IDS.values()]
             slots = ", ".join(map(str, TRAINED if seen else HELD_OUT))
             which = f"{'trained on' if seen else 'never trained on'} ({slots})"
             lines.append(f"| {seed} | {which} | " + " | ".join(cells) + " |")

@@ -312,13 +312,13 @@ def _start_paths(vias_json: str) -> StartPaths:
     install, lift = install_configurations().astype(np.float64), lift_configurations().astype(np.float64)
     table = lift_configurations(0.0).astype(np.float64)
     backoff = backoff_configurations().astype(np.float64)
-    site = site_collision_objects(m)
     shape = install.shape[:3] + (2,)
     waypoints, free, planned = np.zeros(shape + (5, 6)), np.zeros(shape), np.zeros(shape, dtype=bool)
     turns = [float(np.deg2rad(t)) for t in START_TURNS_DEG]
     with tempfile.TemporaryDirectory(prefix="ms_construction_paths_") as workdir:
         for k, kind in enumerate(ELEMENT_KINDS):
-            planners = _path_planners(workdir, kind, site)
+            # each task type's paths among its own site (tests check that the paper's keep clear of paneling's partition)
+            planners = _path_planners(workdir, kind, site_collision_objects(m, (kind,)))
             for index in np.ndindex(shape[1:]):
                 slot, c, side = index
                 q_install, q_back, q_lift, q_table = _path_ends(k, index, install, backoff, lift, table)
@@ -357,10 +357,10 @@ VIA_PLAN_SECONDS = 5.0
 VIA_PLAN_TRIES = 10
 
 
-def plan_vias(paths: Optional[StartPaths] = None) -> dict:
-    """Per task type, the turret side most of its goal slots have usable start paths from (a general agent grasps
-    an element type from one side), and for each slot without one from there, one via configuration per
-    installation configuration: the middle of an RRTConnect path (the planner's, on the site's collision model,
+def plan_vias(paths: Optional[StartPaths] = None, kinds: tuple[str, ...] = ELEMENT_KINDS) -> dict:
+    """Per task type of `kinds`, the turret side most of its goal slots have usable start paths from (a general agent
+    grasps an element type from one side), and for each slot without a wholly clear one from there, one via
+    configuration per installation configuration: the middle of an RRTConnect path (the planner's, on the site's collision model,
     the element unturned on the plate) from the back-off to the lift, shortcut to a single via, kept where the path
     install - back-off - via - lift - table is clear at every turn of START_TURNS_DEG. Only the window opening at
     y = +0.85 needs one (its IK paths leave only from +pi; the other openings' only from -pi). The planner's
@@ -373,20 +373,22 @@ def plan_vias(paths: Optional[StartPaths] = None) -> dict:
     install, lift = install_configurations().astype(np.float64), lift_configurations().astype(np.float64)
     table = lift_configurations(0.0).astype(np.float64)
     backoff = backoff_configurations().astype(np.float64)
-    site = site_collision_objects(load_manifest())
     turns = [float(np.deg2rad(t)) for t in START_TURNS_DEG]
     sides = paths.usable.any(2)  # [kinds, slots, 2]
+    clear = paths.free.max(2) >= 1.0  # [kinds, slots, 2]
     vias: dict = {}
     with tempfile.TemporaryDirectory(prefix="ms_construction_vias_") as workdir:
         for k, kind in enumerate(ELEMENT_KINDS):
+            if kind not in kinds:
+                continue
             side = int(np.argmax(sides[k].sum(0)))
             planners = None
-            for slot in np.flatnonzero(~sides[k, :, side]):
+            for slot in np.flatnonzero(~clear[k, :, side]):
                 for c in range(install.shape[2]):
                     q_install, q_back, q_lift, q_table = _path_ends(k, (slot, c, side), install, backoff, lift, table)
                     if np.array_equal(q_back, q_install):
                         continue
-                    planners = planners or _path_planners(workdir, kind, site)
+                    planners = planners or _path_planners(workdir, kind, site_collision_objects(load_manifest(), (kind,)))
                     for _ in range(VIA_PLAN_TRIES):
                         path = planners[START_TURNS_DEG.index(0.0)].rrt_connect(q_back, q_lift, VIA_PLAN_SECONDS)
                         if path is None:
@@ -401,6 +403,11 @@ def plan_vias(paths: Optional[StartPaths] = None) -> dict:
 
 
 if __name__ == "__main__":
-    VIAS_PATH.write_text(json.dumps(plan_vias(), indent=1) + "\n")
+    import sys
+
+    # the task types named (all by default) are planned anew; the others keep their shipped vias
+    planned_kinds = tuple(sys.argv[1:]) or ELEMENT_KINDS
+    VIAS_PATH.write_text(json.dumps({**{k: v for k, v in load_vias().items() if k not in planned_kinds},
+                                     **plan_vias(kinds=planned_kinds)}, indent=1) + "\n")
     print(f"wrote {VIAS_PATH}; the start paths now: usable per kind, slot, side:",
           _start_paths(json.dumps(load_vias())).usable.any(2).astype(int).tolist())

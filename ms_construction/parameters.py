@@ -11,8 +11,10 @@ from __future__ import annotations
 import dataclasses
 from dataclasses import dataclass
 
-ELEMENT_KINDS = ("ceiling", "window", "flooring")
-"""Task types in the order of their `task_id` (0 ceiling, 1 window, 2 flooring)."""
+ELEMENT_KINDS = ("ceiling", "window", "flooring", "paneling")
+"""Task types in the order of their `task_id` (0 ceiling, 1 window, 2 flooring, 3 paneling)."""
+PAPER_KINDS = ELEMENT_KINDS[:3]
+"""the paper's three task types: what the general task samples unless `tasks=` asks for paneling too."""
 
 
 @dataclass(frozen=True)
@@ -41,6 +43,8 @@ class SiteParams:
     """double-glazed window: 0.6 m wide, 0.8 m tall, aluminium frame."""
     floor_panel: ElementParams = ElementParams((0.60, 0.60, 0.035), material="timber")
     """raised-access floor panel with a timber finish."""
+    wall_panel: ElementParams = ElementParams((0.60, 1.00, 0.025), material="fibre_cement")
+    """fibre-cement wall board (the gypsum-board class at 15 kg), 0.6 m wide (one stud bay), 1 m tall."""
 
     ground_extent: tuple[float, float, float, float] = (-2.3, 1.7, -2.3, 2.3)
     """ground slab footprint (x_min, x_max, y_min, y_max); its top is at z = 0."""
@@ -62,6 +66,18 @@ class SiteParams:
     floor_slots: tuple[tuple[float, float, float], ...] = ((0.75, -1.1, 0.0), (0.0, -1.1, 0.0), (-0.75, -1.1, 0.0))
     """(x, y, yaw) of each floor recess."""
 
+    partition_face_y: float = 1.70
+    """y of the stud frame's face towards the arm: an interior partition parallel to the x axis, as near as the
+    paper's task types' start paths allow (tests/test_paneling.py)."""
+    partition_x_extent: tuple[float, float] = (-1.1, 1.15)
+    """the partition runs from a free end to the exterior wall."""
+    stud_size: tuple[float, float] = (0.05, 0.10)
+    """steel stud: width along the partition (x), depth (y)."""
+    panel_slots: tuple[float, ...] = (-0.68, 0.0, 0.68)
+    """x of the centre of each bay left open in the partition's board layer; a wall panel installs into one."""
+    panel_sill: float = 0.55
+    """height of the bottom of each open bay."""
+
     staging_center: tuple[float, float] = (-1.15, 0.0)
     staging_size: tuple[float, float] = (1.1, 1.3)
     """table top (x, y) size."""
@@ -78,7 +94,8 @@ class SiteParams:
     column_size: float = 0.3
 
     def element(self, kind: str) -> ElementParams:
-        return {"ceiling": self.ceiling_panel, "window": self.window, "flooring": self.floor_panel}[kind]
+        return {"ceiling": self.ceiling_panel, "window": self.window, "flooring": self.floor_panel,
+                "paneling": self.wall_panel}[kind]
 
     def to_dict(self) -> dict:
         return dataclasses.asdict(self)
@@ -129,13 +146,14 @@ SYMMETRIES_DEG = {
     "ceiling": (0.0, 180.0),  # a rectangle, finished face fixed (down)
     "window": (0.0,),  # head up and inside face in: no symmetry
     "flooring": (0.0, 90.0, 180.0, 270.0),  # a square, finish up
+    "paneling": (0.0, 180.0),  # a rectangle, finished face fixed (towards the room)
 }
 START_XY_NOISE = 0.08
 """m; element start position on the staging table, uniform in +-this around the table centre."""
 START_YAW_NOISE_DEG = 15.0
-START_YAW_DEG = {"ceiling": 90.0, "window": 0.0, "flooring": 0.0}
+START_YAW_DEG = {"ceiling": 90.0, "window": 0.0, "flooring": 0.0, "paneling": 90.0}
 """nominal yaw on the table: the long side along the table's long side (y)."""
-STORAGE_XY = {"ceiling": (-3.2, -1.2), "window": (-3.2, 0.0), "flooring": (-3.2, 1.2)}
+STORAGE_XY = {"ceiling": (-3.2, -1.2), "window": (-3.2, 0.0), "flooring": (-3.2, 1.2), "paneling": (-3.2, 2.4)}
 """general task: where the episode's unused elements wait, on the ground outside the barriers."""
 DROP_CLEARANCE = 1e-3
 """m; an element is placed this far above the surface it starts on (table, storage ground) and

@@ -2,7 +2,8 @@
 
 `ConstructionSiteSceneBuilder` is a ManiSkill SceneBuilder: `build()` adds the static site (visual
 meshes with their materials, coacd convex parts for collision) to every parallel sub-scene;
-`initialize(env_idx)` puts the arm in its rest pose with a little noise. `build_element` makes one
+A part built for one task type (the partition, for paneling) is built only in an env that has that
+type among its task types. `initialize(env_idx)` puts the arm in its rest pose with a little noise. `build_element` makes one
 15 kg element (ceiling panel, window or floor panel) as a dynamic actor.
 """
 
@@ -41,6 +42,8 @@ class ConstructionSiteSceneBuilder(SceneBuilder):
         physx_material = sapien.physx.PhysxMaterial(SITE_FRICTION, SITE_FRICTION, 0.0)
         self.parts: dict[str, Actor] = {}
         for name, part in self.manifest["parts"].items():
+            if part.get("task", self.env.TASKS[0]) not in self.env.TASKS:  # a part of another task's site
+                continue
             builder = self.scene.create_actor_builder()
             builder.add_multiple_convex_collisions_from_file(str(ASSET_DIR / part["collision"]), material=physx_material)
             builder.add_visual_from_file(str(ASSET_DIR / part["visual"]))

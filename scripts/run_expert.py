@@ -41,7 +41,7 @@ RESULTS_PATH = Path("docs/RESULTS.md")
 @dataclass
 class Args:
     env_id: str = "ConstructionPickPlace-v1"
-    """task to solve, or 'all' for the four tasks one after the other."""
+    """task to solve, or 'all' for every task (ms_construction.envs.ENV_IDS) one after the other."""
     episodes: int = 10
     """episodes per task."""
     seed: int = 0

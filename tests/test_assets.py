@@ -34,7 +34,9 @@ def _hulls(obj_path):
 def test_manifest_matches_files():
     m = load_manifest()
     check_manifest(m)
-    assert set(m["parts"]) == {"ground_slab", "upper_slab", "exterior_wall", "columns", "staging_table", "barriers"}
+    assert set(m["parts"]) == {"ground_slab", "upper_slab", "exterior_wall", "columns", "staging_table", "barriers",
+                               "partition_frame", "partition_boards"}
+    assert {name for name, part in m["parts"].items() if "task" in part} == {"partition_frame", "partition_boards"}
     for kind in ELEMENT_KINDS:
         assert m["elements"][kind]["mass"] == 15.0
         assert len(m["goal_poses"][kind]) >= 3, "several slots per element type"

@@ -12,7 +12,7 @@ from baselines.ppo import ppo
 from baselines.ppo.checkpoints import CSV_FIELDS, Progress
 from experiments import curriculum_question as cq
 from experiments.from_scratch import scratch_args
-from ms_construction.envs import TASK_ENV_IDS
+from ms_construction.envs import PAPER_TASK_ENV_IDS
 
 
 def test_the_two_arms_are_the_from_scratch_recipe_and_differ_only_in_the_curriculum():
@@ -48,7 +48,7 @@ def test_the_curriculum_arm_moves_on_after_its_stage_s_steps_whatever_it_places(
 
 def _evaluation(place: float) -> dict:
     return {"tasks": {env_id: {"pick_success": 1.0, "place_success": place, "place_success_ci95": [place / 2, place]}
-                      for env_id in TASK_ENV_IDS.values()}}
+                      for env_id in PAPER_TASK_ENV_IDS.values()}}
 
 
 def test_the_report_compares_the_arms_at_cp4_beside_the_paper_s_rows(tmp_path, monkeypatch):

@@ -9,6 +9,7 @@ import pytest
 import torch
 
 from baselines.ppo import bc, checkpoints, networks, ppo
+from ms_construction.envs.state_layout import STATE_SIZE
 from ms_construction.planning.demos import DEMO_EXPERT_CONFIG, DemoCollector, load_demos, save_demos
 
 from tests.helpers import PLAN_TRIES, SLOW_MACHINE_RRT_TIME
@@ -35,7 +36,7 @@ def flooring_demos():
 def test_demonstrations_place_and_their_clean_actions_replay_to_a_placement(flooring_demos):
     clean, noisy = flooring_demos
     for d in flooring_demos:
-        assert d.placed and d.obs.shape == (len(d.actions), 43) and d.actions.shape[1] == 6
+        assert d.placed and d.obs.shape == (len(d.actions), STATE_SIZE) and d.actions.shape[1] == 6
         assert np.abs(d.actions).max() <= 1.0 and d.rewards.shape == (len(d.actions),)
         assert d.rewards[-1] == pytest.approx(2.0) and (d.rewards == 1.0).sum() == 1, "Algorithm 1: grasp once, place"
     # without noise the recorded actions are the executed ones: replayed open loop, they place again
@@ -166,7 +167,7 @@ def test_rotation_features_are_the_same_for_q_and_minus_q_and_sit_where_the_stat
     for s in STATE_QUATERNION_STARTS:
         x[1, s:s + 4] *= -1
     f = networks.rotation_features(x, STATE_QUATERNION_STARTS)
-    assert f.shape == (2, 43 + 6) and torch.allclose(f[0], f[1], atol=1e-6)
+    assert f.shape == (2, flat.shape[1] + 6) and torch.allclose(f[0], f[1], atol=1e-6)
     assert not torch.allclose(x[0], x[1])
     env.close()
 

@@ -14,6 +14,7 @@ import pytest
 import torch
 
 from baselines.ppo import update
+from ms_construction.envs import TASK_ENV_IDS
 from ms_construction.planning import MotionPlanningExpert
 
 from tests.helpers import PLAN_TRIES, TEST_EXPERT_CONFIG, StepLog, make_env
@@ -24,7 +25,7 @@ GAMMA = 0.99
 def expert_rewards(env_id: str, slot: int = None) -> torch.Tensor:
     """Dense rewards (default kwargs) of the expert's placed episode (seed 0; at goal slot `slot` if given), and
     whether the element was held at each step."""
-    kind = {"CeilingInstallation-v1": "ceiling", "WindowInstallation-v1": "window", "Flooring-v1": "flooring"}[env_id]
+    kind = {env: kind for kind, env in TASK_ENV_IDS.items()}[env_id]
     weights = None if slot is None else {kind: tuple(float(s == slot) for s in range(3))}
     env = StepLog(make_env(env_id, reward_mode="dense", goal_slot_weights=weights))
     expert = MotionPlanningExpert(env, TEST_EXPERT_CONFIG)
@@ -62,7 +63,7 @@ def returns(rewards: torch.Tensor, bootstrap_at_done: str, success_value: float)
                    dones=terminated, gamma=GAMMA, gae_lambda=1.0)[:, 0]
 
 
-@pytest.mark.parametrize("env_id", ["CeilingInstallation-v1", "WindowInstallation-v1", "Flooring-v1"])
+@pytest.mark.parametrize("env_id", list(TASK_ENV_IDS.values()))
 def test_placing_beats_holding_still_anywhere_along_the_expert_s_episode(env_id):
     dense, held = expert_rewards(env_id)
     assert_rises_while_carried(dense, held, env_id)
@@ -79,8 +80,7 @@ def test_placing_beats_holding_still_anywhere_along_the_expert_s_episode(env_id)
         assert torch.any(ended < stay), name
 
 
-@pytest.mark.parametrize("env_id, slot", [(e, s) for e in ("CeilingInstallation-v1", "WindowInstallation-v1", "Flooring-v1")
-                                          for s in range(3)])
+@pytest.mark.parametrize("env_id, slot", [(e, s) for e in TASK_ENV_IDS.values() for s in range(3)])
 def test_the_dense_reward_rises_along_the_expert_s_carry_to_every_goal_slot(env_id, slot):
     # RRTConnect's path differs from run to run, and one in a few swings away from the start paths mid-carry: the
     # reward must rise along one of PLAN_TRIES of the expert's placed episodes (a reward that does not rise fails all)

@@ -16,6 +16,7 @@ from mani_skill.utils.wrappers import CPUGymWrapper, RecordEpisode
 
 from ms_construction.curriculum import STAGES
 from ms_construction.envs import ENV_IDS
+from ms_construction.envs.state_layout import STATE_SIZE
 from ms_construction.parameters import ELEMENT_KINDS
 
 from tests.helpers import PLAN_TRIES, TEST_EXPERT_CONFIG, JointMover, StepLog, make_env, quat_z, to_sapien
@@ -51,7 +52,7 @@ def test_every_obs_reward_and_control_mode_steps(env_id, obs_mode):
                 assert 0 <= float(r) <= 1
         u._reward_mode = "dense"
         if obs_mode == "state":
-            assert obs.shape == (1, 43) and torch.isfinite(obs).all()
+            assert obs.shape == (1, STATE_SIZE) and torch.isfinite(obs).all()
         for key in ("is_grasped", "picked", "success", "place_dist", "place_angle_deg", "task_id"):
             assert info[key].shape == (1,)
     env.close()
@@ -436,7 +437,7 @@ def test_state_round_trip_continues_identically(env_id):
 def test_cpu_gym_wrapper_returns_numpy_floats_and_bools():
     env = CPUGymWrapper(make_env("ConstructionPickPlace-v1", control_mode="pd_joint_delta_pos", reward_mode="dense"))
     obs, info = env.reset(seed=0)
-    assert isinstance(obs, np.ndarray) and obs.shape == (43,)
+    assert isinstance(obs, np.ndarray) and obs.shape == (STATE_SIZE,)
     obs, reward, term, trunc, info = env.step(env.action_space.sample())
     assert isinstance(obs, np.ndarray) and obs.dtype == np.float32
     assert isinstance(reward, float) and isinstance(term, bool) and isinstance(trunc, bool)

@@ -10,6 +10,7 @@ from baselines.ppo import evaluation
 from baselines.ppo.checkpoints import Progress, load_policy, save_checkpoint
 from baselines.ppo.networks import Agent
 from baselines.ppo.ppo import Args as PPOArgs
+from ms_construction.envs.state_layout import STATE_SIZE
 from ms_construction.vector_env import CPUVectorEnv
 
 
@@ -101,7 +102,7 @@ def test_a_checkpoint_of_the_wrong_shape_is_a_clear_error(tmp_path):
     agent = Agent(40, 6, 32)
     save_checkpoint(path, PPOArgs.of(hidden_size=32, control_mode="pd_joint_delta_pos"), Progress(), agent,
                     torch.optim.Adam(agent.parameters()), None, None, 40, 6)
-    with pytest.raises(SystemExit, match=r"does not fit Flooring-v1.*observations of size 40.*has 43"):
+    with pytest.raises(SystemExit, match=rf"does not fit Flooring-v1.*observations of size 40.*has {STATE_SIZE}"):
         evaluation.main(evaluation.Args(checkpoint=path, env_id="Flooring-v1", episodes=1))
 
 

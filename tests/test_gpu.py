@@ -12,6 +12,7 @@ import torch
 
 import ms_construction  # noqa: F401
 from ms_construction.envs import ENV_IDS
+from ms_construction.envs.state_layout import STATE_SIZE
 
 pytestmark = pytest.mark.skipif(not torch.cuda.is_available(), reason="needs a CUDA GPU (physx_cuda)")
 
@@ -41,7 +42,7 @@ def test_general_task_on_gpu_mixes_elements_and_holds_them():
     env = gym.make("ConstructionPickPlace-v1", num_envs=64, sim_backend="physx_cuda", obs_mode="state",
                    control_mode="pd_joint_delta_pos", reward_mode="sparse")
     obs, info = env.reset(seed=0)
-    assert obs.shape == (64, 43)
+    assert obs.shape == (64, STATE_SIZE)
     assert set(info["task_id"].tolist()) == {0, 1, 2}
     u = env.unwrapped
     state = u.get_state_dict()
@@ -68,7 +69,7 @@ def test_every_task_steps_1024_envs_with_and_without_the_element_held(bench, env
     env = bench.make_gpu(env_id, 1024)
     u = env.unwrapped
     sps, finite, obs = bench.gpu_steps_per_second(env, 10, seed=0, warmup=2)
-    assert obs.shape == (1024, 43) and finite and sps > 0
+    assert obs.shape == (1024, STATE_SIZE) and finite and sps > 0
     env.reset(seed=0)
     start_gap = torch.linalg.norm(u.obj.pose.p - u.agent.tcp.pose.p, dim=-1)
     sps, finite, obs = bench.gpu_steps_per_second(env, 10, seed=0, warmup=2, held=True)

@@ -11,13 +11,23 @@ from baselines.ppo import ppo
 from baselines.ppo.checkpoints import make_agent
 from mani_skill.utils.structs import Pose
 from ms_construction.envs.carry_geometry import JOINT_MIRROR_SIGNS
-from ms_construction.envs.state_layout import STATE_GOAL_Y, STATE_IS_GRASPED, STATE_TASK_START, state_mirror_signs
+from ms_construction.envs.state_layout import (
+    STATE_GOAL_Y,
+    STATE_IS_GRASPED,
+    STATE_QUATERNION_STARTS,
+    STATE_SIZE,
+    STATE_TASK_START,
+    state_mirror_signs,
+)
 from ms_construction.assets import load_manifest
 from ms_construction.parameters import ELEMENT_KINDS
 from tests.helpers import make_env
 
 GOAL_QUAT = slice(23, 27)
-INSTALL_OFFSET = slice(43, 49)
+INSTALL_OFFSET = slice(STATE_SIZE, STATE_SIZE + 6)
+WITH_INSTALL = STATE_SIZE + 6
+WITH_BOTH = STATE_SIZE + 12
+"""observation sizes with the install offset, and with the path offset too."""
 
 
 def test_the_mirror_image_of_a_window_episode_at_y_minus_085_is_one_at_plus_085_step_by_step():
@@ -27,7 +37,7 @@ def test_the_mirror_image_of_a_window_episode_at_y_minus_085_is_one_at_plus_085_
     over grasp-free steps, the joint move to the installation included (until the grasp it is measured for the mirror
     branch, the element turned half a turn: the rule of `carry_geometry` for a slot that mirrors another). The goal's
     orientation is the same in both (a window's head is up at every opening). Other sizes are refused."""
-    signs, joint_signs = state_mirror_signs(49), torch.tensor(JOINT_MIRROR_SIGNS)
+    signs, joint_signs = state_mirror_signs(WITH_INSTALL), torch.tensor(JOINT_MIRROR_SIGNS)
     kwargs = dict(control_mode="pd_joint_delta_pos", obs_install_offset=True)
     left = make_env("WindowInstallation-v1", goal_slot_weights={"window": (1.0, 0.0, 0.0)}, **kwargs)
     right = make_env("WindowInstallation-v1", goal_slot_weights={"window": (0.0, 0.0, 1.0)}, **kwargs)
@@ -39,7 +49,7 @@ def test_the_mirror_image_of_a_window_episode_at_y_minus_085_is_one_at_plus_085_
     pose = lu.obj.pose.raw_pose * torch.tensor([1.0, -1.0, 1.0, 1.0, -1.0, 1.0, -1.0])
     ru.obj.set_pose(Pose.create_from_pq(pose[:, :3], pose[:, 3:]))
     obs_r = ru.get_obs()
-    same = torch.ones(49, dtype=torch.bool)
+    same = torch.ones(WITH_INSTALL, dtype=torch.bool)
     same[GOAL_QUAT] = False
     g = torch.Generator().manual_seed(0)
     for step in range(25):
@@ -49,14 +59,14 @@ def test_the_mirror_image_of_a_window_episode_at_y_minus_085_is_one_at_plus_085_
         obs_l, *_ = left.step(action)
         obs_r, *_ = right.step(action * joint_signs)
     assert float(obs_l[0, :6].abs().sum()) > 0.5, "the arm moved"
-    for dim in (42, 51, 53):
+    for dim in (STATE_SIZE - 1, STATE_SIZE + 8, STATE_SIZE + 10):
         with pytest.raises(ValueError, match="state observation"):
             state_mirror_signs(dim)
     left.close()
     right.close()
 
 
-def _obs(n: int, obs_dim: int = 55) -> torch.Tensor:
+def _obs(n: int, obs_dim: int = WITH_BOTH) -> torch.Tensor:
     """Random observations with a task one-hot: windows with the goal at y > 0, at y <= 0, and ceiling panels."""
     x = torch.randn(n, obs_dim, generator=torch.Generator().manual_seed(1))
     x[:, STATE_TASK_START:STATE_TASK_START + 3] = 0
@@ -73,13 +83,13 @@ def test_a_mirrored_policy_acts_on_windows_beyond_y0_as_the_plain_one_on_their_m
     goal lies at y > 0 are the plain networks' (same weights) on the mirror image of the state, the mean and the
     action mirrored back; on every other state they are the plain networks'. The mirror needs joint control."""
     args = ppo.Args.of(hidden_size=32, curiosity="none", bounded_mean=True)
-    plain = make_agent(args, 55, 6)
-    mirrored = make_agent(ppo.Args.of(hidden_size=32, curiosity="none", bounded_mean=True, mirror_twins=True), 55, 6)
+    plain = make_agent(args, WITH_BOTH, 6)
+    mirrored = make_agent(ppo.Args.of(hidden_size=32, curiosity="none", bounded_mean=True, mirror_twins=True), WITH_BOTH, 6)
     mirrored.load_state_dict(plain.state_dict())
     x = _obs(30)
     mirrored.obs_rms.update(mirrored.features(x))
     plain.obs_rms.load_state_dict(mirrored.obs_rms.state_dict())
-    signs, joint_signs = state_mirror_signs(55), torch.tensor(JOINT_MIRROR_SIGNS)
+    signs, joint_signs = state_mirror_signs(WITH_BOTH), torch.tensor(JOINT_MIRROR_SIGNS)
     beyond = torch.tensor([True, False, False]).repeat(10)
     actions = torch.rand(30, 6, generator=torch.Generator().manual_seed(2)) * 2 - 1
     with torch.no_grad():
@@ -135,10 +145,10 @@ def test_with_the_mirror_branch_the_joint_moves_are_the_twins_mirror_image_until
     installation and along the start path) included, over random mirrored steps; once the element is held (the
     nominal hold in both), the joint moves to the installation differ in joint 6 alone, by half a turn: the turn the
     carry has to add."""
-    signs, joint_signs = state_mirror_signs(55), torch.tensor(JOINT_MIRROR_SIGNS)
+    signs, joint_signs = state_mirror_signs(WITH_BOTH), torch.tensor(JOINT_MIRROR_SIGNS)
     left, right = _twin_envs(control_mode="pd_joint_delta_pos", obs_install_offset=True, obs_path_offset=True)
     lu, ru = left.unwrapped, right.unwrapped
-    same = torch.ones(55, dtype=torch.bool)
+    same = torch.ones(WITH_BOTH, dtype=torch.bool)
     same[GOAL_QUAT] = False
     g = torch.Generator().manual_seed(0)
     for step in range(15):
@@ -162,11 +172,11 @@ def test_the_canonical_reach_shows_a_mirrored_window_its_goal_orientation_as_it_
     with the goal's orientation as it is (what the twin opening shows), after the grasp as the plain mirror image;
     other states as they are. It needs the mirror."""
     args = ppo.Args.of(hidden_size=32, curiosity="none", bounded_mean=True, mirror_twins=True)
-    honest = make_agent(args, 55, 6)
-    canonical = make_agent(args.replace(mirror_canonical_reach=True), 55, 6)
+    honest = make_agent(args, WITH_BOTH, 6)
+    canonical = make_agent(args.replace(mirror_canonical_reach=True), WITH_BOTH, 6)
     x = _obs(30)
     x[:, STATE_IS_GRASPED] = torch.tensor([0.0, 1.0]).repeat(15)
-    signs = state_mirror_signs(55)
+    signs = state_mirror_signs(WITH_BOTH)
     beyond = torch.tensor([True, False, False]).repeat(10)
     before = beyond & (x[:, STATE_IS_GRASPED] < 0.5)
     expected = torch.where(beyond[:, None], x * signs, x)
@@ -198,17 +208,17 @@ def test_held_the_half_turn_view_of_a_window_installed_at_plus_085_is_a_window_i
     obs_r, _ = right.reset(seed=1)
     obs_l, _ = left.reset(seed=1)
     args = ppo.Args.of(hidden_size=32, curiosity="none", mirror_twins=True, mirror_canonical_reach=True)
-    view = make_agent(args.replace(mirror_held_half_turn=True), 55, 6).mirror
+    view = make_agent(args.replace(mirror_held_half_turn=True), WITH_BOTH, 6).mirror
     seen = view.observation(obs_r)[0]
     w = ELEMENT_KINDS.index("window")
     assert float(obs_r[0, STATE_IS_GRASPED]) == 1.0
     assert torch.allclose(seen[:6], torch.tensor(install_configurations()[w, 0, 0]), atol=1e-3)
-    for quat in (slice(16, 20), GOAL_QUAT, slice(33, 37)):  # the plate, the goal, the window: the same rotations
+    for quat in (slice(s, s + 4) for s in STATE_QUATERNION_STARTS):  # the plate, the goal, the window: the same rotations
         assert float((seen[quat] * obs_l[0, quat]).sum().abs()) == pytest.approx(1.0, abs=1e-3)
-    assert torch.allclose(seen[43:], torch.zeros(12), atol=1e-3)
+    assert torch.allclose(seen[STATE_SIZE:], torch.zeros(12), atol=1e-3)
     before = _obs(3)
     before[:, STATE_IS_GRASPED] = 0
-    canonical_reach = make_agent(args, 55, 6).mirror
+    canonical_reach = make_agent(args, WITH_BOTH, 6).mirror
     assert torch.equal(view.observation(before), canonical_reach.observation(before))
     with pytest.raises(SystemExit, match="mirror-canonical-reach"):
         ppo.validate(ppo.Args.of(mirror_twins=True, mirror_held_half_turn=True))

@@ -18,9 +18,10 @@ import numpy as np
 import pytest
 import torch
 
-from baselines.ppo import evaluation, ppo, update
+from baselines.ppo import checkpoints, evaluation, ppo, update
 from baselines.ppo.args import GROUPS, Args, ControlMode, command_line
 from ms_construction.curriculum import stage_tolerances
+from ms_construction.envs.state_layout import STATE_SIZE
 from ms_construction.vector_env import CPUVectorEnv
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -208,8 +209,8 @@ def test_checkpoint_for_other_shapes_gives_a_clear_error(tmp_path):
     args = tiny_args(tmp_path, exp_name="shape", total_timesteps=80, curriculum=("cp4",), curiosity="none")
     ppo.main(args)
     path = tmp_path / "shape" / "checkpoint.pt"
-    with pytest.raises(SystemExit, match="observations of size 43 and actions of size 6"):
-        ppo.load_checkpoint(str(path), obs_dim=43, act_dim=3, env_id="Flooring-v1")
+    with pytest.raises(SystemExit, match=f"observations of size {STATE_SIZE} and actions of size 6"):
+        ppo.load_checkpoint(str(path), obs_dim=STATE_SIZE, act_dim=3, env_id="Flooring-v1")
     with pytest.raises(SystemExit, match="control mode"):
         ppo.main(tiny_args(tmp_path, exp_name="shape2", checkpoint=str(path), control_mode="pd_ee_delta_pos", evaluate=True))
 
@@ -348,8 +349,10 @@ def fixed_batch(n=500, obs_dim=43, act_dim=6) -> dict:
 
 
 @pytest.mark.parametrize("case", list(REFERENCE_UPDATES))
-def test_one_update_on_a_fixed_batch_gives_the_losses_and_weights_of_the_original_update(case):
+def test_one_update_on_a_fixed_batch_gives_the_losses_and_weights_of_the_original_update(case, monkeypatch):
     setting, expected = REFERENCE_UPDATES[case]
+    # the references were computed on the observation layout before paneling's task slot: its quaternions there
+    monkeypatch.setattr(checkpoints, "STATE_QUATERNION_STARTS", (16, 23, 33))
     threads = torch.get_num_threads()
     torch.set_num_threads(1)
     try:
@@ -449,8 +452,6 @@ def test_a_checkpoint_of_an_earlier_version_loads_through_the_checkpoint_api(tmp
     """Checkpoints written before baselines/ppo/checkpoints.py saved their args under earlier names and meanings
     (`finite_horizon_gae`, a boolean `norm_adv`, `icm` for the normalized variant before ML-Agents' curiosity with
     its `icm_gamma` took the name): such args, on the shipped clone's weights, load under today's."""
-    from baselines.ppo import checkpoints
-
     ckpt = torch.load(ROOT / "assets/checkpoints/general_agent_clone_direct.pt", map_location="cpu", weights_only=False)
     old = {k: v for k, v in ckpt["args"].items() if k not in ("bootstrap_at_done", "icm_gamma")}
     old.update(finite_horizon_gae=True, norm_adv=True, curiosity="icm")
@@ -458,7 +459,8 @@ def test_a_checkpoint_of_an_earlier_version_loads_through_the_checkpoint_api(tmp
     agent = {k: v[:1] if k.startswith(last + ".") else v for k, v in ckpt["agent"].items()}
     path = tmp_path / "old.pt"
     torch.save({**ckpt, "args": old, "agent": agent}, path)
-    ckpt = checkpoints.load_checkpoint(path, env_id="Flooring-v1", obs_dim=43, act_dim=6, control_mode="pd_joint_delta_pos")
+    ckpt = checkpoints.load_checkpoint(path, env_id="Flooring-v1", obs_dim=STATE_SIZE, act_dim=6,
+                                       control_mode="pd_joint_delta_pos")
     assert ckpt["args"]["bootstrap_at_done"] == "truncated" and "finite_horizon_gae" not in ckpt["args"]
     assert ckpt["args"]["norm_adv"] == "minibatch"
     assert ckpt["args"]["curiosity"] == "icm_normalized", "before ML-Agents' curiosity, icm meant the normalized variant"
@@ -469,7 +471,7 @@ def test_a_checkpoint_of_an_earlier_version_loads_through_the_checkpoint_api(tmp
     for k, v in agent.state_dict().items():
         assert torch.equal(v, ckpt["agent"][k]), k
     with pytest.raises(SystemExit, match="control mode pd_joint_delta_pos, not pd_joint_pos"):
-        checkpoints.load_checkpoint(path, env_id="Flooring-v1", obs_dim=43, act_dim=6, control_mode="pd_joint_pos")
+        checkpoints.load_checkpoint(path, env_id="Flooring-v1", obs_dim=STATE_SIZE, act_dim=6, control_mode="pd_joint_pos")
 
 
 @pytest.mark.parametrize("damage", ["random bytes", "truncated", "not a dict"])
@@ -521,8 +523,8 @@ def test_near_goal_starts_widen_per_task_with_success_and_a_resumed_run_goes_on_
     assert float(rows[0]["near_goal_radius_flooring"]) == 0.0 and int(rows[0]["near_goal_episodes"]) > 0
     assert float(rows[0]["near_goal_place_success"]) == 1.0
     assert progress.near_goal_radius[:2] == [0.0, 0.0] and progress.near_goal_radius[2] >= 0.05
-    assert ("set_near_goal_starts", (1.0, (0.0, 0.0, 0.0), None)) in calls
-    assert ("set_near_goal_starts", (1.0, (0.0, 0.0, 0.05), None)) in calls
+    assert ("set_near_goal_starts", (1.0, (0.0, 0.0, 0.0, 0.0), None)) in calls  # a radius per task type, paneling's too
+    assert ("set_near_goal_starts", (1.0, (0.0, 0.0, 0.05, 0.0), None)) in calls
     ckpt = torch.load(tmp_path / "near" / "checkpoint.pt", weights_only=False)
     assert ckpt["progress"]["near_goal_radius"] == progress.near_goal_radius
     assert ckpt["progress"]["near_goal_recent"] == progress.near_goal_recent and len(progress.near_goal_recent[2]) < 4
@@ -558,7 +560,7 @@ def test_reach_starts_widen_per_goal_slot_as_they_grasp_from_their_side_and_a_re
     monkeypatch.setattr(ppo, "call_task", lambda envs, name, *a: calls.append((name, a)))  # no envs here
     args = Args.of(env_id="ConstructionPickPlace-v1", reach_start_share=1.0, reach_start_radius=0.1, near_goal_window=4,
                    near_goal_promote=0.5, near_goal_step=0.1)
-    progress = ppo.Progress(reach_start_radius=[0.1] * 9, reach_start_recent=[[] for _ in range(9)])
+    progress = ppo.Progress(reach_start_radius=[0.1] * 12, reach_start_recent=[[] for _ in range(12)])  # paneling's 3 last
     episodes = {key: [0.0] * 9 for key in ppo.EPISODE_STATS.values()}
     # windows: slot 0 grasps from its side 3 of 4 times, slot 2 never; a floor panel from an ordinary reset places
     episodes.update(success=[0.0] * 6 + [1.0, 0.0, 0.0], task_id=[1, 1, 1, 1, 1, 1, 2, 0, 1],
@@ -568,28 +570,28 @@ def test_reach_starts_widen_per_goal_slot_as_they_grasp_from_their_side_and_a_re
     row = ppo.episode_columns(args, progress, episodes, envs=None)
     assert row["reach_start_episodes"] == 8 and row["reach_start_grasp_success"] == pytest.approx(3 / 8)
     assert row["ordinary_place_flooring"] == 1.0 and "ordinary_place_window" not in row, "reach starts are not ordinary"
-    widened = [0.1, 0.1, 0.1, 0.2, 0.1, 0.1, 0.1, 0.1, 0.1]
+    widened = [0.1, 0.1, 0.1, 0.2, 0.1, 0.1, 0.1, 0.1, 0.1, 0.1, 0.1, 0.1]
     assert progress.reach_start_radius == widened, "the slot that never grasps from its side does not widen"
     assert row["reach_start_radius_window0"] == 0.1, "the row holds the radius its episodes started at"
     assert progress.reach_start_recent[3] == [] and progress.reach_start_recent[5] == [0.0, 0.0, 0.0]
-    assert calls == [("set_reach_starts", ((1.0, 1.0, 1.0), tuple(widened)))]
+    assert calls == [("set_reach_starts", ((1.0, 1.0, 1.0, 1.0), tuple(widened)))]
 
     monkeypatch.setattr(ppo, "call_task", lambda envs, name, *a: (calls.append((name, a)), original(envs, name, *a))[1])
     calls.clear()
     run = tiny_args(tmp_path, exp_name="reach", reward_mode="normalized_dense", curiosity="none", curriculum=("cp4",),
                     reach_start_share=1.0, reach_start_radius=0.0, reach_start_tasks=("flooring",), total_timesteps=80)
     ppo.main(run)
-    assert ("set_reach_starts", ((0.0, 0.0, 1.0), (0.0,) * 9)) in calls, "the share for --reach-start-tasks alone"
+    assert ("set_reach_starts", ((0.0, 0.0, 1.0, 0.0), (0.0,) * 12)) in calls, "the share for --reach-start-tasks alone"
     assert read_csv(tmp_path / "reach" / "progress.csv")[-1]["reach_start_radius_flooring2"] == "0.0"
     path = tmp_path / "reach" / "checkpoint.pt"
     ckpt = torch.load(path, weights_only=False)
-    assert ckpt["progress"]["reach_start_radius"] == [0.0] * 9
-    radii, recent = [0.1 * i for i in range(9)], [[1.0]] + [[] for _ in range(8)]
+    assert ckpt["progress"]["reach_start_radius"] == [0.0] * 12
+    radii, recent = [round(i / 11, 6) for i in range(12)], [[1.0]] + [[] for _ in range(11)]
     ckpt["progress"]["reach_start_radius"], ckpt["progress"]["reach_start_recent"] = radii, recent
     torch.save(ckpt, path)
     calls.clear()
     ppo.main(ppo.Args.of(resume=str(path), extend=True, total_timesteps=120, curriculum=("cp4",)))
-    assert next(a for name, a in calls if name == "set_reach_starts") == ((0.0, 0.0, 1.0), tuple(radii))
+    assert next(a for name, a in calls if name == "set_reach_starts") == ((0.0, 0.0, 1.0, 0.0), tuple(radii))
     assert torch.load(path, weights_only=False)["progress"]["reach_start_recent"] == recent
 
 
@@ -607,7 +609,7 @@ def test_failure_task_weights_sample_more_of_what_fails_and_a_resumed_run_sets_t
     assert failure_task_weights(Args.of(failure_task_weights=4), progress, [], []) == pytest.approx([1 / 3] * 3)
     weights = failure_task_weights(Args.of(failure_task_weights=4), progress, [0, 0, 1, 2, 2, 2, 2, 2],
                                    [1, 1, 0, 1, 1, 0, 0, 0])
-    assert progress.ordinary_recent == [[1.0, 1.0], [0.0], [1.0, 0.0, 0.0, 0.0]]  # the last 4 of each type
+    assert progress.ordinary_recent == [[1.0, 1.0], [0.0], [1.0, 0.0, 0.0, 0.0], []]  # the last 4 of each type
     raw = [FAILURE_WEIGHT_FLOOR, 1 + FAILURE_WEIGHT_FLOOR, 0.75 + FAILURE_WEIGHT_FLOOR]
     assert weights == pytest.approx([w / sum(raw) for w in raw])
 
@@ -624,8 +626,8 @@ def test_failure_task_weights_sample_more_of_what_fails_and_a_resumed_run_sets_t
     assert list(first[0]) == ["ceiling", "window", "flooring"] and list(first[0].values()) == pytest.approx([1 / 3] * 3)
     path = tmp_path / "weights" / "checkpoint.pt"
     ckpt = torch.load(path, weights_only=False)
-    assert ckpt["progress"]["ordinary_recent"] == [[], [], []]  # no ordinary episode ends in 40 steps
-    ckpt["progress"]["ordinary_recent"] = [[1.0, 1.0], [0.0], [1.0, 0.0]]  # as if some had
+    assert ckpt["progress"]["ordinary_recent"] == [[], [], [], []]  # no ordinary episode ends in 40 steps
+    ckpt["progress"]["ordinary_recent"] = [[1.0, 1.0], [0.0], [1.0, 0.0], []]  # as if some had
     torch.save(ckpt, path)
     calls.clear()
     ppo.main(ppo.Args.of(resume=str(path), extend=True, total_timesteps=120, curriculum=("cp4",)))

@@ -132,7 +132,8 @@ def test_the_report_tables_a_confirmation_beside_the_clone_where_a_run_has_one(t
 def test_a_run_folder_s_confirmation_names_the_snapshot_and_the_agent_shipped_then(tmp_path):
     run = tmp_path / "refine9"
     (run / "ppo").mkdir(parents=True)
-    torch.save(dict(args=dict(learning_rate=3e-5), progress=dict(global_step=200_000), agent={}, obs_dim=43, act_dim=6),
+    torch.save(dict(args=dict(learning_rate=3e-5), progress=dict(global_step=200_000), agent={}, obs_dim=43, act_dim=6,
+                    task_slots=4),
                run / "ppo" / "checkpoint.pt")
     for name, success in [("val200_clone", 0.96), ("val200_200000", 0.97), ("confirm200_clone", 0.95),
                           ("confirm200_200000", 0.99), ("confirm200_shipped_fe56ed4d", 0.97)]:

@@ -12,6 +12,7 @@ from baselines.ppo.checkpoints import load_checkpoint, load_policy
 from baselines.ppo.checkpoints import make_agent
 from baselines.ppo import start_states
 from baselines.ppo.start_states import StartFromStates
+from ms_construction.envs.state_layout import STATE_SIZE
 
 ROOT = Path(__file__).resolve().parents[1]
 CLONE = ROOT / "assets/checkpoints/general_agent_clone_direct.pt"
@@ -28,11 +29,11 @@ def residual_args(tmp_path, **kw) -> ppo.Args:
 def test_the_residual_starts_as_the_clone_and_trains_only_its_own_weights():
     base = load_checkpoint(CLONE)
     torch.manual_seed(0)
-    agent = make_agent(dict(base["args"], residual_of=str(CLONE), residual_scale=0.1, curiosity="none"), 43, 6,
+    agent = make_agent(dict(base["args"], residual_of=str(CLONE), residual_scale=0.1, curiosity="none"), STATE_SIZE, 6,
                        base_args=base["args"])
     agent.base.load_state_dict(base["agent"])
     clone, _ = load_policy(CLONE, "Flooring-v1")
-    obs = torch.randn(64, 43)
+    obs = torch.randn(64, STATE_SIZE)
     with torch.no_grad():
         assert torch.equal(agent.get_action(obs, deterministic=True), clone.get_action(obs, deterministic=True))
         action, logprob, _, value = agent.get_action_and_value(obs)
@@ -47,16 +48,16 @@ def test_a_residual_that_sees_the_time_starts_as_the_clone_which_does_not():
     base = load_checkpoint(CLONE)
     torch.manual_seed(0)
     agent = make_agent(dict(base["args"], residual_of=str(CLONE), residual_scale=0.1, curiosity="none",
-                            obs_elapsed_time=True), 44, 6, base_args=base["args"])
+                            obs_elapsed_time=True), STATE_SIZE + 1, 6, base_args=base["args"])
     agent.base.load_state_dict(base["agent"])
     clone, _ = load_policy(CLONE, "Flooring-v1")
-    obs = torch.randn(64, 44)
+    obs = torch.randn(64, STATE_SIZE + 1)
     with torch.no_grad():
         assert torch.equal(agent.get_action(obs, deterministic=True), clone.get_action(obs[:, :-1], deterministic=True))
         late = obs.clone()
         late[:, -1] = 0.9
         assert not torch.equal(agent.get_value(obs), agent.get_value(late)), "the critic sees the time"
-    assert agent.residual_mean[0].in_features == agent.critic[0].in_features == 43 + 2 * 3 + 6 + 1
+    assert agent.residual_mean[0].in_features == agent.critic[0].in_features == STATE_SIZE + 2 * 3 + 6 + 1
 
 
 def test_bootstrapping_at_terminated_ends_keeps_success_and_drops_the_time_limit():
@@ -71,11 +72,11 @@ def test_the_l2_anchor_pulls_the_correction_back_to_the_clone():
     only the correction, and towards zero (the clone's own action)."""
     base = load_checkpoint(CLONE)
     torch.manual_seed(0)
-    agent = make_agent(dict(base["args"], residual_of=str(CLONE), residual_scale=0.1, curiosity="none"), 43, 6,
+    agent = make_agent(dict(base["args"], residual_of=str(CLONE), residual_scale=0.1, curiosity="none"), STATE_SIZE, 6,
                        base_args=base["args"])
     agent.base.load_state_dict(base["agent"])
     torch.nn.init.normal_(agent.residual_mean[-1].weight, std=0.5)  # a correction that has moved away from zero
-    obs = torch.randn(256, 43)
+    obs = torch.randn(256, STATE_SIZE)
     with torch.no_grad():
         actions, logprobs, _, values = agent.get_action_and_value(obs)
     batch = dict(obs=obs, next_obs=obs, actions=actions, logprobs=logprobs, advantages=torch.zeros(256),
@@ -94,11 +95,11 @@ def test_a_second_round_residual_starts_as_the_refined_agent_and_keeps_it_frozen
     refined = load_checkpoint(REFINED)
     assert refined["base_args"] is not None, "the shipped agent is a residual on the clone"
     torch.manual_seed(0)
-    agent = make_agent(dict(refined["args"], residual_of=str(REFINED), obs_elapsed_time=False), 43, 6,
+    agent = make_agent(dict(refined["args"], residual_of=str(REFINED), obs_elapsed_time=False), STATE_SIZE, 6,
                        base_args={**refined["args"], "base_args": refined["base_args"]})
     agent.base.load_state_dict(refined["agent"])
     shipped, _ = load_policy(REFINED, "Flooring-v1")
-    obs = torch.randn(64, 43)
+    obs = torch.randn(64, STATE_SIZE)
     with torch.no_grad():
         assert torch.equal(agent.get_action(obs, deterministic=True), shipped.get_action(obs, deterministic=True))
     assert not any(p.requires_grad for p in agent.base.parameters())
@@ -117,7 +118,7 @@ def test_a_second_round_residual_starts_as_the_refined_agent_and_keeps_it_frozen
 def test_a_residual_that_sees_the_time_is_refused_as_a_base(tmp_path):
     timed = load_checkpoint(REFINED)
     timed["args"] = dict(timed["args"], obs_elapsed_time=True)
-    timed["obs_dim"] = 44
+    timed["obs_dim"] = STATE_SIZE + 1
     torch.save(timed, tmp_path / "timed.pt")
     with pytest.raises(SystemExit, match="elapsed time cannot be another residual's base"):
         ppo.main(residual_args(tmp_path, residual_of=str(tmp_path / "timed.pt")))
@@ -134,7 +135,7 @@ def test_a_short_residual_run_changes_the_policy_resumes_and_evaluates(tmp_path,
     for k, v in base["agent"].items():
         assert torch.equal(ckpt["agent"][f"base.{k}"], v), f"the base stays as it was: {k}"
     assert ckpt["agent"]["residual_mean.6.weight"].abs().sum() > 0, "the correction has learnt"
-    assert ckpt["obs_dim"] == 43 + timed
+    assert ckpt["obs_dim"] == STATE_SIZE + timed
     progress = ppo.main(residual_args(tmp_path, total_timesteps=160, **kw).replace(resume=str(ckpt_path), extend=True))
     assert progress.global_step == 160
     _, env_kwargs = load_policy(ckpt_path, "Flooring-v1")  # what scripts/evaluate.py loads
@@ -216,12 +217,13 @@ def residual_snapshot(path: Path, shift: float, base_shift: float = 0.0) -> Path
     by `base_shift`)."""
     base = load_checkpoint(CLONE)
     args = dict(base["args"], residual_of=str(CLONE), residual_scale=0.1, curiosity="none")
-    agent = make_agent(args, 43, 6, base_args=base["args"])
+    agent = make_agent(args, STATE_SIZE, 6, base_args=base["args"])
     agent.base.load_state_dict(base["agent"])
     state = {k: v if k.startswith("base.") or not v.is_floating_point() else torch.full_like(v, shift)
              for k, v in agent.state_dict().items()}
     state["base.actor_mean.0.weight"] = state["base.actor_mean.0.weight"] + base_shift
-    torch.save(dict(args=args, base_args=base["args"], obs_dim=43, act_dim=6, agent=state, progress={}), path)
+    torch.save(dict(args=args, base_args=base["args"], obs_dim=STATE_SIZE, act_dim=6, task_slots=4, agent=state, progress={}),
+               path)
     return path
 
 

@@ -15,7 +15,7 @@ def test_an_ended_episode_is_reset_in_the_same_step_and_reported_in_final_info()
         # the workers ignore Ctrl-C (their creator stops them); the creating process keeps its handlers
         assert [signal.getsignal(s) for s in (signal.SIGINT, signal.SIGTERM)] == handlers
         obs, _ = envs.reset(seed=[0, 1])
-        assert obs.shape == (2, 43) and obs.dtype == torch.float32
+        assert obs.shape == (2, 44) and obs.dtype == torch.float32
         zeros = torch.zeros(2, *envs.single_action_space.shape)
         for _ in range(2):
             obs, reward, terminated, truncated, info = envs.step(zeros)
@@ -29,7 +29,7 @@ def test_an_ended_episode_is_reset_in_the_same_step_and_reported_in_final_info()
         assert "success_once" in info["final_info"]["episode"] and "picked" in info["final_info"]
         # the final observation is the ended episode's (it moved on from the step before); the
         # returned one is the next episode's first, in an env already reset
-        assert info["final_observation"].shape == (2, 43) and not torch.equal(info["final_observation"], obs)
+        assert info["final_observation"].shape == (2, 44) and not torch.equal(info["final_observation"], obs)
         assert torch.allclose(info["final_observation"][:, :6], before[:, :6], atol=0.2)
         assert [int(t) for t in envs.call("elapsed_steps")] == [0, 0]
     finally:

@@ -55,7 +55,7 @@ class RunArgs:
     log_dir: str = "runs"
     """where run folders go."""
     env_id: str = "ConstructionPickPlace-v1"
-    """the environment: the general task or one of the three single tasks (ms_construction.envs.ENV_IDS)."""
+    """the environment: the general task or one of the single tasks (ms_construction.envs.ENV_IDS)."""
     control_mode: ControlMode = "pd_joint_delta_pos"
     """the arm's controller."""
     reward_mode: RewardMode = "normalized_dense"

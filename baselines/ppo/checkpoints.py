@@ -26,8 +26,14 @@ from baselines.ppo import curiosity
 from baselines.ppo.networks import Agent, CanonicalReach, Mirror
 from baselines.ppo.residual import ResidualAgent
 from ms_construction.envs.carry_geometry import JOINT_MIRROR_SIGNS
-from ms_construction.envs.state_layout import STATE_IS_GRASPED, STATE_QUATERNION_STARTS, STATE_TASK_START, state_mirror_signs
-from ms_construction.parameters import ELEMENT_KINDS
+from ms_construction.envs.state_layout import (
+    STATE_IS_GRASPED,
+    STATE_QUATERNION_STARTS,
+    STATE_TASK_START,
+    TASK_SLOTS_BEFORE_PANELING,
+    state_mirror_signs,
+)
+from ms_construction.parameters import ELEMENT_KINDS, PAPER_KINDS
 
 WHAT_A_CHECKPOINT_IS = ("a checkpoint is the .pt file that baselines/ppo/ppo.py or baselines/ppo/bc.py writes "
                         "(torch.save of a dict with args, obs_dim, act_dim and the agent's weights)")
@@ -137,7 +143,7 @@ def save_checkpoint(path: Path, args, progress: Progress, agent: Agent, optimize
     bc.py's record of its demonstrations) are stored beside the run's state."""
     state = dict(
         args=args.flat(), progress=dataclasses.asdict(progress), obs_dim=obs_dim, act_dim=act_dim,
-        agent=agent.state_dict(), optimizer=None if optimizer is None else optimizer.state_dict(),
+        task_slots=len(ELEMENT_KINDS), agent=agent.state_dict(), optimizer=None if optimizer is None else optimizer.state_dict(),
         icm=None if icm is None else icm.state_dict(),
         icm_optimizer=None if icm_optimizer is None else icm_optimizer.state_dict(),
         rng=dict(python=random.getstate(), numpy=np.random.get_state(), torch=torch.get_rng_state(),
@@ -178,6 +184,7 @@ def load_checkpoint(path, option: str = "--checkpoint", env_id: Optional[str] = 
     ckpt["args"] = upgrade_args(ckpt["args"])
     if ckpt.get("base_args") is not None:
         ckpt["base_args"] = upgrade_args(ckpt["base_args"])
+    ckpt = with_task_slots(ckpt)
     if obs_dim is not None:
         check_fit(ckpt, path, env_id, obs_dim, act_dim, control_mode)
     return ckpt
@@ -195,6 +202,100 @@ def check_fit(ckpt: dict, path, env_id: str, obs_dim: int, act_dim: int, control
     if control_mode is not None and ckpt["args"]["control_mode"] != control_mode:
         raise SystemExit(f"checkpoint {path} was trained in control mode {ckpt['args']['control_mode']}, "
                          f"not {control_mode}: use --control-mode {ckpt['args']['control_mode']}")
+
+
+def _insert(t: torch.Tensor, dim: int, at: int, fill: float) -> torch.Tensor:
+    shape = list(t.shape)
+    shape[dim] = 1
+    return torch.cat([t.narrow(dim, 0, at), torch.full(shape, fill, dtype=t.dtype), t.narrow(dim, at, t.shape[dim] - at)], dim)
+
+
+def _feature_index(args: dict, obs_dim: int, index: int) -> int:
+    """Where observation entry `index` is among the features of the Agent `args` describes (`rotation_features`
+    puts six numbers where each quaternion's four were)."""
+    from baselines.ppo.networks import _feature_layout
+
+    if not args.get("rotation_features"):
+        return index
+    _, order = _feature_layout(tuple(STATE_QUATERNION_STARTS), obs_dim, torch.device("cpu"))
+    return order.tolist().index(index)
+
+
+def _widen_policy(agent: dict, prefix: str, args: dict, base_args: Optional[dict], obs_dim: int, index: int,
+                  widened: dict) -> int:
+    """Give the policy under `prefix` in `agent` (a state dict, changed in place) a zero input for new observation
+    entry `index` (obs_dim: the observation's size with it); returns where the entry is among its innermost Agent's
+    features. `widened` collects {parameter name: column inserted}."""
+    if args.get("residual_of"):
+        time_input = int(bool(args.get("obs_elapsed_time")))
+        at = _widen_policy(agent, prefix + "base.", base_args, base_args.get("base_args"), obs_dim - time_input,
+                           index, widened)
+    else:
+        at = _feature_index(args, obs_dim, index)
+        for key, fill in (("obs_rms.mean", 0.0), ("obs_rms.var", 1.0)):
+            agent[prefix + key] = _insert(agent[prefix + key], 0, at, fill)
+    for key in ("critic.0.weight", "actor_mean.0.weight", "residual_mean.0.weight"):
+        if prefix + key in agent:
+            agent[prefix + key] = _insert(agent[prefix + key], 1, at, 0.0)
+            widened[prefix + key] = at
+    return at
+
+
+def _widen_adam(state: dict, names: list[str], widened: dict) -> dict:
+    """An Adam state dict whose parameters (named `names`, in the optimizer's order) gained the `widened` columns:
+    zero moments there (a zero input's weight has had zero gradient), so the next steps are those it would take."""
+    state = {**state, "state": dict(state["state"])}
+    for i, name in enumerate(names):
+        if name in widened and i in state["state"]:
+            moments = dict(state["state"][i])
+            for key in ("exp_avg", "exp_avg_sq"):
+                moments[key] = _insert(moments[key], 1, widened[name], 0.0)
+            state["state"][i] = moments
+    return state
+
+
+def _progress_per_task_type(progress: Optional[dict], args: dict) -> Optional[dict]:
+    """A saved Progress whose per-task-type (and per-goal-slot) lists were of the paper's three task types, with
+    entries for the new ones where their curricula would start (the radius the run started its own at, empty windows)."""
+    from baselines.ppo.start_states import GOAL_SLOTS
+
+    if progress is None:
+        return None
+    progress, old, new = dict(progress), len(PAPER_KINDS), len(ELEMENT_KINDS)
+    for key, per, fill in (("near_goal_radius", 1, args.get("near_goal_radius")), ("near_goal_recent", 1, None),
+                           ("ordinary_recent", 1, None), ("reach_start_radius", GOAL_SLOTS, args.get("reach_start_radius")),
+                           ("reach_start_recent", GOAL_SLOTS, None)):
+        if progress.get(key) is not None and len(progress[key]) == old * per:
+            progress[key] = list(progress[key]) + [[] if fill is None else fill for _ in range((new - old) * per)]
+    return progress
+
+
+def with_task_slots(ckpt: dict) -> dict:
+    """`ckpt` for today's observation, whose task one-hot has a slot per task type of ELEMENT_KINDS: a checkpoint
+    saved before paneling became the fourth type (its one-hot had TASK_SLOTS_BEFORE_PANELING slots) gets a zero
+    input weight for the new slot in the first layer of every network that reads the observation (policy, value,
+    a residual's base, curiosity's encoder), statistics of mean 0 and variance 1 for it, and zero optimizer moments
+    there. It acts, values and trains on the paper's three task types exactly as before (the slot is 0 in all of
+    them, and an input that is always 0 gets no gradient); on paneling, its task input is all zeros."""
+    if ckpt.get("task_slots", TASK_SLOTS_BEFORE_PANELING) == len(ELEMENT_KINDS):
+        return ckpt
+    index, obs_dim = STATE_TASK_START + TASK_SLOTS_BEFORE_PANELING, ckpt["obs_dim"] + 1
+    agent, widened = dict(ckpt["agent"]), {}
+    _widen_policy(agent, "", ckpt["args"], ckpt.get("base_args"), obs_dim, index, widened)
+    out = {**ckpt, "agent": agent, "obs_dim": obs_dim, "task_slots": len(ELEMENT_KINDS),
+           "progress": _progress_per_task_type(ckpt.get("progress"), ckpt["args"])}
+    if ckpt.get("optimizer") is not None:
+        net = make_agent(ckpt["args"], obs_dim, ckpt["act_dim"], ckpt.get("base_args"))
+        names = [name for name, p in net.named_parameters() if p.requires_grad]
+        out["optimizer"] = _widen_adam(ckpt["optimizer"], names, widened)
+    if ckpt.get("icm") is not None:
+        icm = dict(ckpt["icm"])
+        first = "encoder.0.0.weight"  # the encoder's first layer: the ICM's first parameter, as in its optimizer
+        icm[first] = _insert(icm[first], 1, index, 0.0)
+        out["icm"] = icm
+        if ckpt.get("icm_optimizer") is not None:
+            out["icm_optimizer"] = _widen_adam(ckpt["icm_optimizer"], [first], {first: index})
+    return out
 
 
 PATH_OFFSET_SIZE = 6

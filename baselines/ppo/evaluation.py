@@ -36,7 +36,7 @@ from tqdm import tqdm
 from baselines.ppo.checkpoints import load_checkpoint, load_policy
 from baselines.ppo.start_states import GOAL_SLOTS
 from ms_construction.curriculum import FINAL_STAGE, STAGE_NAMES, stage_tolerances
-from ms_construction.envs import ENV_IDS, TASK_ENV_IDS
+from ms_construction.envs import ENV_IDS, PAPER_TASK_ENV_IDS
 from ms_construction.envs.construction_env import ConstructionTaskEnv
 from ms_construction.parameters import ELEMENT_KINDS
 from ms_construction.reporting import update_section
@@ -343,7 +343,7 @@ def expert_place_success(path: Path = EXPERT_RESULTS) -> dict[str, str]:
 
 
 def main(args: Args) -> dict[str, dict]:
-    env_ids = tuple(TASK_ENV_IDS.values()) if args.all else (args.env_id,)
+    env_ids = tuple(PAPER_TASK_ENV_IDS.values()) if args.all else (args.env_id,)
     if not args.all and args.env_id not in ENV_IDS:
         raise SystemExit(f"--env-id {args.env_id}: unknown; allowed: {', '.join(ENV_IDS)}")
     if args.curriculum_stage not in STAGE_NAMES:

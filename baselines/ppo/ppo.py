@@ -57,7 +57,7 @@ from baselines.ppo.networks import Agent
 from baselines.ppo.update import adam, hold_log_std_floor, ppo_update, signal_advantages
 from baselines.ppo.start_states import GOAL_SLOTS, StartFromStates, failure_task_weights, widen_near_goal, widen_reach_starts
 from ms_construction.envs.start_states import NearGoalTimeLimit
-from ms_construction.parameters import ELEMENT_KINDS
+from ms_construction.parameters import ELEMENT_KINDS, PAPER_KINDS
 from ms_construction.vector_env import CPUVectorEnv
 
 Envs = Union[CPUVectorEnv, ManiSkillVectorEnv]
@@ -67,6 +67,13 @@ Envs = Union[CPUVectorEnv, ManiSkillVectorEnv]
 # ------------------------------------------------------------------------------------------------- #
 # Environments
 # ------------------------------------------------------------------------------------------------- #
+def env_kinds(env_id: str) -> tuple[str, ...]:
+    """The task types the env `env_id` samples (ELEMENT_KINDS order): the per-type options and columns are theirs."""
+    from mani_skill.utils.registration import REGISTERED_ENVS
+
+    return REGISTERED_ENVS[env_id].cls.TASKS
+
+
 def make_envs(args: Args, num_envs: int, device: torch.device, eval_mode: bool = False,
               video_dir: Optional[Path] = None) -> Envs:
     """`num_envs` envs with same-step resets and torch tensors in and out: worker processes on
@@ -76,10 +83,10 @@ def make_envs(args: Args, num_envs: int, device: torch.device, eval_mode: bool =
     if args.obstacles is not None:
         kwargs["obstacles"] = args.obstacles
     if args.task_weights is not None and not eval_mode:
-        kwargs["task_weights"] = dict(zip(ELEMENT_KINDS, args.task_weights))
+        kwargs["task_weights"] = dict(zip(PAPER_KINDS, args.task_weights))  # the general task's three types
     if args.starts.goal_slot_weights is not None and not eval_mode:
         w = args.starts.goal_slot_weights
-        kwargs["goal_slot_weights"] = {kind: w[3 * k:3 * k + 3] for k, kind in enumerate(ELEMENT_KINDS)}
+        kwargs["goal_slot_weights"] = {kind: w[3 * k:3 * k + 3] for k, kind in enumerate(PAPER_KINDS)}
     if args.starts.reach_start_share and not eval_mode:
         kwargs["reach_start_share"] = args.starts.reach_start_share
     # near-goal starts are set (and left off in evaluation) by set_near_goal_starts; this applies their time limit
@@ -369,12 +376,15 @@ def episode_columns(args: Args, progress: Progress, episodes: dict, envs: Envs) 
         if ((task == k) & ordinary).any():
             row[f"ordinary_place_{kind}"] = float(placed[(task == k) & ordinary].mean())
             row[f"ordinary_pick_{kind}"] = float(picked[(task == k) & ordinary].mean())
+    kinds = env_kinds(args.env_id)
     if args.failure_task_weights:
-        weights = failure_task_weights(args, progress, task[ordinary].tolist(), placed[ordinary].tolist())
-        call_task(envs, "set_task_weights", dict(zip(ELEMENT_KINDS, weights)))
-        row.update({f"task_weight_{kind}": w for kind, w in zip(ELEMENT_KINDS, weights)})
+        weights = failure_task_weights(args, progress, task[ordinary].tolist(), placed[ordinary].tolist(),
+                                       [ELEMENT_KINDS.index(kind) for kind in kinds])
+        call_task(envs, "set_task_weights", dict(zip(kinds, weights)))
+        row.update({f"task_weight_{kind}": w for kind, w in zip(kinds, weights)})
     if args.starts.near_goal_share > 0:
-        row.update(near_goal_radius=float(np.mean(progress.near_goal_radius)), near_goal_episodes=int(near.sum()),
+        radii = [progress.near_goal_radius[ELEMENT_KINDS.index(kind)] for kind in kinds]
+        row.update(near_goal_radius=float(np.mean(radii)), near_goal_episodes=int(near.sum()),
                    near_goal_place_success=float(placed[near].mean()) if near.any() else float("nan"),
                    ordinary_place_success=float(placed[ordinary].mean()) if ordinary.any() else float("nan"),
                    **{f"near_goal_radius_{kind}": r for kind, r in zip(ELEMENT_KINDS, progress.near_goal_radius)})
@@ -443,7 +453,9 @@ def train(run: Run) -> Progress:
             progress.reach_start_recent = [[] for _ in progress.reach_start_radius]
         call_task(envs, "set_reach_starts", reach_start_shares(args), tuple(progress.reach_start_radius))
     if args.failure_task_weights:  # where the run left them (uniform at its start)
-        call_task(envs, "set_task_weights", dict(zip(ELEMENT_KINDS, failure_task_weights(args, progress, [], []))))
+        kinds = env_kinds(args.env_id)
+        weights = failure_task_weights(args, progress, [], [], [ELEMENT_KINDS.index(kind) for kind in kinds])
+        call_task(envs, "set_task_weights", dict(zip(kinds, weights)))
 
     run_dir.mkdir(parents=True, exist_ok=True)
     writer = SummaryWriter(str(run_dir))

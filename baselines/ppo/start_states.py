@@ -24,6 +24,7 @@ from __future__ import annotations
 import multiprocessing as mp
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Sequence
 
 import gymnasium as gym
 import numpy as np
@@ -33,7 +34,7 @@ from tqdm import tqdm
 
 from baselines.ppo.args import Args as PPOArgs
 from baselines.ppo.checkpoints import Progress, load_policy
-from ms_construction.parameters import ELEMENT_KINDS
+from ms_construction.parameters import ELEMENT_KINDS, PAPER_KINDS
 from ms_construction.rollout import policy_episode
 
 FIRST_SEED = 430_000
@@ -87,7 +88,7 @@ def collect_failure_states(checkpoint: Path, episodes: int, env_id: str = "Const
     if not offsets or max(offsets) > 0:
         raise ValueError(f"offsets {offsets}: steps at or before (<= 0) the closest approach, at least one")
     jobs = [(str(checkpoint), env_id, seed + i, offsets) for i in range(episodes)]
-    bank, elapsed, failed, per_task = [], [], 0, np.zeros((3, 2), dtype=int)  # per task: episodes, failures
+    bank, elapsed, failed, per_task = [], [], 0, np.zeros((len(ELEMENT_KINDS), 2), dtype=int)  # per task: episodes, failures
     with mp.get_context("spawn").Pool(workers) as pool:
         bar = tqdm(pool.imap(_failure_states, jobs), total=episodes, desc="failure states", unit="ep")
         for r in bar:
@@ -171,11 +172,12 @@ FAILURE_WEIGHT_FLOOR = 0.1
 """--failure-task-weights: a task type that placed every recent episode still weighs this (it is still trained)."""
 
 
-def failure_task_weights(args: PPOArgs, progress: Progress, task_ids: list[int], placed: list[float]) -> list[float]:
-    """Record the ordinary-reset episodes that ended (their task types and whether they placed) and return the task
-    types' sampling probabilities: FAILURE_WEIGHT_FLOOR + each one's failure rate over its last
-    --failure-task-weights episodes (a type with none yet counts as failing all), normalized. The windows are part
-    of the progress: a resumed run goes on with them."""
+def failure_task_weights(args: PPOArgs, progress: Progress, task_ids: list[int], placed: list[float],
+                         kinds: Sequence[int] = tuple(range(len(PAPER_KINDS)))) -> list[float]:
+    """Record the ordinary-reset episodes that ended (their task types and whether they placed) and return the
+    sampling probabilities of the task types `kinds` (task ids: those the env samples, the paper's three by default):
+    FAILURE_WEIGHT_FLOOR + each one's failure rate over its last --failure-task-weights episodes (a type with none
+    yet counts as failing all), normalized. The windows are part of the progress: a resumed run goes on with them."""
     window = args.failure_task_weights
     if progress.ordinary_recent is None:
         progress.ordinary_recent = [[] for _ in ELEMENT_KINDS]
@@ -183,7 +185,8 @@ def failure_task_weights(args: PPOArgs, progress: Progress, task_ids: list[int],
         recent = progress.ordinary_recent[k]
         recent.append(float(ok))
         del recent[:-window]
-    weights = [FAILURE_WEIGHT_FLOOR + (1.0 - float(np.mean(r)) if r else 1.0) for r in progress.ordinary_recent]
+    recents = [progress.ordinary_recent[k] for k in kinds]
+    weights = [FAILURE_WEIGHT_FLOOR + (1.0 - float(np.mean(r)) if r else 1.0) for r in recents]
     return [w / sum(weights) for w in weights]
 
 

@@ -188,6 +188,7 @@ def build_assets(
             "convex_parts": len(hulls),
             "keep_free": [{"center": c.tolist(), "half_size": h.tolist(), "yaw_deg": y, "through_axis": a}
                           for c, h, y, a in part.keep_free],
+            **({"task": part.task} if part.task else {}),
         }
 
     progress("writing the arm's URDF and SRDF")

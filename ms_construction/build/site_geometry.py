@@ -17,6 +17,7 @@ tcp frame at grasp sits on that face with its z axis pointing into the element.
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from typing import Optional
 
 import manifold3d
 import numpy as np
@@ -35,6 +36,7 @@ MATERIALS = {
     "gypsum": ((0.92, 0.92, 0.88, 1.0), 0.0, 0.8),
     "aluminium": ((0.80, 0.81, 0.83, 1.0), 0.9, 0.3),
     "glass": ((0.55, 0.75, 0.85, 0.45), 0.1, 0.05),
+    "fibre_cement": ((0.78, 0.80, 0.80, 1.0), 0.0, 0.85),
 }
 
 
@@ -70,6 +72,7 @@ def goal_poses(p: SiteParams) -> dict[str, list[list[float]]]:
     """Installation pose of the element's own frame for every slot of every task type."""
     t_c = p.ceiling_panel.size[2]
     t_f = p.floor_panel.size[2]
+    t_w = p.wall_panel.size[2]
     goals = {
         # flipped (grasp face down, towards the plate below), flush with the slab's underside
         "ceiling": [
@@ -88,6 +91,13 @@ def goal_poses(p: SiteParams) -> dict[str, list[list[float]]]:
         # flat, top flush with the ground
         "flooring": [
             pose7((x, y, -t_f / 2), euler2mat(0, 0, np.deg2rad(yaw))) for x, y, yaw in p.floor_slots
+        ],
+        # standing up against the studs, grasp face towards the arm (element z = world -y, element y = world z),
+        # flush with the boards around its bay
+        "paneling": [
+            pose7((x, p.partition_face_y - t_w / 2, p.panel_sill + p.clearance + p.wall_panel.size[1] / 2),
+                  np.array([[1.0, 0.0, 0.0], [0.0, 0.0, -1.0], [0.0, 1.0, 0.0]]))
+            for x in p.panel_slots
         ],
     }
     return goals
@@ -118,6 +128,8 @@ class StaticPart:
     keep_free: list[tuple[np.ndarray, np.ndarray, float, int]] = field(default_factory=list)
     """oriented boxes (center, half sizes, yaw deg, through axis) that no collision hull may block:
     openings, recesses, the staging tray; elements enter them along the through axis."""
+    task: Optional[str] = None
+    """the task type the part is built for, in an env that has it among its task types (None: always)."""
 
 
 def static_parts(p: SiteParams) -> list[StaticPart]:
@@ -192,7 +204,35 @@ def static_parts(p: SiteParams) -> list[StaticPart]:
         _box_between((bx0, -by - t, 0.0), (bx1, -by, bh)),
     ]
     parts.append(StaticPart("barriers", "safety", manifold3d.Manifold.batch_boolean(barriers, manifold3d.OpType.Add)))
+    parts += partition(p)
     return parts
+
+
+def partition(p: SiteParams) -> list[StaticPart]:
+    """An interior partition under construction, built for paneling only: steel studs between a floor and a ceiling
+    track (the frame), boarded on the far side and on the near side but for one bay per panel slot, where the studs
+    show and a wall panel goes, flush with the boards around it."""
+    x0, x1 = p.partition_x_extent
+    face, (stud_w, depth) = p.partition_face_y, p.stud_size
+    w, h, t = p.wall_panel.size
+    c, top, track = p.clearance, p.story_height, 0.04
+    frame = [_box_between((x0, face, 0.0), (x1, face + depth, track)),
+             _box_between((x0, face, top - track), (x1, face + depth, top))]
+    studs = {x0 + stud_w / 2, x1 - stud_w / 2}
+    for x in p.panel_slots:  # a stud under each edge of a bay and one behind its middle
+        studs |= {round(x - w / 2 - c, 6), round(x, 6), round(x + w / 2 + c, 6)}
+    frame += [_box((stud_w, depth, top), (x, face + depth / 2, top / 2)) for x in sorted(studs)]
+    boards = _box_between((x0, face - t, 0.0), (x1, face, top))
+    bays = []
+    for x in p.panel_slots:
+        size = (w + 2 * c, t, h + 2 * c)
+        center = (x, face - t / 2, p.panel_sill + size[2] / 2)
+        boards = boards - _box((size[0], 3 * t, size[2]), center)
+        bays.append((np.array(center), np.array(size) / 2, 0.0, 1))
+    boards = boards + _box_between((x0, face + depth, 0.0), (x1, face + depth + t, top))
+    return [StaticPart("partition_frame", "steel", manifold3d.Manifold.batch_boolean(frame, manifold3d.OpType.Add),
+                       task="paneling"),
+            StaticPart("partition_boards", "gypsum", boards, bays, task="paneling")]
 
 
 def to_trimesh(solid: manifold3d.Manifold) -> trimesh.Trimesh:

@@ -11,23 +11,28 @@ from ms_construction.envs.tasks import (
     CeilingInstallationEnv,
     ConstructionPickPlaceEnv,
     FlooringEnv,
+    PanelInstallationEnv,
     WindowInstallationEnv,
 )
-from ms_construction.parameters import ELEMENT_KINDS
+from ms_construction.parameters import ELEMENT_KINDS, PAPER_KINDS
 
 _OURS = {env_id: spec.cls for env_id, spec in REGISTERED_ENVS.items() if issubclass(spec.cls, ConstructionTaskEnv)}
 _SINGLE = {cls.TASKS[0]: env_id for env_id, cls in _OURS.items() if len(cls.TASKS) == 1}
 TASK_ENV_IDS = {kind: _SINGLE[kind] for kind in ELEMENT_KINDS}
 """task type -> its single-task environment id, in ELEMENT_KINDS order."""
+PAPER_TASK_ENV_IDS = {kind: TASK_ENV_IDS[kind] for kind in PAPER_KINDS}
+"""the paper's three task types' environments (Table II's rows)."""
 ENV_IDS = (*(env_id for env_id, cls in _OURS.items() if len(cls.TASKS) > 1), *TASK_ENV_IDS.values())
 """every registered construction environment: the general task, then the single tasks."""
 
 __all__ = [
     "ENV_IDS",
     "TASK_ENV_IDS",
+    "PAPER_TASK_ENV_IDS",
     "ConstructionTaskEnv",
     "ConstructionPickPlaceEnv",
     "CeilingInstallationEnv",
     "WindowInstallationEnv",
     "FlooringEnv",
+    "PanelInstallationEnv",
 ]

@@ -180,6 +180,8 @@ class SiteObstacles:
             return
         if self.gpu_sim_enabled:
             raise NotImplementedError("obstacles run on physx_cpu only for now (sim_backend='physx_cpu')")
+        if "paneling" in self.TASKS:  # their layout rules know the paper's site, not paneling's partition
+            raise NotImplementedError("obstacles are drawn on the paper's three task types' site only, not with paneling")
         site = self._obstacle_site = SiteParams()  # the manifest's (assets.load_manifest checks them equal)
         material = sapien.render.RenderMaterial
         stack = self.scene.create_actor_builder()

@@ -11,13 +11,14 @@ import numpy as np
 import torch
 
 from ms_construction.envs.carry_geometry import JOINT_MIRROR_SIGNS
+from ms_construction.parameters import ELEMENT_KINDS, PAPER_KINDS
 
 MIRROR_SIGNS = {"joints": JOINT_MIRROR_SIGNS, "scalars": (1.0,), "vector": (1.0, -1.0, 1.0),
                 "pose": (1.0, -1.0, 1.0, 1.0, -1.0, 1.0, -1.0)}
 """How each kind of entry changes in the mirror image in the plane y = 0: joints by JOINT_MIRROR_SIGNS, the y of a
 position or vector, the x and z of a quaternion [w, x, y, z] (the rotation M R M, M = diag(1, -1, 1))."""
 STATE_LAYOUT = (("qpos", 6, "joints"), ("qvel", 6, "joints"), ("is_grasped", 1, "scalars"), ("tcp_pose", 7, "pose"),
-                ("goal_pose", 7, "pose"), ("task", 3, "scalars"), ("obj_pose", 7, "pose"),
+                ("goal_pose", 7, "pose"), ("task", len(ELEMENT_KINDS), "scalars"), ("obj_pose", 7, "pose"),
                 ("tcp_to_grasp_pos", 3, "vector"), ("obj_to_goal_pos", 3, "vector"))
 """The flat `state` observation's entries in order (the agent's, then `_get_obs_extra`'s): name, size, and the kind
 of MIRROR_SIGNS it is; after them the optional joint moves (`obs_install_offset`, `obs_path_offset`: 6 joints each)
@@ -32,6 +33,8 @@ STATE_TASK_START = STATE_START["task"]
 """Where the task's one-hot (ELEMENT_KINDS order) starts."""
 STATE_GOAL_Y, STATE_IS_GRASPED = STATE_START["goal_pose"] + 1, STATE_START["is_grasped"]
 """Where the goal's y and is_grasped are."""
+TASK_SLOTS_BEFORE_PANELING = len(PAPER_KINDS)
+"""the task one-hot's size before paneling became the fourth task type (2026-11-28): what older checkpoints read."""
 
 
 OBSTACLE_MIRROR_SIGNS = (1.0, -1.0, 1.0, 1.0, -1.0, 1.0, -1.0, 1.0, -1.0, 1.0, -1.0)

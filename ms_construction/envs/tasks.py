@@ -1,6 +1,6 @@
-"""The four registered construction tasks and their task cards.
+"""The five registered construction tasks and their task cards.
 
-All four share ConstructionTaskEnv's mechanics, observation layout (the task type is a one-hot in
+All five share ConstructionTaskEnv's mechanics, observation layout (the task type is a one-hot in
 every observation, so one policy runs on all of them) and rewards.
 """
 
@@ -19,10 +19,11 @@ from ms_construction.envs.obstacles import (
     WORKER_SPEED,
     WORKER_START_S,
 )
-from ms_construction.parameters import START_XY_NOISE, START_YAW_NOISE_DEG, SiteParams
+from ms_construction.parameters import PAPER_KINDS, START_XY_NOISE, START_YAW_NOISE_DEG, SiteParams
 
 _SITE = SiteParams()
-_SLOTS = {"ceiling": len(_SITE.ceiling_slots), "window": len(_SITE.window_ys), "flooring": len(_SITE.floor_slots)}
+_SLOTS = {"ceiling": len(_SITE.ceiling_slots), "window": len(_SITE.window_ys), "flooring": len(_SITE.floor_slots),
+          "paneling": len(_SITE.panel_slots)}
 _CP4 = STAGES[FINAL_STAGE]
 _STEPS = ConstructionTaskEnv.MAX_EPISODE_STEPS
 
@@ -32,7 +33,7 @@ def _size(kind: str) -> str:
 
 
 def _card(description: str, kind: str, symmetry: str) -> str:
-    """A task card: the task's own description, then what all four share, every number read from
+    """A task card: the task's own description, then what all five share, every number read from
     the code that uses it."""
     return description + f"""
 **Randomizations (every episode, per parallel env):**
@@ -162,17 +163,35 @@ flat into a recess of the ground slab, its top flush with the floor.
 )
 
 
+@register_env("PanelInstallation-v1", max_episode_steps=_STEPS)
+class PanelInstallationEnv(ConstructionTaskEnv):
+    TASKS = ("paneling",)
+
+
+PanelInstallationEnv.__doc__ = _card(
+    f"""**Task Description:** install a {_SITE.wall_panel.mass:g} kg wall panel ({_SITE.wall_panel.size[0]:g} m wide,
+{_SITE.wall_panel.size[1]:g} m tall, {_SITE.wall_panel.size[2]:g} m thick, fibre cement) standing up against the steel studs of an
+interior partition, into one of the bays its boards leave open, flush with the boards around it, its finished
+face towards the room. Not one of the paper's tasks: the fourth task its conclusion names (paneling), built to
+measure whether what was learnt on the other three carries over. The partition is built only in the envs that
+have paneling among their task types.
+""",
+    "paneling",
+    "a 180 degree turn about its normal; the finished face must face the room",
+)
+
+
 @register_env("ConstructionPickPlace-v1", max_episode_steps=_STEPS)
 class ConstructionPickPlaceEnv(ConstructionTaskEnv):
-    TASKS = ("ceiling", "window", "flooring")
+    TASKS = PAPER_KINDS
 
 
 ConstructionPickPlaceEnv.__doc__ = _card(
     """**Task Description:** the general pick-and-place task. Every episode, each parallel env samples
-a task type (ceiling panel, window or floor panel; `tasks=` restricts the choice, `task_weights=`, e.g.
-`{"window": 2}`, weighs it; unnamed types weigh 1) and a goal slot
-of that type; the episode's element starts on the staging table while the other two wait in the
-storage area outside the barriers. `info["task_id"]`: 0 ceiling, 1 window, 2 flooring.
+a task type (ceiling panel, window or floor panel; `tasks=` chooses among those and paneling, the fourth type,
+which is sampled only when asked for; `task_weights=`, e.g. `{"window": 2}`, weighs them; unnamed types weigh 1)
+and a goal slot of that type; the episode's element starts on the staging table while the others wait in the
+storage area outside the barriers. `info["task_id"]`: 0 ceiling, 1 window, 2 flooring, 3 paneling.
 """,
     "ceiling",  # the same number of openings of every type
     "those of the episode's element, as in the single tasks",

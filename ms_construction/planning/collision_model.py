@@ -26,6 +26,7 @@ from mplib.pymp.collision_detection import fcl
 from transforms3d.euler import euler2quat, quat2euler
 
 from ms_construction.assets import ARM_SRDF_PATH, ARM_URDF_PATH, ASSET_DIR
+from ms_construction.parameters import PAPER_KINDS
 
 ELEMENT_LINK = "element"
 PLATE_LINK = "suction_plate"
@@ -99,10 +100,13 @@ def load_convex_parts(obj_path) -> list[tuple[np.ndarray, np.ndarray]]:
     return out
 
 
-def site_collision_objects(manifest: dict) -> dict[str, fcl.CollisionObject]:
-    """Every convex part of the static site as an FCL object, keyed `<part>/<index>`."""
+def site_collision_objects(manifest: dict, kinds=PAPER_KINDS) -> dict[str, fcl.CollisionObject]:
+    """Every convex part of the static site as an FCL object, keyed `<part>/<index>`: the site of an env whose task
+    types are `kinds` (a part built for one task type only is there when that type is among them)."""
     objects = {}
     for name, part in manifest["parts"].items():
+        if part.get("task", kinds[0]) not in kinds:
+            continue
         for i, (v, f) in enumerate(load_convex_parts(ASSET_DIR / part["collision"])):
             objects[f"{name}/{i}"] = fcl.CollisionObject(fcl.Convex(v, f), np.zeros(3), np.array([1.0, 0, 0, 0]))
     return objects

@@ -151,6 +151,8 @@ class EpisodeResult:
     """control steps held still while the worker blocked the way."""
     escapes: int = 0
     """times the arm got out of the walking worker's way (towards its rest pose) before replanning."""
+    goal_slot: int = -1
+    """the episode's goal slot (its task type's opening, recess or bay)."""
 
     def to_dict(self) -> dict:
         return asdict(self)
@@ -190,7 +192,7 @@ class MotionPlanningExpert:
         self.el_size = {k: np.asarray(manifest["elements"][k]["size"], float) for k in ELEMENT_KINDS}
         self._tmp = tempfile.TemporaryDirectory(prefix="ms_construction_planning_")
         self.workdir = Path(self._tmp.name)
-        self.site = site_collision_objects(manifest)
+        self.site = site_collision_objects(manifest, self.u.TASKS)
         # the free arm: inflated for sampling, exact for the descent onto the element
         self.free = ArmPlanner(planning_urdf(config.arm_margin), planning_srdf(False), self.workdir, "free", self.site)
         self.free_exact = ArmPlanner(planning_urdf(0.0), planning_srdf(False), self.workdir, "free_exact", self.site)
@@ -244,7 +246,7 @@ class MotionPlanningExpert:
         return EpisodeResult(seed=seed, task=self.kind, picked=bool(u.picked[0]), placed=placed, steps=self.steps,
                              planning_time=self.plan_time, failure=failure, phase_steps=self.phase_steps,
                              collisions=self.collisions, replans=self.replans, waited_steps=self.waited_steps,
-                             escapes=self.escapes)
+                             escapes=self.escapes, goal_slot=int(u.goal_slot[0]))
 
     # ------------------------------------------------------------------------------------- #
     # phases

@@ -27,7 +27,7 @@ def install_sweep_hits(manifest: dict, kinds=ELEMENT_KINDS, standoff: float = 0.
     """{(kind, slot): {collision part: (nearest, farthest) distance before the goal where it is hit}}
     for every goal slot of `kinds` (an empty dict where the way is free), sweeping from `standoff`
     to `nearest` before the goal."""
-    site = site_collision_objects(manifest)
+    site = site_collision_objects(manifest, ELEMENT_KINDS)  # every part, those of one task type's site too
     request = fcl.CollisionRequest()
     hits = {}
     for kind in kinds:

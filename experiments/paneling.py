@@ -1,0 +1,141 @@
+"""Paneling, the fourth task, zero-shot: the planning expert and the shipped agents on PanelInstallation-v1.
+
+    python -m experiments.paneling                       # every row; then the RESULTS section and its JSON
+    python -m experiments.paneling --episodes 20 --workers 1
+
+The shipped agents were trained on the paper's three task types; on paneling the task one-hot's new slot is the
+only thing that says which task it is, and they read it with zero weights (baselines/ppo/checkpoints.py,
+`with_task_slots`): their task input is all zeros, and what they do comes from the rest of the observation (the
+goal pose, the element's pose). Protocol: cp4, seeds from 1,000,000 (never trained on), the policy's mean. Each
+row is written to --out as it finishes and skipped when the file is there with the same seeds, so an interrupted
+run goes on where it stopped.
+"""
+
+from __future__ import annotations
+
+import json
+import multiprocessing as mp
+import shlex
+import sys
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+import torch
+import tyro
+
+from baselines.ppo.evaluation import episode_job, pct, wilson
+from experiments.obstacles import RESULTS_PATH, run_row
+from ms_construction.curriculum import FINAL_STAGE
+from ms_construction.reporting import update_section
+
+ENV_ID = "PanelInstallation-v1"
+AGENTS = {
+    "general agent (imitation: clone + residual PPO)": "assets/checkpoints/general_agent.pt",
+    "scratch general agent (reward alone, the campaign's)": "assets/checkpoints/scratch_general_agent.pt",
+    "paper setting (sparse reward, ICM, Table I stages)": "assets/checkpoints/paper_general_agent.pt",
+}
+
+
+@dataclass
+class Args:
+    episodes: int = 100
+    """seeded episodes per row."""
+    seed: int = 1_000_000
+    """the first seed; the others follow."""
+    workers: int = 2
+    """processes, one env each."""
+    out: Path = Path("docs/data/paneling")
+    """where each row's episodes go (one JSON per row)."""
+    agents: dict[str, str] = field(default_factory=lambda: dict(AGENTS))
+    """label -> checkpoint of the agents to run."""
+    write_results: bool = True
+    """write the table into docs/RESULTS.md (section `paneling-zero-shot`)."""
+
+
+_expert: dict = {}
+
+
+def _expert_episode(seed: int) -> dict:
+    """One seeded expert episode in a worker process (env and expert kept for the next)."""
+    import gymnasium as gym
+
+    from ms_construction.planning import MotionPlanningExpert
+
+    torch.set_num_threads(1)
+    if not _expert:
+        env = gym.make(ENV_ID, num_envs=1, obs_mode="state", control_mode="pd_joint_pos", reward_mode="sparse",
+                       sim_backend="physx_cpu", curriculum_stage=FINAL_STAGE)
+        _expert["expert"] = MotionPlanningExpert(env)
+    return _expert["expert"].run(seed).to_dict()
+
+
+def _agent_episode(job: tuple[str, int]) -> dict:
+    checkpoint, seed = job
+    return episode_job((checkpoint, ENV_ID, FINAL_STAGE, seed, None, False, None, 1.0, None, ()))
+
+
+def summarize(episodes: list[dict], expert: bool) -> dict:
+    n = len(episodes)
+    picked, placed = sum(e["picked"] for e in episodes), sum(e["placed"] for e in episodes)
+    by_slot: dict[int, list[bool]] = {}
+    for e in episodes:
+        by_slot.setdefault(int(e["goal_slot"]), []).append(bool(e["placed"]))
+    return dict(episodes=n, pick_success=picked / max(n, 1), pick_success_ci95=wilson(picked, n),
+                place_success=placed / max(n, 1), place_success_ci95=wilson(placed, n),
+                place_success_by_goal_slot={s: float(np.mean(v)) for s, v in sorted(by_slot.items())},
+                **({} if expert else {"final_place_dist_median": float(np.median([e["final_place_dist"] for e in episodes]))}))
+
+
+def table(rows: dict[str, dict]) -> str:
+    lines = ["| agent | episodes | picked % [95% CI] | placed % [95% CI] | placed % by bay (x = -0.68 / 0 / +0.68 m) | "
+             "final distance to the goal, median (m) |", "|---|---|---|---|---|---|"]
+    for label, s in rows.items():
+        bays = " / ".join(f"{100 * v:.0f}" for v in s["place_success_by_goal_slot"].values())
+        dist = f"{s['final_place_dist_median']:.2f}" if "final_place_dist_median" in s else "-"
+        lines.append(f"| {label} | {s['episodes']} | {pct(s['pick_success'], s['pick_success_ci95'])} | "
+                     f"{pct(s['place_success'], s['place_success_ci95'])} | {bays} | {dist} |")
+    return "\n".join(lines)
+
+
+def main(args: Args) -> dict:
+    if args.episodes < 1 or args.workers < 1:
+        raise SystemExit("--episodes and --workers must be positive")
+    command = "python -m experiments.paneling " + " ".join(shlex.quote(a) for a in sys.argv[1:])
+    seeds = list(range(args.seed, args.seed + args.episodes))
+    rows: dict[str, dict] = {}
+    with mp.get_context("spawn").Pool(args.workers) as pool:
+        expert = run_row(pool, args.out / "expert.json", _expert_episode, seeds, seeds, "expert paneling")
+        rows["planning expert"] = summarize(expert, True)
+        failures = "; ".join(f"seed {e['seed']} (bay {e['goal_slot']}): {e['failure']}" for e in expert if not e["placed"])
+        for label, checkpoint in args.agents.items():
+            name = Path(checkpoint).stem
+            episodes = run_row(pool, args.out / f"{name}.json", _agent_episode, [(checkpoint, s) for s in seeds], seeds,
+                               f"{name} paneling")
+            rows[f"{label}, zero-shot"] = summarize(episodes, False)
+    none_place = all(r["place_success"] == 0 for label, r in rows.items() if label != "planning expert")
+    body = ("## Paneling, a fourth task: zero-shot\n\n"
+            f"Command: `{command}`\n\n{table(rows)}\n\n"
+            f"{ENV_ID}: a 15 kg wall panel into one of three open bays of an interior partition's board layer, standing, "
+            "flush with the boards around it (cp4 tolerances; seeds "
+            f"{args.seed}..{args.seed + args.episodes - 1}, never trained on; the policies' mean). The agents were "
+            "trained on the paper's three task types only; their task input is all zeros here (they read the task "
+            "one-hot's new slot with zero weights)" + (", and none places a panel: what they learnt does not carry over "
+                                                        "to a fourth task without training on it" if none_place else "")
+            + ".\n\n"
+            f"The expert's failures: {failures or 'none'} (not yet understood; the issue asks >= 99% of it). The dense "
+            "reward for paneling comes from the same rule as for the paper's tasks (start "
+            "paths, a planned via for the bay at x = +0.68), with one known gap: at that bay a straight joint move from "
+            "the table toward the goal, which runs the panel into the site, pays more than the planned way "
+            "(tests/test_near_goal_starts.py, KNOWN_SHORTCUTS). Training on paneling has not run yet.\n")
+    print(body)
+    args.out.mkdir(parents=True, exist_ok=True)
+    (args.out / "summary.json").write_text(json.dumps({"command": command, "rows": rows}, indent=1) + "\n")
+    if args.write_results:
+        update_section(RESULTS_PATH, "paneling-zero-shot", title="Results", body=body)
+        print(f"wrote {RESULTS_PATH}")
+    return rows
+
+
+if __name__ == "__main__":
+    main(tyro.cli(Args))

@@ -1,0 +1,185 @@
+"""Paneling, the fourth task type: its site (the partition, built only where paneling is asked for), its goals and
+start paths, the expert, and the shipped checkpoints acting unchanged on the observation's new task slot."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+import sapien
+import torch
+from mplib.pymp.collision_detection import fcl
+
+from baselines.ppo.checkpoints import load_checkpoint, load_policy, make_agent
+from baselines.ppo.update import adam
+from ms_construction.assets import ASSET_DIR, load_manifest
+from ms_construction.envs.state_layout import STATE_TASK_START, TASK_SLOTS_BEFORE_PANELING
+from ms_construction.goal_configurations import PATH_CHECKS, START_TURNS_DEG, path_point, start_paths
+from ms_construction.parameters import ELEMENT_KINDS, PAPER_KINDS
+from ms_construction.planning import MotionPlanningExpert
+from ms_construction.planning.collision_model import load_convex_parts
+from ms_construction.planning.site_check import install_sweep_hits
+from tests.helpers import PLAN_TRIES, TEST_EXPERT_CONFIG, make_env, to_sapien
+
+ROOT = Path(__file__).resolve().parent.parent
+SHIPPED_OUTPUTS = Path(__file__).parent / "data" / "shipped_policy_outputs.npz"
+"""Actions and values of shipped checkpoints on 72 observations of the paper's three task types each (six seeded
+episodes of the general task, the policy's own first 12 steps), computed by the code of commit ed49227, before
+paneling: the observations there have the three-slot task one-hot."""
+
+
+def _partition_parts(manifest: dict) -> list[str]:
+    return [name for name, part in manifest["parts"].items() if part.get("task") == "paneling"]
+
+
+def test_the_partition_is_built_only_where_paneling_is_a_task_type():
+    manifest = load_manifest()
+    partition = _partition_parts(manifest)
+    assert partition == ["partition_frame", "partition_boards"]
+    for env_id, kwargs, has in (("PanelInstallation-v1", {}, True), ("ConstructionPickPlace-v1", {}, False),
+                                ("WindowInstallation-v1", {}, False),
+                                ("ConstructionPickPlace-v1", dict(tasks=ELEMENT_KINDS), True)):
+        env = make_env(env_id, **kwargs)
+        env.reset(seed=0)
+        names = set(env.unwrapped.scene.actors)
+        assert all((name in names) == has for name in partition), (env_id, kwargs)
+        env.close()
+
+
+def test_the_general_task_samples_paneling_only_when_asked_and_marks_it_in_the_one_hot():
+    env = make_env("ConstructionPickPlace-v1")
+    seen = set()
+    for seed in range(12):
+        obs, info = env.reset(seed=seed)
+        seen.add(int(info["task_id"][0]))
+        one_hot = obs[0, STATE_TASK_START:STATE_TASK_START + len(ELEMENT_KINDS)]
+        assert one_hot.tolist() == np.eye(len(ELEMENT_KINDS))[int(info["task_id"][0])].tolist()
+    assert seen == {0, 1, 2}
+    env.close()
+    env = make_env("ConstructionPickPlace-v1", tasks=ELEMENT_KINDS)
+    kinds = {int(env.reset(seed=seed)[1]["task_id"][0]) for seed in range(24)}
+    assert kinds == {0, 1, 2, 3}
+    env.close()
+
+
+def test_a_panel_set_at_its_goal_in_every_bay_is_placed_and_the_way_in_is_free():
+    assert all(not found for (kind, _), found in install_sweep_hits(load_manifest(), ("paneling",)).items())
+    env = make_env("PanelInstallation-v1")
+    u = env.unwrapped
+    for slot in range(3):
+        env.reset(seed=slot)
+        u.goal_slot[:] = slot
+        u._place_goal_markers(torch.arange(1))
+        goal = u._goal_table[u.task_id, u.goal_slot]
+        assert abs(float(goal[0, 1]) - (load_manifest()["site_params"]["partition_face_y"] - 0.0125)) < 1e-6
+        u.obj.set_pose(sapien.Pose(goal[0, :3].numpy(), goal[0, 3:].numpy()))
+        info = u.get_info()
+        assert float(info["place_dist"][0]) < 1e-5 and float(info["place_angle_deg"][0]) < 0.1  # float32 rounding
+    env.close()
+
+
+def test_the_papers_start_paths_keep_clear_of_the_partition():
+    """The paper's task types keep their start paths (computed on their own site) in an env with paneling too."""
+    from ms_construction.goal_configurations import _path_planners
+
+    import tempfile
+
+    manifest = load_manifest()
+    partition = {f"{name}/{i}": fcl.CollisionObject(fcl.Convex(v, f), np.zeros(3), np.array([1.0, 0, 0, 0]))
+                 for name in _partition_parts(manifest)
+                 for i, (v, f) in enumerate(load_convex_parts(ASSET_DIR / manifest["parts"][name]["collision"]))}
+    paths = start_paths()
+    with tempfile.TemporaryDirectory() as workdir:
+        for k, kind in enumerate(PAPER_KINDS):
+            planners = _path_planners(workdir, kind, partition)
+            for index in zip(*np.nonzero(paths.usable[k])):
+                for a in np.linspace(0.0, 1.0, PATH_CHECKS + 1):
+                    q = path_point(paths.waypoints[(k, *index)], a)
+                    for planner, turn in zip(planners, START_TURNS_DEG):
+                        shifted = q.copy()
+                        shifted[5] += np.deg2rad(turn)
+                        assert not planner.collides(shifted), (kind, index, a, turn, planner.contacts(shifted))
+
+
+def test_paneling_has_a_wholly_clear_start_path_at_every_bay():
+    k = ELEMENT_KINDS.index("paneling")
+    assert (start_paths().free[k].max(axis=(1, 2)) >= 1.0).all()
+
+
+def test_the_expert_installs_a_panel_in_every_bay():
+    env = make_env("PanelInstallation-v1")
+    expert = MotionPlanningExpert(env, TEST_EXPERT_CONFIG)
+    try:
+        for slot in range(3):
+            seeds = [s for s in range(40) if int(env.reset(seed=s)[1]["task_id"][0]) == 3
+                     and int(env.unwrapped.goal_slot[0]) == slot][:PLAN_TRIES]
+            results = [expert.run(seed) for seed in seeds]
+            assert any(r.placed for r in results), [r.failure for r in results]
+    finally:
+        expert.close()
+        env.close()
+
+
+@pytest.mark.parametrize("name", ["general_agent", "general_agent_clone_direct", "paper_general_agent",
+                                  "scratch_general_agent", "control_window"])
+def test_shipped_checkpoints_act_as_before_on_the_papers_tasks(name):
+    """A checkpoint from before paneling reads the task one-hot's new slot with zero weights: on the paper's task
+    types (the slot is 0) its actions and values are those the code before paneling computed."""
+    saved = np.load(SHIPPED_OUTPUTS)
+    agent, _ = load_policy(ROOT / "assets" / "checkpoints" / f"{name}.pt", "ConstructionPickPlace-v1")
+    old = torch.as_tensor(saved[f"{name}/obs"])
+    at = STATE_TASK_START + TASK_SLOTS_BEFORE_PANELING
+    obs = torch.cat([old[:, :at], torch.zeros(len(old), 1), old[:, at:]], 1)
+    with torch.no_grad():
+        assert torch.allclose(agent.get_action(obs, deterministic=True), torch.as_tensor(saved[f"{name}/action"]),
+                              atol=1e-5)
+        assert torch.allclose(agent.get_value(obs), torch.as_tensor(saved[f"{name}/value"]), atol=1e-4)
+        paneling = obs.clone()
+        paneling[:, STATE_TASK_START:STATE_TASK_START + len(ELEMENT_KINDS)] = torch.eye(len(ELEMENT_KINDS))[3]
+        assert torch.isfinite(agent.get_action(paneling, deterministic=True)).all()
+
+
+def test_an_old_run_resumes_with_the_new_slot_held_at_zero():
+    """A checkpoint saved before paneling resumes: the shipped imitation agent (a residual with its Adam state) gains
+    the new input with zero weights and zero Adam moments, and an update on the paper's task types leaves those
+    weights at 0; the from-scratch agent's per-task-type curricula gain paneling's entries, the others unchanged."""
+    raw = torch.load(ROOT / "assets/checkpoints/general_agent.pt", map_location="cpu", weights_only=False)
+    assert raw.get("task_slots") is None and raw["optimizer"] is not None, "a checkpoint from before paneling"
+    ckpt = load_checkpoint(ROOT / "assets/checkpoints/general_agent.pt")
+    assert ckpt["obs_dim"] == raw["obs_dim"] + 1 and ckpt["task_slots"] == len(ELEMENT_KINDS)
+    agent = make_agent(ckpt["args"], ckpt["obs_dim"], ckpt["act_dim"], ckpt.get("base_args"))
+    agent.load_state_dict(ckpt["agent"])
+    optimizer = adam([p for p in agent.parameters() if p.requires_grad], lr=3e-4, eps=1e-5)
+    optimizer.load_state_dict(ckpt["optimizer"])
+    zero = lambda w: [i for i in range(w.shape[1]) if w[:, i].abs().sum() == 0]  # noqa: E731
+    columns = zero(agent.residual_mean[0].weight)
+    assert len(columns) == 1 and zero(agent.critic[0].weight) == columns
+    obs = torch.randn(64, ckpt["obs_dim"])
+    obs[:, STATE_TASK_START:STATE_TASK_START + len(ELEMENT_KINDS)] = torch.eye(len(ELEMENT_KINDS))[torch.arange(64) % 3]
+    _, logp, _, value = agent.get_action_and_value(obs)
+    (value.square().mean() - logp.mean()).backward()
+    optimizer.step()
+    assert zero(agent.residual_mean[0].weight) == columns and zero(agent.critic[0].weight) == columns
+    assert zero(agent.base.actor_mean[0].weight) == columns, "the frozen base reads the new slot with zero weights too"
+
+    old = torch.load(ROOT / "assets/checkpoints/scratch_general_agent.pt", map_location="cpu", weights_only=False)
+    progress = load_checkpoint(ROOT / "assets/checkpoints/scratch_general_agent.pt")["progress"]
+    assert progress["near_goal_radius"] == old["progress"]["near_goal_radius"] + [old["args"]["near_goal_radius"]]
+    assert progress["near_goal_recent"][:3] == old["progress"]["near_goal_recent"] and progress["near_goal_recent"][3] == []
+
+
+def test_the_zero_shot_experiment_writes_its_rows_and_skips_what_it_has(tmp_path):
+    from experiments import paneling
+
+    args = paneling.Args(episodes=1, workers=1, out=tmp_path, write_results=False,
+                         agents={"clone": str(ROOT / "assets/checkpoints/general_agent_clone_direct.pt")})
+    rows = paneling.main(args)
+    assert list(rows) == ["planning expert", "clone, zero-shot"]
+    assert all(r["episodes"] == 1 for r in rows.values())
+    assert sorted(p.name for p in tmp_path.glob("*.json")) == ["expert.json", "general_agent_clone_direct.json", "summary.json"]
+    saved = json.loads((tmp_path / "expert.json").read_text())
+    saved["episodes"][0]["placed"] = flipped = not saved["episodes"][0]["placed"]
+    (tmp_path / "expert.json").write_text(json.dumps(saved))
+    assert paneling.main(args)["planning expert"]["place_success"] == float(flipped), "a row on file is read, not rerun"
