@@ -123,11 +123,11 @@ def main(args: Args) -> dict:
             "one-hot's new slot with zero weights)" + (", and none places a panel: what they learnt does not carry over "
                                                         "to a fourth task without training on it" if none_place else "")
             + ".\n\n"
-            f"The expert's failures: {failures or 'none'} (not yet understood; the issue asks >= 99% of it). The dense "
-            "reward for paneling comes from the same rule as for the paper's tasks (start "
-            "paths, a planned via for the bay at x = +0.68), with one known gap: at that bay a straight joint move from "
-            "the table toward the goal, which runs the panel into the site, pays more than the planned way "
-            "(tests/test_near_goal_starts.py, KNOWN_SHORTCUTS). Training on paneling has not run yet.\n")
+            f"The expert's failures: {failures or 'none'}. The dense reward for paneling comes from the same rule as "
+            "for the paper's tasks (start paths from each bay to the staging table, a planned via where no path from "
+            "the table's main side is wholly clear), with no code of its own; a straight joint move from the table "
+            "toward any bay pays less than stepping along its paths (tests/test_near_goal_starts.py). Training on "
+            "paneling has not run yet.\n")
     print(body)
     args.out.mkdir(parents=True, exist_ok=True)
     (args.out / "summary.json").write_text(json.dumps({"command": command, "rows": rows}, indent=1) + "\n")

@@ -11,6 +11,8 @@ from __future__ import annotations
 import dataclasses
 from dataclasses import dataclass
 
+import numpy as np
+
 ELEMENT_KINDS = ("ceiling", "window", "flooring", "paneling")
 """Task types in the order of their `task_id` (0 ceiling, 1 window, 2 flooring, 3 paneling)."""
 PAPER_KINDS = ELEMENT_KINDS[:3]
@@ -149,10 +151,31 @@ SYMMETRIES_DEG = {
     "paneling": (0.0, 180.0),  # a rectangle, finished face fixed (towards the room)
 }
 START_XY_NOISE = 0.08
-"""m; element start position on the staging table, uniform in +-this around the table centre."""
+"""m; element start position on the staging table, uniform in +-this around the table centre (less along an axis
+where the element would reach the table's rim: `start_xy_noise`)."""
 START_YAW_NOISE_DEG = 15.0
-START_YAW_DEG = {"ceiling": 90.0, "window": 0.0, "flooring": 0.0, "paneling": 90.0}
+START_YAW_DEG = {"ceiling": 90.0, "window": 0.0, "flooring": 0.0, "paneling": 0.0}
 """nominal yaw on the table: the long side along the table's long side (y)."""
+START_RIM_GAP = 0.005
+"""m; the least gap between an element on the staging table and the table's rim, at any start."""
+
+
+def start_xy_noise(size: tuple[float, ...], yaw_deg: float, table_size: tuple[float, float],
+                   rim_thickness: float) -> tuple[float, float]:
+    """(x, y) half-ranges of an element's start position on the staging table: START_XY_NOISE, or less along an
+    axis where the element's footprint (`size`, turned by its nominal yaw +- START_YAW_NOISE_DEG) would come
+    within START_RIM_GAP of the rim. A start that overlaps the rim is thrown off the table by the solver."""
+    corners = np.array([[sx * size[0] / 2, sy * size[1] / 2] for sx in (-1, 1) for sy in (-1, 1)])
+    reach = np.zeros(2)
+    for turn in np.linspace(-START_YAW_NOISE_DEG, START_YAW_NOISE_DEG, 31):
+        a = np.deg2rad(yaw_deg + turn)
+        rot = np.array([[np.cos(a), -np.sin(a)], [np.sin(a), np.cos(a)]])
+        reach = np.maximum(reach, np.abs(corners @ rot.T).max(0))
+    room = np.asarray(table_size) / 2 - rim_thickness - START_RIM_GAP - reach
+    if (room <= 0).any():
+        raise ValueError(f"an element of size {size[:2]} at yaw {yaw_deg:g} +- {START_YAW_NOISE_DEG:g} deg does not fit "
+                         f"on the staging table {tuple(table_size)} inside its rim of {rim_thickness:g} m")
+    return tuple(float(v) for v in np.minimum(START_XY_NOISE, room))
 STORAGE_XY = {"ceiling": (-3.2, -1.2), "window": (-3.2, 0.0), "flooring": (-3.2, 1.2), "paneling": (-3.2, 2.4)}
 """general task: where the episode's unused elements wait, on the ground outside the barriers."""
 DROP_CLEARANCE = 1e-3

@@ -140,13 +140,6 @@ def test_the_env_s_batched_path_points_are_the_reference_s():
         np.testing.assert_allclose(got[i].numpy(), path_point(wp[i].astype(np.float64), float(frac[i])), atol=1e-5)
 
 
-KNOWN_SHORTCUTS = {("paneling", 2)}
-"""(task type, goal slot) where a straight joint move from the table toward the goal, which runs the element into the
-site, pays more than stepping along the slot's start paths: paneling's bay at x = +0.68, reached only by planned vias
-that swing the turret wide (docs/RESULTS.md, paneling). The rule that weighs a via path's deviation was tuned on the
-paper's site; this is where it does not yet carry over."""
-
-
 @pytest.mark.parametrize("kind", ELEMENT_KINDS)
 def test_the_path_distance_falls_along_every_start_path_and_a_shortcut_off_it_pays_less(kind):
     """Along each usable start path of every goal slot (from the table end to the goal, the
@@ -165,7 +158,7 @@ def test_the_path_distance_falls_along_every_start_path_and_a_shortcut_off_it_pa
         u.agent.robot.set_qpos(torch.tensor(q[None], dtype=torch.float32))
         return float(u.carry_distance()[0])
 
-    checked, known = 0, []
+    checked = 0
     usable = u.geometry.paths["usable"][k].view(paths.usable.shape[1:]).cpu().numpy()  # the mirror branch's alone
     for slot, c, side in zip(*np.nonzero(usable)):
         u.goal_slot[:] = int(slot)
@@ -190,13 +183,9 @@ def test_the_path_distance_falls_along_every_start_path_and_a_shortcut_off_it_pa
             other_length = np.abs(np.diff(ow, axis=0)).sum()
             at_lift = np.abs(np.diff(ow[:4], axis=0)).sum() / other_length
             along.append(distance_at(path_point(ow, at_lift - step / other_length)))
-        if (kind, int(slot)) in KNOWN_SHORTCUTS:
-            known.append(distance_at(straight) > min(along))
-        else:
-            assert distance_at(straight) > min(along), (slot, c, side)
+        assert distance_at(straight) > min(along), (slot, c, side)
         checked += 1
     assert checked > 0
-    assert not known or not all(known), f"{kind}: the shortcut pays less everywhere now; empty KNOWN_SHORTCUTS"
     env.close()
 
 

@@ -32,11 +32,11 @@ from ms_construction.parameters import (
     DROP_CLEARANCE,
     ELEMENT_KINDS,
     HIDDEN_POSE,
-    START_XY_NOISE,
     START_YAW_DEG,
     START_YAW_NOISE_DEG,
     STORAGE_XY,
     SYMMETRIES_DEG,
+    start_xy_noise,
 )
 from ms_construction.rotations import pose_inv, pose_mul, qangle_deg, qaxis, qconj, qmul, quat_z
 from ms_construction.site import ConstructionSiteSceneBuilder, build_element
@@ -217,6 +217,8 @@ class ConstructionTaskEnv(SiteObstacles, StartStates, BaseEnv):
         self._task_choices = torch.tensor([kinds.index(k) for k in self.TASKS], device=dev)
         st = m["staging"]
         self._staging_xyz = torch.tensor(st["center"], **f32)
+        self._start_xy_noise = torch.tensor([start_xy_noise(m["elements"][k]["size"], START_YAW_DEG[k], st["size"],
+                                                            st["rim"][1]) for k in kinds], **f32)
 
         # task state (also in get_state_dict)
         self.task_id = torch.full((n,), int(self._task_choices[0]), dtype=torch.long, device=dev)
@@ -269,7 +271,7 @@ class ConstructionTaskEnv(SiteObstacles, StartStates, BaseEnv):
                 self.goal_slot[env_idx] = torch.multinomial(self._goal_slot_weights[task], 1)[:, 0]
 
             xyz = self._staging_xyz.repeat(b, 1)
-            xyz[:, :2] += (torch.rand(b, 2) * 2 - 1) * START_XY_NOISE
+            xyz[:, :2] += (torch.rand(b, 2) * 2 - 1) * self._start_xy_noise[task]
             xyz[:, 2] += self._el_size[task, 2] / 2 + DROP_CLEARANCE
             yaw = self._start_yaw[task] + (torch.rand(b) * 2 - 1) * START_YAW_NOISE_DEG
             start = torch.cat([xyz, quat_z(yaw)], -1)

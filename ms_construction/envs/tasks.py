@@ -19,7 +19,7 @@ from ms_construction.envs.obstacles import (
     WORKER_SPEED,
     WORKER_START_S,
 )
-from ms_construction.parameters import PAPER_KINDS, START_XY_NOISE, START_YAW_NOISE_DEG, SiteParams
+from ms_construction.parameters import PAPER_KINDS, START_RIM_GAP, START_XY_NOISE, START_YAW_NOISE_DEG, SiteParams
 
 _SITE = SiteParams()
 _SLOTS = {"ceiling": len(_SITE.ceiling_slots), "window": len(_SITE.window_ys), "flooring": len(_SITE.floor_slots),
@@ -38,7 +38,8 @@ def _card(description: str, kind: str, symmetry: str) -> str:
     return description + f"""
 **Randomizations (every episode, per parallel env):**
 - the element's start position on the staging table: uniform within +-{START_XY_NOISE:g} m of the table
-  centre in x and y, lying flat (grasp face up)
+  centre in x and y (less along an axis where the element would come within {START_RIM_GAP * 1000:g} mm of the
+  table's rim), lying flat (grasp face up)
 - the element's start yaw: its nominal yaw +-{START_YAW_NOISE_DEG:g} degrees
 - the goal slot: uniform among the site's {_SLOTS[kind]} openings of this type
 - the arm's start configuration: rest keyframe + N(0, {ROBOT_INIT_QPOS_NOISE:g} rad) per joint
