@@ -3,6 +3,8 @@
     python -m experiments.from_scratch --seed 1 --dry-run   # the plan, and where that seed's run stands
     python -m experiments.from_scratch --seed 1             # run (or resume) the recipe from nothing on seed 1, a snapshot
                                                             # every 250,000 env steps (commit its checkpoint and CSV)
+    python -m experiments.from_scratch --seed 1 --evaluate  # the paper's protocol on that seed's latest snapshot (the
+                                                            # run does it on its last one at the end of its budget)
     python -m experiments.from_scratch --report             # the campaign's section of docs/RESULTS.md and its curve
     python -m experiments.from_scratch --ship-best          # ship the campaign's snapshot that places most on validation
 
@@ -41,7 +43,7 @@ from typing import Optional
 import numpy as np
 import tyro
 
-from baselines.ppo import ppo
+from baselines.ppo import evaluation, ppo
 from baselines.ppo.args import command_line
 from baselines.ppo.checkpoints import load_checkpoint
 from baselines.ppo.evaluation import PAPER_TABLE_II, failures, kinds, pct
@@ -233,6 +235,60 @@ SEEDS = (1, 2)
 SEEDS_CURVE = Path("docs/images/scratch_seeds_curve.png")
 
 
+SEED_EVAL_DIR = Path("docs/data/from_scratch")
+"""where each seed's evaluations with the paper's protocol go (scratch_s<seed>_eval50k_<env steps>.json)."""
+EVAL_STEPS = 50_000
+"""env steps per task of the paper's protocol."""
+
+
+def seed_snapshots(seed: int) -> Path:
+    return SNAPSHOT_DIR.with_name(f"{SNAPSHOT_DIR.name}_s{seed}")
+
+
+def seed_evaluation_json(seed: int, step: int) -> Path:
+    return SEED_EVAL_DIR / f"scratch_s{seed}_eval50k_{step}.json"
+
+
+def evaluate_seed(seed: int, step: Optional[int] = None, workers: int = 2) -> Path:
+    """The paper's protocol (test seeds from 1,000,000, EVAL_STEPS per task, cp4, the policy's mean) on the seed's
+    snapshot at `step` env steps (default: its latest), written to `seed_evaluation_json`; kept where it is there."""
+    snapshots = seed_snapshots(seed)
+    found = {int(p.stem.split("_")[1]): p for p in snapshots.glob("checkpoint_*.pt")}
+    if not found:
+        raise SystemExit(f"no snapshots of seed {seed} in {snapshots}: `{COMMAND} --seed {seed}` keeps one every "
+                         f"{SNAPSHOT_EVERY:,} env steps")
+    step = max(found) if step is None else step
+    if step not in found:
+        raise SystemExit(f"no snapshot of seed {seed} at {step:,} env steps; there are: "
+                         + ", ".join(f"{s:,}" for s in sorted(found)))
+    out = seed_evaluation_json(seed, step)
+    if not out.is_file():
+        evaluation.main(evaluation.Args(checkpoint=found[step], all=True, steps=EVAL_STEPS, workers=workers, json=out))
+    return out
+
+
+def seed_evaluations_table() -> list[str]:
+    """Every seed evaluation there is, a row each (seed, then env steps), beside the paper's Table II."""
+    found = sorted((int(m[0]), int(m[1]), p) for p in SEED_EVAL_DIR.glob("scratch_s*_eval50k_*.json")
+                   for m in [p.stem[len("scratch_s"):].split("_eval50k_")])
+    if not found:
+        return ["No seed has been evaluated with the paper's protocol yet "
+                f"(`{COMMAND} --seed S --evaluate`, at the end of its run)."]
+    envs = list(PAPER_TABLE_II)
+    lines = [f"With the paper's protocol (`{COMMAND} --seed S --evaluate [--at-step N]`: test seeds from 1,000,000, "
+             f"{EVAL_STEPS:,} env steps per task, cp4, the policy's mean; the seed's snapshot at N env steps):", "",
+             "| seed | env steps | " + " | ".join(f"{e}: picked / placed % [95% CI]" for e in envs) + " |",
+             "|---|---|" + "---|" * len(envs),
+             "| paper's general agent (Table II, cp4) | 8,000,000 | "
+             + " | ".join(f"{PAPER_TABLE_II[e][0]:.2f} / {PAPER_TABLE_II[e][1]:.2f}" for e in envs) + " |"]
+    for seed, step, path in found:
+        tasks = json.loads(path.read_text())["tasks"]
+        lines.append(f"| {seed} | {step:,} | " + " | ".join(
+            f"{100 * tasks[e]['pick_success']:.1f} / {pct(tasks[e]['place_success'], tasks[e]['place_success_ci95'])}"
+            for e in envs) + " |")
+    return lines
+
+
 def seeds_report(results: Path = Path("docs/RESULTS.md"), log_dir: Path = CAMPAIGN_DIR) -> str:
     """The section `from-scratch-seeds` of docs/RESULTS.md: where the recipe's run from nothing stands on each seed
     (its progress.csv in `log_dir`/scratch_s<seed>/), a row per seed, and their curves side by side."""
@@ -273,7 +329,7 @@ def seeds_report(results: Path = Path("docs/RESULTS.md"), log_dir: Path = CAMPAI
     SEEDS_CURVE.parent.mkdir(parents=True, exist_ok=True)
     fig.savefig(SEEDS_CURVE, dpi=100)
     plt.close(fig)
-    lines += ["", f"![the recipe from nothing, per seed]({Path(*SEEDS_CURVE.parts[1:])})", "",
+    lines += ["", *seed_evaluations_table(), "", f"![the recipe from nothing, per seed]({Path(*SEEDS_CURVE.parts[1:])})", "",
               f"*Made by `{COMMAND} --report`: each seed's training episodes placed from ordinary resets per task (solid) "
               "and its near-goal start radius per task (dotted, x 100).*"]
     body = "\n".join(lines)
@@ -382,6 +438,11 @@ class Args:
     (if that is not the shipped one), and exit."""
     report: bool = False
     """write the campaign's section of docs/RESULTS.md and its curve (docs/images/scratch_curve.png), and exit."""
+    evaluate: bool = False
+    """with --seed: evaluate the seed's snapshot with the paper's protocol (`evaluate_seed`) and exit; a run that
+    reaches its budget does this itself on its last snapshot."""
+    at_step: Optional[int] = None
+    """with --evaluate: the snapshot at this many env steps (default: the latest)."""
 
 
 def main(args: Args) -> None:
@@ -389,8 +450,11 @@ def main(args: Args) -> None:
         run = seed_run(args.seed, args.num_envs)
         print(describe(run))
         print("as one ppo.py command: python baselines/ppo/ppo.py " + shlex.join(command_line(run.args)))
-        if not args.dry_run:
-            train(run, snapshots=SNAPSHOT_DIR.with_name(f"{SNAPSHOT_DIR.name}_s{args.seed}"))
+        if args.evaluate:
+            print(f"wrote {evaluate_seed(args.seed, args.at_step)}")
+        elif not args.dry_run:
+            train(run, snapshots=seed_snapshots(args.seed))
+            print(f"wrote {evaluate_seed(args.seed)}")  # the paper's protocol on the budget's last snapshot
         return
     [run] = scratch_runs(args.num_envs)
     print(describe(run))

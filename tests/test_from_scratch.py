@@ -204,3 +204,33 @@ def test_the_seeds_report_has_a_row_per_seed_and_says_how_a_seed_not_started_sta
     assert "| 2 | not started: `python -m experiments.from_scratch --seed 2` |" in body
     assert (tmp_path / "images" / "seeds.png").stat().st_size > 0
     assert "<!-- begin from-scratch-seeds (generated) -->" in results.read_text()
+
+
+def test_a_seed_is_evaluated_on_its_latest_snapshot_once_and_its_row_joins_the_seeds_report(tmp_path, monkeypatch):
+    small = dict(num_envs=2, num_steps=20, num_minibatches=2, update_epochs=1, num_eval_envs=1, eval_freq=100,
+                 checkpoint_freq=1, env_id="Flooring-v1", task_weights=None, log_dir=str(tmp_path), exp_name="tiny",
+                 total_timesteps=40)
+    ppo.main(fs.scratch_args(**small))
+    monkeypatch.setattr(fs, "SNAPSHOT_DIR", tmp_path / "runs" / "snaps")
+    monkeypatch.setattr(fs, "SEED_EVAL_DIR", tmp_path / "evals")
+    monkeypatch.setattr(fs, "EVAL_STEPS", 300)
+    monkeypatch.setattr(fs, "SEEDS_CURVE", tmp_path / "images" / "seeds.png")
+    with pytest.raises(SystemExit, match="no snapshots of seed 1"):
+        fs.evaluate_seed(1)
+    snaps = fs.seed_snapshots(1)
+    snaps.mkdir(parents=True)
+    for step in (20, 40):
+        shutil.copyfile(tmp_path / "tiny" / "checkpoint.pt", snaps / f"checkpoint_{step}.pt")
+    with pytest.raises(SystemExit, match="there are: 20, 40"):
+        fs.evaluate_seed(1, 30)
+    out = fs.evaluate_seed(1, workers=1)
+    assert out == tmp_path / "evals" / "scratch_s1_eval50k_40.json"
+    tasks = json.loads(out.read_text())["tasks"]
+    assert set(tasks) == {"CeilingInstallation-v1", "WindowInstallation-v1", "Flooring-v1"}
+    assert all(t["steps"] >= 300 and t["episodes"] >= 1 for t in tasks.values())
+    written = out.stat().st_mtime_ns
+    assert fs.evaluate_seed(1) == out and out.stat().st_mtime_ns == written  # kept, not run again
+    body = fs.seeds_report(tmp_path / "RESULTS.md", log_dir=tmp_path / "campaign")
+    assert "| paper's general agent (Table II, cp4) | 8,000,000 | 84.55 / 68.04 |" in body
+    row = next(line for line in body.splitlines() if line.startswith("| 1 | 40 |"))
+    assert row.count("/") == 3

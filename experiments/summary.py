@@ -1,0 +1,111 @@
+"""RESULTS' first screen: the headline numbers of every section, each read from the JSON its own command wrote.
+
+    python -m experiments.summary        # rewrites the section `summary` at the top of docs/RESULTS.md
+
+Nothing here runs an agent: a number that a section's command has not produced yet shows as "-". Each row names the
+file it comes from; the sections below say how each was made.
+"""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+from typing import Optional
+
+from baselines.ppo.evaluation import EXPERT_RESULTS, PAPER_TABLE_II, RESULTS_PATH
+from experiments import from_scratch
+from ms_construction.reporting import update_section
+
+TASKS = tuple(PAPER_TABLE_II)
+"""the paper's three tasks, Table II's rows."""
+AGENTS = (  # label, how it learnt, its evaluation with the paper's protocol
+    ("imitation general agent (general_agent.pt, shipped)",
+     "expert demonstrations, behaviour cloning, residual PPO", Path("docs/data/general_agent_eval_50k.json")),
+    ("reward-only general agent (scratch_general_agent.pt, shipped)",
+     "PPO on the dense reward, no demonstrations; one hand-steered campaign, 19.4M env steps",
+     Path("docs/data/paper/scratch_general_agent_eval_50k.json")),
+    ("the paper's setting (paper_general_agent.pt)",
+     "PPO + ICM on the sparse reward, Table I's stages, 8M env steps", Path("docs/data/paper/paper_general_agent_eval_50k.json")),
+)
+GENERALIZATION = (  # label, the agent's label in the obstacle and paneling tables
+    ("planning expert", "planning expert"),
+    ("imitation general agent", "general agent (imitation: clone + residual PPO)"),
+    ("reward-only general agent", "scratch general agent (reward alone, the campaign's)"),
+    ("the paper's setting", "paper setting (sparse reward, ICM, Table I stages)"),
+)
+OBSTACLES = Path("docs/data/obstacles/summary.json")
+PANELING = Path("docs/data/paneling/summary.json")
+
+
+def _read(path: Path) -> Optional[dict]:
+    return json.loads(path.read_text()) if path.is_file() else None
+
+
+def _placed(tasks: Optional[dict]) -> list[str]:
+    """Placed % per paper task of an evaluation's `tasks` (or "-" where there is none)."""
+    return [f"{100 * tasks[t]['place_success']:.1f}" if tasks and t in tasks else "-" for t in TASKS]
+
+
+def paper_tasks_table() -> list[str]:
+    lines = ["| agent | how it learnt | " + " | ".join(f"{t}: placed %" for t in TASKS) + " | source |",
+             "|---|---|" + "---|" * len(TASKS) + "---|",
+             "| the paper's general agent (Table II, cp4) | PPO + ICM (ML-Agents), Table I's stages, 8M env steps | "
+             + " | ".join(f"{PAPER_TABLE_II[t][1]:.2f}" for t in TASKS) + " | the paper |"]
+    expert = _read(EXPERT_RESULTS)
+    lines.append("| planning expert (100 episodes per task) | - | " + " | ".join(_placed(expert and expert["summary"]))
+                 + f" | {EXPERT_RESULTS} |")
+    for label, how, path in AGENTS:
+        data = _read(path)
+        lines.append(f"| {label} | {how} | " + " | ".join(_placed(data and data["tasks"])) + f" | {path} |")
+    latest: dict[int, tuple[int, Path]] = {}
+    for path in from_scratch.SEED_EVAL_DIR.glob("scratch_s*_eval50k_*.json"):
+        seed, step = map(int, path.stem[len("scratch_s"):].split("_eval50k_"))
+        latest[seed] = max(latest.get(seed, (step, path)), (step, path))
+    for seed in from_scratch.SEEDS:
+        if seed in latest:
+            step, path = latest[seed]
+            cells = _placed(json.loads(path.read_text())["tasks"])
+            lines.append(f"| the recipe from nothing, seed {seed}, at {step:,} env steps | PPO on the tasks' default dense "
+                         f"reward, one recipe unchanged from step 0 | " + " | ".join(cells) + f" | {path} |")
+        else:
+            lines.append(f"| the recipe from nothing, seed {seed} | (not evaluated yet: `{from_scratch.COMMAND} --seed "
+                         f"{seed} --evaluate`) | " + " | ".join("-" for _ in TASKS) + " | |")
+    return lines
+
+
+def generalization_table() -> list[str]:
+    obstacles, paneling = _read(OBSTACLES), _read(PANELING)
+    lines = ["| agent | paneling, a fourth task: placed % | static obstacles: placed % (ceiling / window / flooring) | "
+             "a worker walking across too | source |", "|---|---|---|---|---|"]
+    for label, key in GENERALIZATION:
+        panel = (paneling or {}).get("rows", {}).get(key if key == "planning expert" else f"{key}, zero-shot")
+        cells = [f"{100 * panel['place_success']:.1f}" if panel else "-"]
+        for scene in ("static", "moving"):
+            row = next((r for name, r in (obstacles or {}).get("rows", {}).items()
+                        if name.startswith(f"{key} | {scene}")), None)
+            cells.append(" / ".join(_placed(row)) if row else "-")
+        lines.append(f"| {label} | " + " | ".join(cells) + f" | {PANELING}, {OBSTACLES} |")
+    return lines
+
+
+def summary() -> str:
+    return "\n".join([
+        "## At a glance", "",
+        "The paper's three tasks with its protocol (test seeds from 1,000,000, 50,000 env steps per task, cp4 tolerances, "
+        "the policy's mean action):", "", *paper_tasks_table(), "",
+        "Generalization, zero-shot: agents trained on the paper's three tasks on the site as built, met with what they "
+        "never saw (the expert plans for each episode as it comes; cp4; seeds from 1,000,000):", "",
+        *generalization_table(), "",
+        f"*Made by `python -m experiments.summary` from the files named; each section below gives the command that "
+        "wrote them, its intervals and its failures.*"])
+
+
+def main() -> str:
+    body = summary()
+    update_section(RESULTS_PATH, "summary", body, "Results")
+    print(body)
+    return body
+
+
+if __name__ == "__main__":
+    main()

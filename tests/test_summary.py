@@ -1,0 +1,40 @@
+"""RESULTS' first screen (experiments/summary.py): every number comes from the JSON its row names, the latest
+evaluation of each seed of the recipe, and a dash where a file is not there yet."""
+
+import json
+
+from experiments import from_scratch
+from experiments import summary as sm
+
+
+def _tasks(placed: float) -> dict:
+    return {t: {"pick_success": 1.0, "place_success": placed, "place_success_ci95": [0.0, 1.0]} for t in sm.TASKS}
+
+
+def test_each_row_reads_its_file_and_a_seed_shows_its_latest_evaluation(tmp_path, monkeypatch):
+    monkeypatch.setattr(from_scratch, "SEED_EVAL_DIR", tmp_path)
+    for step, placed in ((4_000_000, 0.5), (6_000_000, 0.925)):
+        (tmp_path / f"scratch_s1_eval50k_{step}.json").write_text(json.dumps({"tasks": _tasks(placed)}))
+    body = sm.summary()
+    assert "| the paper's general agent (Table II, cp4) | PPO + ICM (ML-Agents), Table I's stages, 8M env steps | " \
+           "68.04 | 84.82 | 85.17 | the paper |" in body
+    label, _, path = sm.AGENTS[0]
+    shipped = json.loads(path.read_text())["tasks"]
+    row = next(line for line in body.splitlines() if line.startswith(f"| {label} |"))
+    assert row.split(" | ")[2:5] == [f"{100 * shipped[t]['place_success']:.1f}" for t in sm.TASKS]
+    seed1 = next(line for line in body.splitlines() if "seed 1" in line)
+    assert "at 6,000,000 env steps" in seed1 and seed1.count("| 92.5 ") == 3
+    assert "`python -m experiments.from_scratch --seed 2 --evaluate`" in body
+
+
+def test_a_file_not_there_yet_shows_a_dash_and_the_section_lands_between_its_markers(tmp_path, monkeypatch):
+    monkeypatch.setattr(sm, "OBSTACLES", tmp_path / "none.json")
+    monkeypatch.setattr(sm, "PANELING", tmp_path / "none.json")
+    rows = sm.generalization_table()[2:]
+    assert len(rows) == len(sm.GENERALIZATION) and all(row.count("| - ") == 3 for row in rows)
+    results = tmp_path / "RESULTS.md"
+    results.write_text("# Results\n\nintro\n\n<!-- begin summary (generated) -->\nold\n<!-- end summary -->\n\n## next\n")
+    monkeypatch.setattr(sm, "RESULTS_PATH", results)
+    sm.main()
+    text = results.read_text()
+    assert "old" not in text and text.index("## At a glance") < text.index("## next") and text.startswith("# Results")
