@@ -183,3 +183,43 @@ def test_the_zero_shot_experiment_writes_its_rows_and_skips_what_it_has(tmp_path
     saved["episodes"][0]["placed"] = flipped = not saved["episodes"][0]["placed"]
     (tmp_path / "expert.json").write_text(json.dumps(saved))
     assert paneling.main(args)["planning expert"]["place_success"] == float(flipped), "a row on file is read, not rerun"
+
+
+def test_the_recipe_trains_on_paneling_from_the_shipped_weights_and_from_nothing_unchanged_but_for_env_and_budget(
+        tmp_path):
+    """`--train`: the from-scratch recipe's arguments, but for the env, the budget, the run's name and (from the shipped
+    reward-only agent) its initial weights, which load into the four-slot observation and train; an unknown start is
+    refused with the starts allowed."""
+    from baselines.ppo import ppo
+    from experiments import from_scratch, paneling
+
+    with pytest.raises(SystemExit, match="nothing, shipped"):
+        paneling.training_run("imitation")
+    recipe = from_scratch.scratch_args(2, seed=1)
+    for start, init in (("shipped", "assets/checkpoints/scratch_general_agent.pt"), ("nothing", None)):
+        run = paneling.training_run(start, num_envs=2)
+        changed = {k for k, v in vars(run.args).items() if v != vars(recipe)[k]}
+        assert changed <= {"env_id", "total_timesteps", "exp_name", "checkpoint"} and run.args.checkpoint == init
+        tiny = run.args.replace(total_timesteps=40, num_steps=20, num_minibatches=2, update_epochs=1, num_eval_envs=1,
+                                log_dir=str(tmp_path), checkpoint_freq=1)
+        ppo.main(tiny)
+        trained = load_checkpoint(tmp_path / run.args.exp_name / "checkpoint.pt")
+        assert trained["progress"]["global_step"] == 40 and trained["args"]["env_id"] == "PanelInstallation-v1"
+        if init is not None:
+            before = load_checkpoint(ROOT / init)["agent"]
+            same = {k: v for k, v in trained["agent"].items() if k in before and v.shape == before[k].shape
+                    and v.is_floating_point()}
+            assert same and all(torch.allclose(v, before[k], atol=0.05) for k, v in same.items()), "started from them"
+            assert any(not torch.equal(v, before[k]) for k, v in same.items()), "and trained"
+
+
+def test_steps_to_reads_the_first_crossing_of_the_training_episodes_moving_mean(tmp_path):
+    from experiments import paneling
+
+    progress = tmp_path / "progress.csv"
+    placed = [0.0] * 10 + [1.0] * 20
+    progress.write_text("global_step,ordinary_place_success\n"
+                        + "".join(f"{2000 * (i + 1)},{p}\n" for i, p in enumerate(placed)))
+    # a 10-iteration mean first reaches 0.9 nine iterations into the ones
+    assert paneling.steps_to(progress, 0.9, window=10) == 2000 * 19
+    assert paneling.steps_to(progress, 1.01, window=10) is None
