@@ -251,9 +251,12 @@ def seed_evaluation_json(seed: int, step: int) -> Path:
 
 def evaluate_seed(seed: int, step: Optional[int] = None, workers: int = 2) -> Path:
     """The paper's protocol (test seeds from 1,000,000, EVAL_STEPS per task, cp4, the policy's mean) on the seed's
-    snapshot at `step` env steps (default: its latest), written to `seed_evaluation_json`; kept where it is there."""
+    snapshot at `step` env steps (default: its latest), written to `seed_evaluation_json`; kept where it is there.
+    The run's own checkpoint counts as its snapshot at its step (a fresh machine has that one only)."""
     snapshots = seed_snapshots(seed)
     found = {int(p.stem.split("_")[1]): p for p in snapshots.glob("checkpoint_*.pt")}
+    if (ckpt := checkpoint_of(seed_run(seed))).is_file():
+        found.setdefault(load_checkpoint(ckpt)["progress"]["global_step"], ckpt)
     if not found:
         raise SystemExit(f"no snapshots of seed {seed} in {snapshots}: `{COMMAND} --seed {seed}` keeps one every "
                          f"{SNAPSHOT_EVERY:,} env steps")

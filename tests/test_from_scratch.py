@@ -207,20 +207,22 @@ def test_the_seeds_report_has_a_row_per_seed_and_says_how_a_seed_not_started_sta
 
 
 def test_a_seed_is_evaluated_on_its_latest_snapshot_once_and_its_row_joins_the_seeds_report(tmp_path, monkeypatch):
-    small = dict(num_envs=2, num_steps=20, num_minibatches=2, update_epochs=1, num_eval_envs=1, eval_freq=100,
-                 checkpoint_freq=1, env_id="Flooring-v1", task_weights=None, log_dir=str(tmp_path), exp_name="tiny",
-                 total_timesteps=40)
-    ppo.main(fs.scratch_args(**small))
+    """`--seed S --evaluate`: the latest of the seed's snapshots and its run's own checkpoint (all a fresh machine
+    has), or the one asked for; a missing one is refused with those there are; an evaluation on file is kept."""
+    monkeypatch.setattr(fs, "CAMPAIGN_DIR", tmp_path / "campaign")
     monkeypatch.setattr(fs, "SNAPSHOT_DIR", tmp_path / "runs" / "snaps")
     monkeypatch.setattr(fs, "SEED_EVAL_DIR", tmp_path / "evals")
     monkeypatch.setattr(fs, "EVAL_STEPS", 300)
     monkeypatch.setattr(fs, "SEEDS_CURVE", tmp_path / "images" / "seeds.png")
     with pytest.raises(SystemExit, match="no snapshots of seed 1"):
         fs.evaluate_seed(1)
+    tiny = fs.seed_run(1).args.replace(num_envs=2, num_steps=20, num_minibatches=2, update_epochs=1, num_eval_envs=1,
+                                       eval_freq=100, checkpoint_freq=1, env_id="Flooring-v1", task_weights=None,
+                                       total_timesteps=40)
+    ppo.main(tiny)
     snaps = fs.seed_snapshots(1)
     snaps.mkdir(parents=True)
-    for step in (20, 40):
-        shutil.copyfile(tmp_path / "tiny" / "checkpoint.pt", snaps / f"checkpoint_{step}.pt")
+    shutil.copyfile(tmp_path / "campaign" / "scratch_s1" / "checkpoint.pt", snaps / "checkpoint_20.pt")
     with pytest.raises(SystemExit, match="there are: 20, 40"):
         fs.evaluate_seed(1, 30)
     out = fs.evaluate_seed(1, workers=1)
