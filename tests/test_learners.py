@@ -1,0 +1,70 @@
+"""experiments/learners.py: SAC and the recipe with curiosity against the recipe's own PPO run, at equal env steps
+and equal wall time, read from each arm's progress.csv."""
+
+import csv
+
+import numpy as np
+import pytest
+
+from baselines.ppo import ppo
+from baselines.ppo.checkpoints import load_checkpoint
+from experiments import from_scratch
+from experiments import learners as ln
+
+
+def _write(path, rows):
+    path.parent.mkdir(parents=True, exist_ok=True)
+    with open(path, "w", newline="") as f:
+        w = csv.DictWriter(f, fieldnames=list(rows[0]))
+        w.writeheader()
+        w.writerows(rows)
+
+
+def _rows(n, placed, wall=None):
+    """n rows of 2,000 env steps: PPO's (500 env steps/s) or, with `wall` seconds per row, SAC's."""
+    rows = []
+    for i in range(n):
+        row = dict(global_step=2000 * (i + 1), sps=500.0, ordinary_place_ceiling=placed(i),
+                   ordinary_place_window=placed(i) + 0.1, ordinary_place_flooring=1.0)
+        if wall is not None:
+            row["wall_s"] = wall * (i + 1)
+        rows.append(row)
+    return rows
+
+
+def test_the_curve_takes_each_arm_s_wall_time_and_the_worst_task_type(tmp_path):
+    ppo_csv, sac_csv = tmp_path / "ppo.csv", tmp_path / "sac.csv"
+    _write(ppo_csv, _rows(100, lambda i: 0.5))
+    _write(sac_csv, _rows(100, lambda i: 0.5, wall=20.0))
+    p, s = ln.curve(ppo_csv), ln.curve(sac_csv)
+    assert np.allclose(p["hours"][-1], 100 * 4.0 / 3600) and np.allclose(s["hours"][-1], 100 * 20.0 / 3600)
+    assert np.allclose(p["worst"], 0.5) and np.allclose(s["worst"], 0.5)  # ceiling's, the worst of the three
+    assert ln.value_at(p, "steps", 100_000) == 0.5 and ln.value_at(p, "steps", 300_000) is None
+
+
+def test_the_report_rows_each_arm_and_says_how_to_run_those_not_run(tmp_path, monkeypatch):
+    monkeypatch.setattr(ln, "CURVES", tmp_path / "images" / "learners.png")
+    log_dir = tmp_path / "campaign"
+    # the PPO arm: nothing placed for 60 rows of 2,000 env steps (4 s each), then 90% of its worst task
+    _write(ln.progress_csv("ppo", log_dir), _rows(100, lambda i: 0.0 if i < 60 else 0.9))
+    body = ln.report(tmp_path / "RESULTS.md", log_dir=log_dir)
+    row = next(line for line in body.splitlines() if line.startswith("| PPO (the recipe"))
+    # its worst task's mean over the last 50 rows (100,000 env steps) first reaches 50% 28 rows after the jump: at
+    # 176,000 env steps, 88 rows of 4 s
+    assert row.startswith("| PPO (the recipe, seed 1's run) | 200,000 | 0.1 |") and row.endswith("| 176,000 | 0.1 |")
+    assert f"not run: `{ln.COMMAND} --arm sac`" in body and f"not run: `{ln.COMMAND} --arm icm`" in body
+    assert (tmp_path / "images" / "learners.png").stat().st_size > 0
+
+
+def test_an_unknown_arm_is_refused_and_the_icm_arm_is_the_recipe_with_curiosity(tmp_path):
+    with pytest.raises(SystemExit, match="use sac or icm"):
+        ln.main(ln.Args(arm="ppo"))
+    run = ln.icm_run(num_envs=2)
+    recipe = from_scratch.scratch_args(2, seed=ln.SEED)
+    changed = {k for k, v in vars(run.args).items() if v != vars(recipe)[k]}
+    assert changed == {"icm", "total_timesteps", "exp_name"} and run.args.icm.curiosity == "icm"
+    tiny = run.args.replace(total_timesteps=40, num_steps=20, num_minibatches=2, update_epochs=1, num_eval_envs=1,
+                            log_dir=str(tmp_path), checkpoint_freq=1)
+    ppo.main(tiny)
+    trained = load_checkpoint(tmp_path / run.args.exp_name / "checkpoint.pt")
+    assert trained["icm"] is not None and trained["progress"]["global_step"] == 40
