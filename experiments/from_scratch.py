@@ -2,9 +2,12 @@
 
     python -m experiments.from_scratch --seed 1 --dry-run   # the plan, and where that seed's run stands
     python -m experiments.from_scratch --seed 1             # run (or resume) the recipe from nothing on seed 1, a snapshot
-                                                            # every 250,000 env steps (commit its checkpoint and CSV)
-    python -m experiments.from_scratch --seed 1 --evaluate  # the paper's protocol on that seed's latest snapshot (the
-                                                            # run does it on its last one at the end of its budget)
+                                                            # every 250,000 env steps, screened on validation seeds as it
+                                                            # is made; at the budget the snapshot rule chooses one and the
+                                                            # paper's protocol evaluates it (commit campaign/scratch_s1/
+                                                            # and docs/data/from_scratch/)
+    python -m experiments.from_scratch --seed 1 --evaluate  # the paper's protocol on that seed's latest snapshot, or
+                                                            # --at-step N
     python -m experiments.from_scratch --report             # the campaign's section of docs/RESULTS.md and its curve
     python -m experiments.from_scratch --ship-best          # ship the campaign's snapshot that places most on validation
 
@@ -41,6 +44,7 @@ from pathlib import Path
 from typing import Optional
 
 import numpy as np
+import torch
 import tyro
 
 from baselines.ppo import evaluation, ppo
@@ -255,6 +259,8 @@ def evaluate_seed(seed: int, step: Optional[int] = None, workers: int = 2) -> Pa
     The run's own checkpoint counts as its snapshot at its step (a fresh machine has that one only)."""
     snapshots = seed_snapshots(seed)
     found = {int(p.stem.split("_")[1]): p for p in snapshots.glob("checkpoint_*.pt")}
+    found.update({int(p.stem.split("_")[1]): p for p in seed_candidates(seed).glob("candidate_*.pt")
+                  if int(p.stem.split("_")[1]) not in found})
     if (ckpt := checkpoint_of(seed_run(seed))).is_file():
         found.setdefault(load_checkpoint(ckpt)["progress"]["global_step"], ckpt)
     if not found:
@@ -280,15 +286,36 @@ def seed_evaluations_table() -> list[str]:
     envs = list(PAPER_TABLE_II)
     lines = [f"With the paper's protocol (`{COMMAND} --seed S --evaluate [--at-step N]`: test seeds from 1,000,000, "
              f"{EVAL_STEPS:,} env steps per task, cp4, the policy's mean; the seed's snapshot at N env steps):", "",
-             "| seed | env steps | " + " | ".join(f"{e}: picked / placed % [95% CI]" for e in envs) + " |",
-             "|---|---|" + "---|" * len(envs),
+             "| seed | env steps | " + " | ".join(f"{e}: picked / placed % [95% CI]" for e in envs)
+             + " | the snapshot rule's choice |",
+             "|---|---|" + "---|" * len(envs) + "---|",
              "| paper's general agent (Table II, cp4) | 8,000,000 | "
-             + " | ".join(f"{PAPER_TABLE_II[e][0]:.2f} / {PAPER_TABLE_II[e][1]:.2f}" for e in envs) + " |"]
+             + " | ".join(f"{PAPER_TABLE_II[e][0]:.2f} / {PAPER_TABLE_II[e][1]:.2f}" for e in envs) + " | |"]
     for seed, step, path in found:
         tasks = json.loads(path.read_text())["tasks"]
         lines.append(f"| {seed} | {step:,} | " + " | ".join(
             f"{100 * tasks[e]['pick_success']:.1f} / {pct(tasks[e]['place_success'], tasks[e]['place_success_ci95'])}"
-            for e in envs) + " |")
+            for e in envs) + f" | {'**yes**' if step == chosen_step(seed) else ''} |")
+    return lines
+
+
+def rule_table() -> list[str]:
+    """Per seed, the snapshot rule's work: snapshots screened, the candidates' confirmation, the choice."""
+    lines = [f"The snapshot rule (`screen_snapshot`, `choose_snapshot`): every snapshot screened on {VALIDATION_EPISODES} "
+             f"validation episodes per task as the run makes it, the {CONFIRM_TOP} best of them validated again on "
+             f"{CONFIRM_EPISODES} fresh episodes per task, the one that places most there on its worst task chosen "
+             "(validation seeds only; the test seeds judge the choice above):", "",
+             "| seed | snapshots screened | candidates: env steps (placed on confirmation, ceiling / window / flooring %) "
+             "| chosen |", "|---|---|---|---|"]
+    for seed in SEEDS:
+        screened = seed_screening(seed)
+        if not chosen_json(seed).is_file():
+            lines.append(f"| {seed} | {len(screened)} | (chosen at the end of its run) | - |")
+            continue
+        chosen = json.loads(chosen_json(seed).read_text())
+        lines.append(f"| {seed} | {chosen['screened']} | " + "; ".join(
+            f"{int(step):,} ({' / '.join(f'{100 * v:.0f}' for v in placed.values())})"
+            for step, placed in chosen["confirmed"].items()) + f" | {chosen['step']:,} |")
     return lines
 
 
@@ -322,6 +349,12 @@ def seeds_report(results: Path = Path("docs/RESULTS.md"), log_dir: Path = CAMPAI
                     label=f"placed, ordinary resets: {kind}")
             ax.plot(steps, 100 * csv_column(rows, f"near_goal_radius_{kind}"), color=color, lw=0.8, ls=":",
                     label=f"start radius x 100: {kind}")
+        screened = seed_screening(seed)
+        for i, (kind, color) in enumerate(zip(PAPER_KINDS, ("tab:blue", "tab:orange", "tab:green"))):
+            ax.scatter([s / 1e6 for s in screened], [100 * v[list(PAPER_TABLE_II)[i]] for v in screened.values()], s=9,
+                       color=color, marker="o", label=f"snapshot placed on validation: {kind}")
+        if (chosen := chosen_step(seed)) is not None:
+            ax.axvline(chosen / 1e6, color="black", lw=0.8, ls="--", label="the snapshot rule's choice")
     axes[0][0].set_ylabel(f"% (training episodes: mean of {WINDOW} iterations)")
     axes[0][0].set_ylim(0, 102)
     handles = [h for ax in axes[0] for h in [ax.get_legend_handles_labels()] if h[0]]
@@ -332,9 +365,10 @@ def seeds_report(results: Path = Path("docs/RESULTS.md"), log_dir: Path = CAMPAI
     SEEDS_CURVE.parent.mkdir(parents=True, exist_ok=True)
     fig.savefig(SEEDS_CURVE, dpi=100)
     plt.close(fig)
-    lines += ["", *seed_evaluations_table(), "", f"![the recipe from nothing, per seed]({Path(*SEEDS_CURVE.parts[1:])})", "",
-              f"*Made by `{COMMAND} --report`: each seed's training episodes placed from ordinary resets per task (solid) "
-              "and its near-goal start radius per task (dotted, x 100).*"]
+    lines += ["", *seed_evaluations_table(), "", *rule_table(), "", f"![the recipe from nothing, per seed]({Path(*SEEDS_CURVE.parts[1:])})", "",
+              f"*Made by `{COMMAND} --report`: each seed's training episodes placed from ordinary resets per task (solid), "
+              f"its near-goal start radius per task (dotted, x 100), each snapshot placed on {VALIDATION_EPISODES} "
+              "validation episodes per task (dots) and the snapshot the rule chose (dashed).*"]
     body = "\n".join(lines)
     update_section(results, "from-scratch-seeds", body, "Results")
     return body
@@ -356,15 +390,19 @@ CONFIRM_EPISODES = 100
 """episodes per task (CONFIRMATION_SEED on: neither the screening's nor the test seeds) that choose the snapshot."""
 
 
-def train(run: Run, every: int = SNAPSHOT_EVERY, snapshots: Path = SNAPSHOT_DIR, page: Path = PAGE) -> None:
+def train(run: Run, every: int = SNAPSHOT_EVERY, snapshots: Path = SNAPSHOT_DIR, page: Path = PAGE,
+          seed: Optional[int] = None) -> None:
     """Run (or resume) the campaign to its budget in parts of `every` env steps, each part's checkpoint copied to
-    `snapshots`, then ship the best snapshot (`ship_best`). Ctrl-C stops it with the checkpoint saved (ppo.py)."""
+    `snapshots`; a seed's run (`seed` given) screens each snapshot as it is made (`screen_snapshot`), the first
+    campaign ships the best snapshot at the end (`ship_best`). Ctrl-C stops it with the checkpoint saved (ppo.py)."""
     ckpt = checkpoint_of(run)
     snapshots.mkdir(parents=True, exist_ok=True)
     while (done := load_checkpoint(ckpt)["progress"]["global_step"] if ckpt.is_file() else 0) < run.args.total_timesteps:
         part = run.args.replace(total_timesteps=min((done // every + 1) * every, run.args.total_timesteps))
         ppo.main(part.replace(resume=str(ckpt), extend=True) if ckpt.is_file() else part)
         shutil.copyfile(ckpt, snapshots / f"checkpoint_{part.total_timesteps}.pt")
+        if seed is not None:
+            screen_snapshot(seed, part.total_timesteps, snapshots / f"checkpoint_{part.total_timesteps}.pt")
     if run.shipped is not None:
         ship_best(run, snapshots=snapshots, page=page)
 
@@ -425,6 +463,81 @@ def snapshot_table(screened: dict, confirmed: dict, best: int, episodes: int) ->
     return "\n".join(lines)
 
 
+def seed_validation_json(seed: int, step: int, confirm: bool = False) -> Path:
+    """A seed's snapshot validated: on VALIDATION_EPISODES per task from VALIDATION_SEED (the screening), or on
+    CONFIRM_EPISODES from CONFIRMATION_SEED (`confirm`). Committed: they are the rule's record on any machine."""
+    n = CONFIRM_EPISODES if confirm else VALIDATION_EPISODES
+    return SEED_EVAL_DIR / "validation" / f"scratch_s{seed}_val{n}_{step}{'_confirm' if confirm else ''}.json"
+
+
+def seed_candidates(seed: int) -> Path:
+    """The committed policies of a seed's CONFIRM_TOP best-screened snapshots (candidate_<env steps>.pt): the rule
+    chooses among them at the end of the run, on a fresh machine too, where runs/ is gone."""
+    return CAMPAIGN_DIR / f"scratch_s{seed}" / "candidates"
+
+
+def seed_screening(seed: int) -> dict[int, dict]:
+    """env steps -> placed per task on the screening, for each of the seed's snapshots screened so far."""
+    found = {}
+    for path in seed_validation_json(seed, 0).parent.glob(f"scratch_s{seed}_val{VALIDATION_EPISODES}_*.json"):
+        if not path.stem.endswith("_confirm"):
+            found[int(path.stem.rsplit("_", 1)[1])] = {k: v["place_success"]
+                                                       for k, v in json.loads(path.read_text())["tasks"].items()}
+    return dict(sorted(found.items()))
+
+
+def screen_snapshot(seed: int, step: int, snapshot: Path) -> dict:
+    """The snapshot rule's first half, run on each snapshot as the run makes it: validate it (the policy's mean,
+    VALIDATION_EPISODES per task from VALIDATION_SEED, never the test seeds), and keep its policy among the seed's
+    committed candidates while it ranks among the CONFIRM_TOP best (`refine.ranked_snapshots`: most placed on the
+    worst task, then on average); a candidate that drops out is deleted. Its placed per task."""
+    out = seed_validation_json(seed, step)
+    out.parent.mkdir(parents=True, exist_ok=True)
+    placed = validate(snapshot, out, VALIDATION_EPISODES)
+    top = set(ranked_snapshots(seed_screening(seed))[:CONFIRM_TOP])
+    folder = seed_candidates(seed)
+    folder.mkdir(parents=True, exist_ok=True)
+    if step in top and not (folder / f"candidate_{step}.pt").is_file():
+        policy = {k: v for k, v in load_checkpoint(snapshot).items() if k not in ("optimizer", "icm_optimizer", "rng")}
+        torch.save(policy, folder / f"candidate_{step}.pt")
+    for path in folder.glob("candidate_*.pt"):
+        if int(path.stem.split("_")[1]) not in top:
+            path.unlink()
+    return placed
+
+
+def choose_snapshot(seed: int) -> int:
+    """The snapshot rule's second half, at the end of the seed's run: screen any snapshot on this machine not
+    screened yet (a run from before the rule), validate the CONFIRM_TOP candidates again on CONFIRM_EPISODES fresh
+    episodes per task from CONFIRMATION_SEED, and choose the one that places most there on its worst task, then
+    on average (`refine.best_snapshot`), written to the seed's chosen.json. Its env steps."""
+    for path in sorted(seed_snapshots(seed).glob("checkpoint_*.pt"), key=lambda p: int(p.stem.split("_")[1])):
+        if int(path.stem.split("_")[1]) not in seed_screening(seed):
+            screen_snapshot(seed, int(path.stem.split("_")[1]), path)
+    top = ranked_snapshots(seed_screening(seed))[:CONFIRM_TOP]
+    if not top:
+        raise SystemExit(f"seed {seed} has no screened snapshots: `{COMMAND} --seed {seed}` screens each as it is made")
+    confirmed = {step: validate(seed_candidates(seed) / f"candidate_{step}.pt",
+                                seed_validation_json(seed, step, confirm=True), CONFIRM_EPISODES, seed=CONFIRMATION_SEED)
+                 for step in top}
+    best = best_snapshot(confirmed)
+    chosen_json(seed).write_text(json.dumps(dict(
+        step=best, screened=len(seed_screening(seed)), confirmed={str(k): confirmed[k] for k in sorted(confirmed)},
+        rule=f"screened on {VALIDATION_EPISODES} episodes per task (seeds {VALIDATION_SEED:,} on) as made; the "
+             f"{CONFIRM_TOP} best confirmed on {CONFIRM_EPISODES} (seeds {CONFIRMATION_SEED:,} on); most placed on "
+             "the worst task, then on average"), indent=1))
+    return best
+
+
+def chosen_json(seed: int) -> Path:
+    return SEED_EVAL_DIR / "validation" / f"scratch_s{seed}_chosen.json"
+
+
+def chosen_step(seed: int) -> Optional[int]:
+    """The env steps of the seed's snapshot the rule chose, or None before its run has ended."""
+    return json.loads(chosen_json(seed).read_text())["step"] if chosen_json(seed).is_file() else None
+
+
 @dataclass
 class Args:
     seed: Optional[int] = None
@@ -456,8 +569,8 @@ def main(args: Args) -> None:
         if args.evaluate:
             print(f"wrote {evaluate_seed(args.seed, args.at_step)}")
         elif not args.dry_run:
-            train(run, snapshots=seed_snapshots(args.seed))
-            print(f"wrote {evaluate_seed(args.seed)}")  # the paper's protocol on the budget's last snapshot
+            train(run, snapshots=seed_snapshots(args.seed), seed=args.seed)
+            print(f"wrote {evaluate_seed(args.seed, choose_snapshot(args.seed))}")  # the paper's protocol on the rule's choice
         return
     [run] = scratch_runs(args.num_envs)
     print(describe(run))

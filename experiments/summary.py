@@ -62,11 +62,15 @@ def paper_tasks_table() -> list[str]:
         seed, step = map(int, path.stem[len("scratch_s"):].split("_eval50k_"))
         latest[seed] = max(latest.get(seed, (step, path)), (step, path))
     for seed in from_scratch.SEEDS:
+        chosen = from_scratch.chosen_step(seed)
+        if chosen is not None and from_scratch.seed_evaluation_json(seed, chosen).is_file():
+            latest[seed] = (chosen, from_scratch.seed_evaluation_json(seed, chosen))
         if seed in latest:
             step, path = latest[seed]
             cells = _placed(json.loads(path.read_text())["tasks"])
-            lines.append(f"| the recipe from nothing, seed {seed}, at {step:,} env steps | PPO on the tasks' default dense "
-                         f"reward, one recipe unchanged from step 0 | " + " | ".join(cells) + f" | {path} |")
+            which = "the snapshot rule's choice" if step == chosen else "its latest evaluated snapshot, not yet chosen"
+            lines.append(f"| the recipe from nothing, seed {seed}, at {step:,} env steps ({which}) | PPO on the tasks' "
+                         f"default dense reward, one recipe unchanged from step 0 | " + " | ".join(cells) + f" | {path} |")
         else:
             lines.append(f"| the recipe from nothing, seed {seed} | (not evaluated yet: `{from_scratch.COMMAND} --seed "
                          f"{seed} --evaluate`) | " + " | ".join("-" for _ in TASKS) + " | |")

@@ -236,3 +236,64 @@ def test_a_seed_is_evaluated_on_its_latest_snapshot_once_and_its_row_joins_the_s
     assert "| paper's general agent (Table II, cp4) | 8,000,000 | 84.55 / 68.04 |" in body
     row = next(line for line in body.splitlines() if line.startswith("| 1 | 40 |"))
     assert row.count("/") == 3
+
+
+def test_a_seed_s_snapshots_are_screened_as_made_and_the_rule_chooses_among_the_committed_candidates(tmp_path, monkeypatch):
+    """The snapshot rule: a seed's run screens each snapshot as it makes it, keeps the CONFIRM_TOP best-screened
+    policies committed (one that falls out is deleted), and at its end confirms those on fresh episodes, with the
+    snapshots on the machine gone, and chooses the one that places most there on its worst task; the paper's
+    protocol then runs on that candidate, and the report marks it."""
+    monkeypatch.setattr(fs, "CAMPAIGN_DIR", tmp_path / "campaign")
+    monkeypatch.setattr(fs, "SNAPSHOT_DIR", tmp_path / "runs" / "snaps")
+    monkeypatch.setattr(fs, "SEED_EVAL_DIR", tmp_path / "evals")
+    monkeypatch.setattr(fs, "SEEDS_CURVE", tmp_path / "images" / "seeds.png")
+    monkeypatch.setattr(fs, "CONFIRM_TOP", 2)
+    envs = list(fs.PAPER_TABLE_II)
+    screening = {20: (0.5, 0.5, 0.5), 40: (0.9, 0.1, 0.9), 60: (0.6, 0.6, 0.6), 80: (0.7, 0.2, 0.8)}
+    confirmation = {20: (0.8, 0.7, 0.9), 60: (0.4, 0.9, 0.9)}
+    kept_after = []
+
+    def fake_validate(checkpoint, out, episodes, seed=fs.VALIDATION_SEED):
+        step = int(checkpoint.stem.split("_")[1])
+        confirming = (episodes, seed) == (fs.CONFIRM_EPISODES, fs.CONFIRMATION_SEED)
+        assert confirming == (checkpoint.parent == fs.seed_candidates(1)), "confirmed from the committed candidates"
+        placed = dict(zip(envs, (confirmation if confirming else screening)[step]))
+        out.write_text(json.dumps(dict(tasks={e: dict(place_success=v) for e, v in placed.items()})))
+        return placed
+
+    def screen_and_look(seed, step, snapshot):
+        placed = real_screen(seed, step, snapshot)
+        kept_after.append(sorted(int(p.stem.split("_")[1]) for p in fs.seed_candidates(1).glob("candidate_*.pt")))
+        return placed
+
+    real_screen = fs.screen_snapshot
+    monkeypatch.setattr(fs, "validate", fake_validate)
+    monkeypatch.setattr(fs, "screen_snapshot", screen_and_look)
+    run = fs.seed_run(1)
+    run = dataclasses.replace(run, args=run.args.replace(
+        num_envs=2, num_steps=10, num_minibatches=2, update_epochs=1, num_eval_envs=1, eval_freq=100, checkpoint_freq=1,
+        env_id="Flooring-v1", task_weights=None, total_timesteps=80))
+    fs.train(run, every=20, snapshots=fs.seed_snapshots(1), seed=1)
+    assert kept_after == [[20], [20, 40], [20, 60], [20, 60]], "the two best-screened so far, the others deleted"
+    assert fs.seed_screening(1) == {s: dict(zip(envs, v)) for s, v in screening.items()}
+    candidate = torch.load(fs.seed_candidates(1) / "candidate_60.pt", weights_only=False)
+    assert candidate["progress"]["global_step"] == 60 and "optimizer" not in candidate and "rng" not in candidate
+    shutil.rmtree(fs.seed_snapshots(1))  # a fresh machine: the committed candidates and validations only
+    assert fs.chosen_step(1) is None
+    assert fs.choose_snapshot(1) == 20, "the confirmation chooses (worst task 70% against 40%), not the screening"
+    assert fs.chosen_step(1) == 20
+    evaluated = []
+
+    def fake_paper_protocol(args):
+        evaluated.append(args.checkpoint)
+        args.json.parent.mkdir(parents=True, exist_ok=True)
+        args.json.write_text(json.dumps(dict(tasks={e: dict(pick_success=1.0, place_success=0.9,
+                                                            place_success_ci95=[0.8, 0.95]) for e in envs})))
+
+    monkeypatch.setattr(fs.evaluation, "main", fake_paper_protocol)
+    assert fs.evaluate_seed(1, fs.chosen_step(1)) == fs.seed_evaluation_json(1, 20)
+    assert evaluated == [fs.seed_candidates(1) / "candidate_20.pt"]
+    body = fs.seeds_report(tmp_path / "RESULTS.md", log_dir=tmp_path / "campaign")
+    assert next(line for line in body.splitlines() if line.startswith("| 1 | 20 |")).endswith("| **yes** |")
+    assert "| 1 | 4 | 20 (80 / 70 / 90); 60 (40 / 90 / 90) | 20 |" in body
+    assert "| 2 | 0 | (chosen at the end of its run) | - |" in body

@@ -1,5 +1,5 @@
 """RESULTS' first screen (experiments/summary.py): every number comes from the JSON its row names, the latest
-evaluation of each seed of the recipe, and a dash where a file is not there yet."""
+evaluation of each seed of the recipe (the snapshot rule's choice once made), and a dash where a file is not there yet."""
 
 import json
 
@@ -25,6 +25,10 @@ def test_each_row_reads_its_file_and_a_seed_shows_its_latest_evaluation(tmp_path
     seed1 = next(line for line in body.splitlines() if "seed 1" in line)
     assert "at 6,000,000 env steps" in seed1 and seed1.count("| 92.5 ") == 3
     assert "`python -m experiments.from_scratch --seed 2 --evaluate`" in body
+    from_scratch.chosen_json(1).parent.mkdir()
+    from_scratch.chosen_json(1).write_text(json.dumps({"step": 4_000_000}))
+    seed1 = next(line for line in sm.summary().splitlines() if "seed 1" in line)
+    assert "at 4,000,000 env steps (the snapshot rule's choice)" in seed1 and seed1.count("| 50.0 ") == 3
 
 
 def test_a_file_not_there_yet_shows_a_dash_and_the_section_lands_between_its_markers(tmp_path, monkeypatch):
