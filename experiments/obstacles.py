@@ -2,6 +2,9 @@
 
     python -m experiments.obstacles                       # every row; then the RESULTS section and its JSON
     python -m experiments.obstacles --episodes 20 --workers 1
+    python -m experiments.obstacles --train shipped      # the recipe among obstacles from the shipped reward-only
+                                                         # agent's weights (or: nothing), resumable
+    python -m experiments.obstacles --train shipped --evaluate   # that run's rows beside the zero-shot ones
 
 Protocol, per task (ceiling, window, flooring), on evaluation seeds (from 1,000,000: never trained on):
 1. the planning expert solves each seed's static scene (a material stack and a scaffold post, seeded per episode):
@@ -9,6 +12,9 @@ Protocol, per task (ceiling, window, flooring), on evaluation seeds (from 1,000,
 2. the expert on those seeds with the worker walking across the cell (`moving`), replanning around it;
 3. each shipped agent on those seeds, without obstacles, static and moving. The agents were trained on a site
    without obstacles and meet them blind (no obstacle entry in their observation): zero-shot.
+4. with `--train S --evaluate`: the from-scratch recipe's run among obstacles (experiments/transfer.py: TRAIN_SCENE,
+   TRAIN_BUDGET env steps, from nothing or from the shipped reward-only agent's weights, the obstacles' entry in its
+   observation) on the same seeds and scenes.
 
 An episode with obstacles ends, failed, at the first touch of the arm or the element on one. Every seed draws the
 same arm, element and goal in all three scenes. Each (row, task) is written to --out as it finishes and skipped when
@@ -23,6 +29,7 @@ import shlex
 import sys
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Optional
 
 import numpy as np
 import torch
@@ -30,6 +37,8 @@ import tyro
 from tqdm import tqdm
 
 from baselines.ppo.evaluation import episode_job, pct, wilson
+from experiments import transfer
+from experiments.campaign import Run, checkpoint_of
 from ms_construction.curriculum import FINAL_STAGE
 from ms_construction.envs import PAPER_TASK_ENV_IDS
 from ms_construction.reporting import update_section
@@ -40,6 +49,24 @@ AGENTS = {
 }
 SCENES = ("none", "static", "moving")
 RESULTS_PATH = Path("docs/RESULTS.md")
+TRAIN_SCENE = "moving"
+"""the scene a training run among obstacles draws: the stack and the post, and the worker walking across."""
+TRAIN_BUDGET = 3_000_000
+"""env steps of each training run among obstacles."""
+
+
+def training_run(start: str, seed: int = 1, num_envs: Optional[int] = None) -> Run:
+    """The recipe among obstacles (TRAIN_SCENE) from `start` (experiments/transfer.py's STARTS), unchanged but for
+    the tasks' `obstacles` and the budget."""
+    return transfer.transfer_run(f"obstacles_{TRAIN_SCENE}", start, seed, num_envs, TRAIN_BUDGET,
+                                 "python -m experiments.obstacles", f"a site with obstacles ({TRAIN_SCENE})",
+                                 obstacles=TRAIN_SCENE)
+
+
+def row_name(checkpoint: str) -> str:
+    """The name an agent's row files take: its checkpoint's file name, or its run's folder for a run's checkpoint.pt."""
+    path = Path(checkpoint)
+    return path.parent.name if path.stem == "checkpoint" else path.stem
 
 
 @dataclass
@@ -56,6 +83,17 @@ class Args:
     """label -> checkpoint of the agents to run."""
     write_results: bool = True
     """write the table into docs/RESULTS.md (section `obstacles-zero-shot`)."""
+    train: Optional[str] = None
+    """train the recipe among obstacles from `nothing` or from the `shipped` reward-only agent (transfer.STARTS), to
+    TRAIN_BUDGET, resuming its checkpoint; then exit."""
+    train_seed: int = 1
+    """with --train: the training run's seed (--seed is the first evaluation seed)."""
+    num_envs: Optional[int] = None
+    """with --train: env processes (default: one per CPU core); a resumed run keeps its own."""
+    evaluate: bool = False
+    """with --train: add that run's policy to the agents (its rows beside the zero-shot ones) instead of training."""
+    dry_run: bool = False
+    """with --train: print the plan and where the run stands, and exit."""
 
 
 _experts: dict = {}
@@ -132,6 +170,11 @@ def table(rows: dict[str, dict[str, dict]]) -> str:
 def main(args: Args) -> dict:
     if args.episodes < 1 or args.workers < 1:
         raise SystemExit("--episodes and --workers must be positive")
+    if args.train is not None:
+        run = training_run(args.train, args.train_seed, args.num_envs)
+        if not args.evaluate:
+            return transfer.train(run, args.dry_run)
+        args.agents = {**args.agents, f"{run.what} (trained among obstacles)": str(checkpoint_of(run))}
     command = "python -m experiments.obstacles " + " ".join(shlex.quote(a) for a in sys.argv[1:])
     rows: dict[tuple[str, str], dict[str, dict]] = {}
     giving_way = []
@@ -149,7 +192,7 @@ def main(args: Args) -> dict:
             giving_way.append(f"{kind} {s['replans_per_episode']:.2f} / {s['escapes_per_episode']:.2f} / "
                               f"{s['waited_steps_per_episode']:.1f}")
             for label, checkpoint in args.agents.items():
-                name = Path(checkpoint).stem
+                name = row_name(checkpoint)
                 for scene in SCENES:
                     episodes = run_row(pool, args.out / f"{name}_{scene}_{kind}.json", _agent_episode,
                                        [(checkpoint, env_id, scene, s) for s in seeds], seeds, f"{name} {scene} {kind}")
@@ -159,8 +202,10 @@ def main(args: Args) -> dict:
             "Scenes: none (the site as trained on), static (a material stack and a scaffold post, seeded per episode), "
             "moving (the same, and a worker walking across the cell once). Episodes: per task, the seeds of "
             f"{args.seed}..{args.seed + args.episodes - 1} whose static scene the planning expert solved (the first "
-            "row: how many it solved). A touch on an obstacle ends the episode, failed. The agents meet the obstacles "
-            "blind (trained without them, no obstacle entry in their observation). Compute per decision: the expert's "
+            "row: how many it solved). A touch on an obstacle ends the episode, failed. The shipped agents meet the "
+            "obstacles blind (trained without them, no obstacle entry in their observation); an agent labelled "
+            "'trained among obstacles' is the from-scratch recipe's run on the moving scene (`--train`), which observes "
+            "them. Compute per decision: the expert's "
             "planning, replanning and path watching per control step; an agent's forward pass per step (one CPU "
             "thread).\n\n"
             "The expert giving way to the walking worker, per episode (replans / steps out of its way / control steps "

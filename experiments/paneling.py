@@ -4,6 +4,7 @@ from-scratch recipe learning it.
     python -m experiments.paneling                       # every zero-shot row; then the RESULTS section and its JSON
     python -m experiments.paneling --episodes 20 --workers 1
     python -m experiments.paneling --train nothing       # the recipe on paneling from nothing (or: shipped), resumable
+                                                         # (--train-seed S: another seed)
     python -m experiments.paneling --train shipped --evaluate   # the paper's protocol on that run's policy
 
 The shipped agents were trained on the paper's three task types; on paneling the task one-hot's new slot is the
@@ -13,17 +14,14 @@ goal pose, the element's pose). Protocol: cp4, seeds from 1,000,000 (never train
 row is written to --out as it finishes and skipped when the file is there with the same seeds, so an interrupted
 run goes on where it stopped.
 
-Training (`--train`): the from-scratch recipe (experiments/from_scratch.py's `scratch_args`) on PanelInstallation-v1
-with the task's own dense reward: no code of paneling's own, the test of the reward's rule. From nothing, or from
-the weights of the shipped general agent learnt from reward alone (assets/checkpoints/scratch_general_agent.pt, whose
-network the recipe shares; the imitation agent's residual network is another). TRAIN_BUDGET env steps each, in
-campaign/paneling_<start>_s<seed>/ (commit its checkpoint and CSV to go on in another session); the env steps to 90%
-placed are read from its training episodes (`steps_to`), then confirmed with the paper's protocol (`--evaluate`).
+Training (`--train`): the from-scratch recipe on PanelInstallation-v1 with the task's own dense reward, from nothing
+or from the shipped reward-only agent's weights (experiments/transfer.py), TRAIN_BUDGET env steps each, in
+campaign/paneling_<start>_s<seed>/; the env steps to 90% placed are read from its training episodes
+(`transfer.steps_to`), then confirmed with the paper's protocol (`--evaluate`).
 """
 
 from __future__ import annotations
 
-import csv
 import json
 import multiprocessing as mp
 import shlex
@@ -37,11 +35,11 @@ import torch
 import tyro
 
 from baselines.ppo import evaluation
-from baselines.ppo.args import command_line
 from baselines.ppo.evaluation import episode_job, pct, wilson
-from experiments.campaign import Run, checkpoint_of, describe, run_or_resume
-from experiments.from_scratch import METHOD, csv_column, moving_mean, scratch_args
+from experiments import transfer
+from experiments.campaign import Run, checkpoint_of
 from experiments.obstacles import RESULTS_PATH, run_row
+from experiments.transfer import transfer_run
 from ms_construction.curriculum import FINAL_STAGE
 from ms_construction.reporting import update_section
 
@@ -53,35 +51,16 @@ AGENTS = {
 }
 
 
-TRAIN_STARTS = {"nothing": None, "shipped": "assets/checkpoints/scratch_general_agent.pt"}
-"""where a training run on paneling starts: fresh weights, or the shipped reward-only general agent's."""
 TRAIN_BUDGET = 3_000_000
 """env steps of each training run on paneling."""
-TARGET = 0.9
-"""the place success whose first crossing `steps_to` reports."""
 TRAIN_EVAL_JSON = "docs/data/paneling/train_{start}_s{seed}_eval50k.json"
 
 
 def training_run(start: str, seed: int = 1, num_envs: Optional[int] = None) -> Run:
-    """The recipe on PanelInstallation-v1 from `start` (TRAIN_STARTS), unchanged but for the env and the budget."""
-    if start not in TRAIN_STARTS:
-        raise SystemExit(f"--train {start}: use one of {', '.join(TRAIN_STARTS)}")
-    name = f"paneling_{start}_s{seed}"
-    args = scratch_args(num_envs, seed=seed, exp_name=name, env_id=ENV_ID, total_timesteps=TRAIN_BUDGET,
-                        checkpoint=TRAIN_STARTS[start])
-    what = "from nothing" if TRAIN_STARTS[start] is None else f"from the weights of {TRAIN_STARTS[start]}"
-    return Run(name, args, f"the from-scratch recipe on paneling {what}, seed {seed}",
-               f"python -m experiments.paneling --train {start} --seed {seed}", None, method=METHOD)
-
-
-def steps_to(progress: Path, target: float = TARGET, window: int = 50) -> Optional[int]:
-    """The first env step at which the training episodes from ordinary resets placed at least `target` (their mean
-    over the last `window` iterations: 100,000 env steps at the recipe's 2,000 per iteration); None if never."""
-    with open(progress, newline="") as f:
-        rows = list(csv.DictReader(f))
-    placed = moving_mean(csv_column(rows, "ordinary_place_success"), window)
-    hit = np.flatnonzero(np.nan_to_num(placed) >= target)
-    return int(csv_column(rows, "global_step")[hit[0]]) if len(hit) else None
+    """The recipe on PanelInstallation-v1 from `start` (experiments/transfer.py's STARTS), unchanged but for the env
+    and the budget."""
+    return transfer_run("paneling", start, seed, num_envs, TRAIN_BUDGET, "python -m experiments.paneling", "paneling",
+                        env_id=ENV_ID)
 
 
 @dataclass
@@ -99,10 +78,10 @@ class Args:
     write_results: bool = True
     """write the table into docs/RESULTS.md (section `paneling-zero-shot`)."""
     train: Optional[str] = None
-    """train the recipe on paneling from `nothing` or from the `shipped` reward-only agent (TRAIN_STARTS), to
+    """train the recipe on paneling from `nothing` or from the `shipped` reward-only agent (transfer.STARTS), to
     TRAIN_BUDGET, resuming its checkpoint; then exit."""
-    seed: int = 1
-    """with --train: the training run's seed."""
+    train_seed: int = 1
+    """with --train: the training run's seed (--seed is the first evaluation seed)."""
     num_envs: Optional[int] = None
     """with --train: env processes (default: one per CPU core); a resumed run keeps its own."""
     evaluate: bool = False
@@ -157,18 +136,13 @@ def table(rows: dict[str, dict]) -> str:
 
 
 def train(args: Args) -> None:
-    run = training_run(args.train, args.seed, args.num_envs)
-    print(describe(run))
-    print("as one ppo.py command: python baselines/ppo/ppo.py " + " ".join(command_line(run.args)))
+    run = training_run(args.train, args.train_seed, args.num_envs)
     if args.evaluate:
-        out = Path(TRAIN_EVAL_JSON.format(start=args.train, seed=args.seed))
+        out = Path(TRAIN_EVAL_JSON.format(start=args.train, seed=args.train_seed))
         evaluation.main(evaluation.Args(checkpoint=checkpoint_of(run), env_id=ENV_ID, steps=50_000,
                                         workers=args.workers, json=out))
-    elif not args.dry_run:
-        run_or_resume(run)
-        reached = steps_to(checkpoint_of(run).parent / "progress.csv")
-        print(f"{run.name}: training episodes placed >= {TARGET:.0%} "
-              + (f"from {reached:,} env steps" if reached is not None else "not yet"))
+    else:
+        transfer.train(run, args.dry_run)
 
 
 def main(args: Args) -> dict:

@@ -4,7 +4,7 @@ when a run adds the path offset to its observation."""
 import pytest
 import torch
 
-from baselines.ppo.checkpoints import make_agent, with_path_offset_inputs
+from baselines.ppo.checkpoints import make_agent, with_obstacle_inputs, with_path_offset_inputs
 from baselines.ppo.networks import Agent
 
 
@@ -54,3 +54,27 @@ def test_a_policy_gains_the_path_offset_inputs_and_acts_as_before(rotation_featu
         assert torch.allclose(new.get_value(widened), old.get_value(x), atol=1e-6)
     with pytest.raises(SystemExit, match="without curiosity"):
         with_path_offset_inputs({**ckpt, "icm": {"w": torch.zeros(1)}}, "test.pt")
+
+
+@pytest.mark.parametrize("elapsed", [False, True])
+def test_a_policy_gains_the_obstacle_inputs_at_the_end_and_acts_as_before(elapsed):
+    """The obstacles' entry ends the observation (after the elapsed time too): the widened policy and value give the
+    checkpoint's outputs whatever the obstacles are, and it says it reads them (its args name a scene)."""
+    from ms_construction.envs.obstacles import OBSTACLE_OBS_SIZE
+
+    args = dict(hidden_size=32, curiosity="none", rotation_features=True, num_layers=2, bounded_mean=True,
+                obs_elapsed_time=elapsed, obs_install_offset=True, obs_path_offset=True)
+    old = make_agent(args, 55, 6)
+    with torch.no_grad():
+        old.obs_rms.mean.uniform_(-1, 1)
+        old.obs_rms.var.uniform_(0.5, 2)
+    ckpt = dict(args=args, agent=old.state_dict(), obs_dim=55, act_dim=6, icm=None)
+    wide = with_obstacle_inputs(ckpt, "test.pt")
+    assert wide["obs_dim"] == 55 + OBSTACLE_OBS_SIZE and wide["args"]["obstacles"] and "obstacles" not in ckpt["args"]
+    new = make_agent(wide["args"], wide["obs_dim"], 6)
+    new.load_state_dict(wide["agent"])
+    x = torch.randn(64, 55)
+    widened = torch.cat([x, 3 * torch.randn(64, OBSTACLE_OBS_SIZE)], 1)
+    with torch.no_grad():
+        assert torch.allclose(new.get_action(widened, True), old.get_action(x, True), atol=1e-6)
+        assert torch.allclose(new.get_value(widened), old.get_value(x), atol=1e-6)

@@ -258,3 +258,29 @@ def test_ppo_trains_among_obstacles_and_its_policy_sees_them_wherever_it_is_eval
                                         obstacles=obstacles, json=out))
         assert json.loads(out.read_text())["episodes"] == 1
 
+
+
+def test_the_recipe_trains_among_obstacles_from_the_shipped_weights_unchanged_but_for_the_scene_and_budget(tmp_path):
+    """`--train shipped`: the from-scratch recipe's arguments, but for the tasks' `obstacles`, the budget, the run's
+    name and the initial weights: the shipped reward-only agent's, which gain the obstacle inputs (at zero weight)
+    and train among them; its row files are named for its run."""
+    from baselines.ppo import ppo
+    from baselines.ppo.checkpoints import load_checkpoint
+    from experiments import from_scratch, obstacles
+
+    run = obstacles.training_run("shipped", num_envs=2)
+    recipe = from_scratch.scratch_args(2, seed=1)
+    changed = {k for k, v in vars(run.args).items() if v != vars(recipe)[k]}
+    assert changed <= {"obstacles", "total_timesteps", "exp_name", "checkpoint"} and run.args.obstacles == "moving"
+    assert obstacles.row_name(str(from_scratch.CAMPAIGN_DIR / run.name / "checkpoint.pt")) == run.name
+    tiny = run.args.replace(total_timesteps=40, num_steps=20, num_minibatches=2, update_epochs=1, num_eval_envs=1,
+                            log_dir=str(tmp_path), checkpoint_freq=1, env_id="Flooring-v1", task_weights=None)
+    ppo.main(tiny)
+    trained = load_checkpoint(tmp_path / run.name / "checkpoint.pt")
+    before = load_checkpoint(run.args.checkpoint)
+    assert trained["progress"]["global_step"] == 40 and trained["args"]["obstacles"] == "moving"
+    assert trained["obs_dim"] == before["obs_dim"] + OBSTACLE_OBS_SIZE
+    at = before["agent"]["obs_rms.mean"].shape[0]  # the obstacles' entry ends the observation
+    w, w0 = trained["agent"]["actor_mean.0.weight"], before["agent"]["actor_mean.0.weight"]
+    rest = torch.cat([w[:, :at], w[:, at + OBSTACLE_OBS_SIZE:]], 1)
+    assert torch.allclose(rest, w0, atol=0.05) and not torch.equal(rest, w0), "started from the shipped weights, and trained"

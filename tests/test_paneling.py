@@ -195,6 +195,7 @@ def test_the_recipe_trains_on_paneling_from_the_shipped_weights_and_from_nothing
 
     with pytest.raises(SystemExit, match="nothing, shipped"):
         paneling.training_run("imitation")
+    assert paneling.training_run("shipped", seed=2).command == "python -m experiments.paneling --train shipped --train-seed 2"
     recipe = from_scratch.scratch_args(2, seed=1)
     for start, init in (("shipped", "assets/checkpoints/scratch_general_agent.pt"), ("nothing", None)):
         run = paneling.training_run(start, num_envs=2)
@@ -213,13 +214,22 @@ def test_the_recipe_trains_on_paneling_from_the_shipped_weights_and_from_nothing
             assert any(not torch.equal(v, before[k]) for k, v in same.items()), "and trained"
 
 
-def test_steps_to_reads_the_first_crossing_of_the_training_episodes_moving_mean(tmp_path):
+def test_the_zero_shot_episodes_default_to_the_test_seeds_and_a_training_run_takes_its_own_seed():
+    """The evaluation's first seed (--seed) and a training run's seed (--train-seed) are two options: neither
+    default shadows the other."""
     from experiments import paneling
+
+    args = paneling.Args()
+    assert args.seed == 1_000_000 and args.train_seed == 1
+
+
+def test_steps_to_reads_the_first_crossing_of_the_training_episodes_moving_mean(tmp_path):
+    from experiments import transfer
 
     progress = tmp_path / "progress.csv"
     placed = [0.0] * 10 + [1.0] * 20
     progress.write_text("global_step,ordinary_place_success\n"
                         + "".join(f"{2000 * (i + 1)},{p}\n" for i, p in enumerate(placed)))
     # a 10-iteration mean first reaches 0.9 nine iterations into the ones
-    assert paneling.steps_to(progress, 0.9, window=10) == 2000 * 19
-    assert paneling.steps_to(progress, 1.01, window=10) is None
+    assert transfer.steps_to(progress, 0.9, window=10) == 2000 * 19
+    assert transfer.steps_to(progress, 1.01, window=10) is None

@@ -304,21 +304,38 @@ PATH_OFFSET_SIZE = 6
 
 def with_path_offset_inputs(ckpt: dict, path) -> dict:
     """`ckpt` (a plain policy trained without `obs_path_offset`) for a run that adds the path offset to the observation
-    (after the install offset, before the elapsed time): the first layers of its policy and value get zero weights for
-    the new inputs and its observation statistics a mean of 0 and a variance of 1 for them (a joint move in rad), so
-    that it acts and values as before until the run learns to read them. A copy; `path` names it in errors."""
+    (after the install offset, before the elapsed time), as `_with_new_inputs` adds inputs (a joint move in rad)."""
+    at = ckpt["agent"]["obs_rms.mean"].shape[0] - int(bool(ckpt["args"].get("obs_elapsed_time")))
+    return _with_new_inputs(ckpt, path, at, PATH_OFFSET_SIZE, "obs_path_offset", "the path-offset inputs")
+
+
+def with_obstacle_inputs(ckpt: dict, path) -> dict:
+    """`ckpt` (a plain policy trained on a site without obstacles) for a run among them (`obstacles`), whose
+    observation ends with the obstacles' entry (OBSTACLE_OBS_SIZE numbers, after everything else), as
+    `_with_new_inputs` adds inputs: it acts as it did blind until the run learns to read them. The run's `obstacles`
+    says which scene; the checkpoint's args gain `obstacles` = "static" until the run saves its own."""
+    from ms_construction.envs.obstacles import OBSTACLE_OBS_SIZE
+
+    at = ckpt["agent"]["obs_rms.mean"].shape[0]
+    return _with_new_inputs(ckpt, path, at, OBSTACLE_OBS_SIZE, "obstacles", "the obstacle inputs", value="static")
+
+
+def _with_new_inputs(ckpt: dict, path, at: int, size: int, flag: str, what: str, value=True) -> dict:
+    """A copy of `ckpt` (a plain policy) whose observation gains `size` inputs at index `at`: the first layers of its
+    policy and value get zero weights for them and its observation statistics a mean of 0 and a variance of 1 there,
+    so that it acts and values as before whatever they say; its args gain `flag` = `value`. `path` names it in
+    errors."""
     args = ckpt["args"]
     if args.get("residual_of") or ckpt.get("icm") is not None:
-        raise SystemExit(f"--checkpoint {path}: only a plain policy without curiosity gains the path-offset inputs")
+        raise SystemExit(f"--checkpoint {path}: only a plain policy without curiosity gains {what}")
     agent = dict(ckpt["agent"])
-    at = agent["obs_rms.mean"].shape[0] - int(bool(args.get("obs_elapsed_time")))  # the features end as the obs does
     for key, fill in (("obs_rms.mean", 0.0), ("obs_rms.var", 1.0)):
         v = agent[key]
-        agent[key] = torch.cat([v[:at], torch.full((PATH_OFFSET_SIZE,), fill, dtype=v.dtype), v[at:]])
+        agent[key] = torch.cat([v[:at], torch.full((size,), fill, dtype=v.dtype), v[at:]])
     for key in ("critic.0.weight", "actor_mean.0.weight"):
         w = agent[key]
-        agent[key] = torch.cat([w[:, :at], torch.zeros(w.shape[0], PATH_OFFSET_SIZE, dtype=w.dtype), w[:, at:]], 1)
-    return {**ckpt, "agent": agent, "obs_dim": ckpt["obs_dim"] + PATH_OFFSET_SIZE, "args": {**args, "obs_path_offset": True}}
+        agent[key] = torch.cat([w[:, :at], torch.zeros(w.shape[0], size, dtype=w.dtype), w[:, at:]], 1)
+    return {**ckpt, "agent": agent, "obs_dim": ckpt["obs_dim"] + size, "args": {**args, flag: value}}
 
 
 def policy_env_kwargs(args: dict) -> dict:

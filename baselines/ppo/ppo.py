@@ -50,7 +50,8 @@ from mani_skill.vector.wrappers.gymnasium import ManiSkillVectorEnv
 
 from baselines.ppo.args import Args, resolve_defaults, validate
 from baselines.ppo.checkpoints import (CSVLog, Progress, check_fit, load_checkpoint, make_agent, policy_env_kwargs,
-                                       restore_rng, save_checkpoint, value_heads, with_path_offset_inputs)
+                                       restore_rng, save_checkpoint, value_heads, with_obstacle_inputs,
+                                       with_path_offset_inputs)
 from baselines.ppo.curiosity import ICM, make_icm
 from baselines.ppo.evaluation import evaluate_envs, finished_episodes, reset
 from baselines.ppo.networks import Agent
@@ -248,6 +249,8 @@ def setup(args: Args) -> Run:
     progress = Progress()
     if init is not None and args.obs_path_offset and not init["args"].get("obs_path_offset"):
         init = with_path_offset_inputs(init, args.checkpoint)
+    if init is not None and args.obstacles and not init["args"].get("obstacles"):
+        init = with_obstacle_inputs(init, args.checkpoint)
     for ckpt, path in ((resume, args.resume), (init, args.checkpoint)):
         if ckpt is not None:
             check_fit(ckpt, path, args.env_id, obs_dim, act_dim, args.control_mode)

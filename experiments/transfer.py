@@ -1,0 +1,60 @@
+"""The from-scratch recipe on a setting it was not made for (a fourth task, a site with obstacles), from nothing or
+from the weights of the shipped general agent learnt from reward alone, with no reward code of the setting's own:
+the test of the dense reward's rule and of what the recipe's policy carries over. experiments/paneling.py and
+experiments/obstacles.py run it (`--train nothing|shipped`); each run is resumable in campaign/<name>/ (commit its
+checkpoint and CSV to go on in another session), and `steps_to` reads from its training episodes the env steps it
+took to place TARGET of them."""
+
+from __future__ import annotations
+
+import csv
+from pathlib import Path
+from typing import Optional
+
+import numpy as np
+
+from baselines.ppo.args import command_line
+from experiments.campaign import Run, checkpoint_of, describe, run_or_resume
+from experiments.from_scratch import METHOD, csv_column, moving_mean, scratch_args
+
+STARTS = {"nothing": None, "shipped": "assets/checkpoints/scratch_general_agent.pt"}
+"""where a run starts: fresh weights, or the shipped reward-only general agent's (whose network the recipe shares;
+the imitation agent's residual network is another)."""
+TARGET = 0.9
+"""the place success whose first crossing `steps_to` reports."""
+
+
+def transfer_run(name: str, start: str, seed: int, num_envs: Optional[int], budget: int, command: str, what: str,
+                 **setting) -> Run:
+    """The recipe (experiments/from_scratch.py's `scratch_args`) from `start` (STARTS) to `budget` env steps on
+    seed `seed`, unchanged but for the `setting` (ppo.py Args fields: an env, a scene), in campaign/<name>_<start>_s<seed>/."""
+    if start not in STARTS:
+        raise SystemExit(f"--train {start}: use one of {', '.join(STARTS)}")
+    exp_name = f"{name}_{start}_s{seed}"
+    args = scratch_args(num_envs, seed=seed, exp_name=exp_name, total_timesteps=budget, checkpoint=STARTS[start], **setting)
+    how = "from nothing" if STARTS[start] is None else f"from the weights of {STARTS[start]}"
+    return Run(exp_name, args, f"the from-scratch recipe on {what} {how}, seed {seed}",
+               f"{command} --train {start} --train-seed {seed}", None, method=METHOD)
+
+
+def steps_to(progress: Path, target: float = TARGET, window: int = 50) -> Optional[int]:
+    """The first env step at which the training episodes from ordinary resets placed at least `target` (their mean
+    over the last `window` iterations: 100,000 env steps at the recipe's 2,000 per iteration); None if never."""
+    with open(progress, newline="") as f:
+        rows = list(csv.DictReader(f))
+    placed = moving_mean(csv_column(rows, "ordinary_place_success"), window)
+    hit = np.flatnonzero(np.nan_to_num(placed) >= target)
+    return int(csv_column(rows, "global_step")[hit[0]]) if len(hit) else None
+
+
+def train(run: Run, dry_run: bool = False) -> None:
+    """Print the plan and where `run` stands; unless `dry_run`, train (or resume) it to its budget and say when its
+    training episodes first placed TARGET."""
+    print(describe(run))
+    print("as one ppo.py command: python baselines/ppo/ppo.py " + " ".join(command_line(run.args)))
+    if dry_run:
+        return
+    run_or_resume(run)
+    reached = steps_to(checkpoint_of(run).parent / "progress.csv")
+    print(f"{run.name}: training episodes placed >= {TARGET:.0%} "
+          + (f"from {reached:,} env steps" if reached is not None else "not yet"))
