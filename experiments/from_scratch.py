@@ -9,7 +9,8 @@
     python -m experiments.from_scratch --seed 1 --evaluate  # the paper's protocol on that seed's latest snapshot, or
                                                             # --at-step N
     python -m experiments.from_scratch --report             # the campaign's section of docs/RESULTS.md and its curve
-    python -m experiments.from_scratch --ship-best          # ship the campaign's snapshot that places most on validation
+    python -m experiments.from_scratch --ship-seeds         # ship the better seed's chosen snapshot once both have run
+    python -m experiments.from_scratch --ship-best          # ship the first campaign's snapshot best on validation
 
 The recipe (`scratch_args`) runs unchanged from step 0 to its budget, one PPO run (baselines/ppo/ppo.py) on
 ConstructionPickPlace-v1 per seed, in campaign/scratch_s<seed>/ (resumed from its checkpoint there). The campaign
@@ -39,6 +40,7 @@ import json
 import os
 import shlex
 import shutil
+import dataclasses
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Optional
@@ -538,6 +540,46 @@ def chosen_step(seed: int) -> Optional[int]:
     return json.loads(chosen_json(seed).read_text())["step"] if chosen_json(seed).is_file() else None
 
 
+def recipe_commit() -> str:
+    """The last commit that changed the recipe (`scratch_args`): the seeds' runs name it in their record."""
+    import subprocess
+
+    log = subprocess.run(["git", "log", "--format=%h", "-L", "/^def scratch_args/,/^    return args/:" + __file__],
+                         capture_output=True, text=True).stdout
+    return next((line for line in log.splitlines() if line and all(c in "0123456789abcdef" for c in line)), "unknown")
+
+
+def ship_seeds(shipped: Path = SHIPPED_DIR / f"{CAMPAIGN}.pt") -> Optional[Path]:
+    """Ship the better seed's chosen snapshot as the general agent learnt from reward alone, once every seed of
+    SEEDS has run to its end (its snapshot chosen and evaluated with the paper's protocol). The better seed is the
+    one whose choice confirmed best on the validation seeds (most placed on its worst task, then on average); it
+    ships only if it places at least what the policy shipped now does on every task on the test seeds (EVAL_JSON),
+    and its evaluation then becomes EVAL_JSON. The path shipped, or None."""
+    waiting = [seed for seed in SEEDS if chosen_step(seed) is None
+               or not seed_evaluation_json(seed, chosen_step(seed)).is_file()]
+    if waiting:
+        raise SystemExit("not every seed has run to its end: " + ", ".join(f"`{COMMAND} --seed {s}`" for s in waiting))
+    confirmed = {seed: json.loads(chosen_json(seed).read_text())["confirmed"][str(chosen_step(seed))] for seed in SEEDS}
+    seed = best_snapshot(confirmed)
+    step = chosen_step(seed)
+    tested = json.loads(seed_evaluation_json(seed, step).read_text())["tasks"]
+    now = json.loads(EVAL_JSON.read_text())["tasks"] if EVAL_JSON.is_file() else {}
+    short = [env for env, r in now.items() if tested[env]["place_success"] < r["place_success"]]
+    if short:
+        print(f"seed {seed}'s snapshot at {step:,} env steps places less than the policy shipped now on the test seeds "
+              "(" + ", ".join(f"{env} {tested[env]['place_success']:.3f} < {now[env]['place_success']:.3f}" for env in short)
+              + f"): {shipped} stays")
+        return None
+    run = dataclasses.replace(seed_run(seed), shipped=shipped)
+    chosen = (f"seed {seed} of {len(SEEDS)} (the better on validation: placed on its worst task "
+              + ", ".join(f"seed {s} {min(c.values()):.2f}" for s, c in confirmed.items())
+              + f"), its snapshot at {step:,} env steps chosen by the snapshot rule; the recipe: scratch_args of "
+              f"experiments/from_scratch.py at commit {recipe_commit()}, unchanged from step 0; demonstrations: none")
+    out = ship(run, snapshot=seed_candidates(seed) / f"candidate_{step}.pt", chosen=chosen)
+    shutil.copyfile(seed_evaluation_json(seed, step), EVAL_JSON)
+    return out
+
+
 @dataclass
 class Args:
     seed: Optional[int] = None
@@ -549,6 +591,8 @@ class Args:
     """print the plan and where the run stands, and exit."""
     ship_now: bool = False
     """ship the campaign's policy where it stands now (its record says at which step of the plan), and exit."""
+    ship_seeds: bool = False
+    """ship the better seed's chosen snapshot (`ship_seeds`) once every seed has run to its end, and exit."""
     ship_best: bool = False
     """validate the campaign's snapshots on this machine and the shipped policy, ship the snapshot that places most
     (if that is not the shipped one), and exit."""
@@ -581,6 +625,8 @@ def main(args: Args) -> None:
         ship(run, before_the_end=True)
     elif args.ship_best:
         ship_best(run)
+    elif args.ship_seeds:
+        ship_seeds()
     elif not args.dry_run:
         raise SystemExit("the campaign has spent its budget: give --seed S to run the recipe from nothing, or --report, "
                          "--ship-now, --ship-best")

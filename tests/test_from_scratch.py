@@ -297,3 +297,40 @@ def test_a_seed_s_snapshots_are_screened_as_made_and_the_rule_chooses_among_the_
     assert next(line for line in body.splitlines() if line.startswith("| 1 | 20 |")).endswith("| **yes** |")
     assert "| 1 | 4 | 20 (80 / 70 / 90); 60 (40 / 90 / 90) | 20 |" in body
     assert "| 2 | 0 | (chosen at the end of its run) | - |" in body
+
+
+def test_the_better_seed_on_validation_ships_only_if_it_places_what_the_shipped_policy_does_on_the_test_seeds(
+        tmp_path, monkeypatch):
+    """`--ship-seeds`: refused until every seed has run to its end; then the seed whose choice confirmed best on the
+    validation seeds, which ships only if it places at least what the policy shipped now does on every task on the
+    test seeds, with a record naming the seed, the recipe's commit and no demonstrations."""
+    monkeypatch.setattr(fs, "CAMPAIGN_DIR", tmp_path / "campaign")
+    monkeypatch.setattr(fs, "SEED_EVAL_DIR", tmp_path / "evals")
+    monkeypatch.setattr(fs, "EVAL_JSON", tmp_path / "shipped_eval.json")
+    shipped = tmp_path / "scratch_general_agent.pt"
+    with pytest.raises(SystemExit, match="--seed 1`, `python -m experiments.from_scratch --seed 2"):
+        fs.ship_seeds(shipped)
+    ppo.main(fs.seed_run(1).args.replace(num_envs=2, num_steps=20, num_minibatches=2, update_epochs=1, num_eval_envs=1,
+                                         eval_freq=100, checkpoint_freq=1, env_id="Flooring-v1", task_weights=None,
+                                         total_timesteps=40))
+    shutil.copytree(tmp_path / "campaign" / "scratch_s1", tmp_path / "campaign" / "scratch_s2")
+    envs = list(fs.PAPER_TABLE_II)
+
+    def tasks(placed):
+        return {"tasks": {e: dict(pick_success=1.0, place_success=placed, place_success_ci95=[0, 1]) for e in envs}}
+
+    for seed, (validated, tested) in {1: (0.8, 0.97), 2: (0.9, 0.9)}.items():
+        fs.seed_candidates(seed).mkdir(parents=True)
+        shutil.copyfile(tmp_path / "campaign" / f"scratch_s{seed}" / "checkpoint.pt",
+                        fs.seed_candidates(seed) / "candidate_40.pt")
+        fs.chosen_json(seed).parent.mkdir(parents=True, exist_ok=True)
+        fs.chosen_json(seed).write_text(json.dumps(dict(step=40, confirmed={"40": dict.fromkeys(envs, validated)})))
+        fs.seed_evaluation_json(seed, 40).write_text(json.dumps(tasks(tested)))
+    fs.EVAL_JSON.write_text(json.dumps(tasks(0.95)))
+    assert fs.ship_seeds(shipped) is None and not shipped.exists(), "seed 2 is better on validation, worse on test"
+    fs.EVAL_JSON.write_text(json.dumps(tasks(0.85)))
+    assert fs.ship_seeds(shipped) == shipped
+    record = torch.load(shipped, weights_only=False)["campaign"]["record"]
+    assert record["chosen"].startswith("seed 2 of 2") and "demonstrations: none" in record["chosen"]
+    assert f"at commit {fs.recipe_commit()}" in record["chosen"] and fs.recipe_commit() != "unknown"
+    assert json.loads(fs.EVAL_JSON.read_text()) == tasks(0.9), "its evaluation is the shipped policy's now"
