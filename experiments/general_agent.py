@@ -43,6 +43,7 @@ import tyro
 
 from baselines.ppo import bc, checkpoints, evaluation, ppo
 from baselines.ppo.checkpoints import load_checkpoint
+from baselines.ppo.evaluation import slot_weights, training_slot_weights
 from experiments.campaign import hardware, ship_checkpoint
 from ms_construction.curriculum import FINAL_STAGE
 from ms_construction.planning.demos import demo_expert_config, load_demos, policy_steps, record_demos, tried_episodes
@@ -107,6 +108,9 @@ class Args:
     """the expert takes a straight (or one-corner) joint path wherever one is free, RRTConnect only elsewhere
     (ExpertConfig.direct_first): the same start and goal give the same motion, where RRTConnect's paths wander
     differently every time and a clone averages them (docs/experiments/general_agent.md, 'the quick one-way expert')."""
+    goal_slots: tuple[int, ...] = ()
+    """demonstrate, take over, validate and fine-tune on these goal slots of every task type only (indices 0-2;
+    default: all): the imitation recipe on the openings a test holds out (experiments/unseen_openings.py)."""
     ship: bool = False
     """copy the result, with the campaign's record, to assets/checkpoints/general_agent.pt."""
 
@@ -123,6 +127,9 @@ def main(args: Args) -> Path:
     args.run_dir.mkdir(parents=True, exist_ok=True)
     wall_times = WallTimes(args.run_dir / "campaign.json")
     timed, record = wall_times.timed, wall_times.record
+    task_kwargs = {"goal_slot_weights": slot_weights(args.goal_slots)} if args.goal_slots else None
+    if args.goal_slots and args.ship:
+        raise SystemExit("--goal-slots trains on some openings only: its agent is an experiment's, not the shipped one")
 
     def collect(sets, policy=None, dagger_round: int = 0) -> list[Path]:
         """The demonstrations of `sets` (or, in DAgger round r >= 1, the expert's takeovers of `policy`)."""
@@ -138,7 +145,8 @@ def main(args: Args) -> Path:
             if tried_episodes(path) < wanted:
                 record_demos(path, wanted, env_id=env_id, seed=seed, workers=args.workers, save_every=100, resume=True,
                              policy=policy, load_policy=checkpoints.load_policy,
-                             expert=demo_expert_config(args.branch_preference, args.demo_pace, args.direct_paths))
+                             expert=demo_expert_config(args.branch_preference, args.demo_pace, args.direct_paths),
+                             env_kwargs=task_kwargs)
             files.append(path)
         return files
 
@@ -155,7 +163,8 @@ def main(args: Args) -> Path:
         path = args.run_dir / f"val{args.validation_episodes}_bc{r}.json"
         if not path.exists():
             timed("validation", lambda: evaluation.main(evaluation.Args(
-                checkpoint=ckpt, all=True, episodes=args.validation_episodes, seed=VALIDATION_SEED, json=path)))
+                checkpoint=ckpt, all=True, episodes=args.validation_episodes, seed=VALIDATION_SEED,
+                goal_slots=args.goal_slots, json=path)))
         tasks = json.loads(path.read_text())["tasks"].values()
         steps = sum(len(e["actions"]) for f in files for e in load_demos(f)[0]) + sum(map(policy_steps, files))
         curve.append(dict(global_step=steps, stage="clone" if r == 0 else f"DAgger round {r}",
@@ -192,7 +201,7 @@ def main(args: Args) -> Path:
                 demos=tuple(map(str, demo_files + takeover_files)), bc_coef=args.bc_coef, total_timesteps=args.ppo_timesteps,
                 num_envs=args.ppo_num_envs, num_steps=250, num_minibatches=4, learning_rate=args.ppo_learning_rate,
                 target_kl=args.ppo_target_kl, seed=args.seed, log_dir=str(args.run_dir), exp_name="ppo",
-                sim_backend="physx_cpu")))
+                sim_backend="physx_cpu", goal_slot_weights=training_slot_weights(args.goal_slots))))
         final = ppo_ckpt
     if args.ship:
         ship(args, final, demo_files, takeover_files, record)

@@ -40,6 +40,7 @@ import tyro
 
 from baselines.ppo import evaluation, ppo
 from baselines.ppo.checkpoints import load_checkpoint
+from baselines.ppo.evaluation import slot_weights, training_slot_weights
 from baselines.ppo.start_states import collect_failure_states
 from experiments.campaign import hardware, ship_checkpoint
 from ms_construction.curriculum import FINAL_STAGE
@@ -121,6 +122,9 @@ class Args:
     validate_every: int = 100_000
     """env steps between validations (each a snapshot of the policy kept in the run directory)."""
     seed: int = 1
+    goal_slots: tuple[int, ...] = ()
+    """bank, train, validate and confirm on these goal slots of every task type only (indices 0-2; default: all):
+    the imitation recipe on the openings a test holds out (experiments/unseen_openings.py); never shipped."""
     ship: bool = True
     """copy the result to assets/checkpoints/general_agent.pt if it beats the clone on validation and confirmation
     and, where an earlier refinement is shipped there, that agent on the confirmation episodes too."""
@@ -129,7 +133,8 @@ class Args:
 def ppo_args(args: Args, bank: Path) -> ppo.Args:
     return ppo.Args.of(
         residual_of=str(args.clone), residual_scale=args.residual_scale, residual_l2_coef=args.residual_l2_coef, start_states=str(bank),
-        start_states_share=args.start_states_share, start_states_keep_clock=args.bank_keeps_clock, task_weights=args.task_weights, env_id="ConstructionPickPlace-v1", reward_mode=args.reward_mode,
+        start_states_share=args.start_states_share, start_states_keep_clock=args.bank_keeps_clock, task_weights=args.task_weights,
+        goal_slot_weights=training_slot_weights(args.goal_slots), env_id="ConstructionPickPlace-v1", reward_mode=args.reward_mode,
         curiosity="none", curriculum=(FINAL_STAGE,), total_timesteps=args.total_timesteps, num_envs=args.num_envs,
         num_steps=args.num_steps, num_minibatches=args.num_minibatches, update_epochs=args.update_epochs,
         learning_rate=args.learning_rate, gamma=args.gamma, reward_scale=args.reward_scale,
@@ -145,20 +150,29 @@ def content_tag(path: Path) -> str:
     return hashlib.sha1(path.read_bytes()).hexdigest()[:8]
 
 
-def validate(checkpoint: Path, out: Path, episodes: int, seed: int = VALIDATION_SEED) -> dict:
+def validate(checkpoint: Path, out: Path, episodes: int, seed: int = VALIDATION_SEED, goal_slots: tuple[int, ...] = ()
+             ) -> dict:
+    """Place success per task of `episodes` per task from `seed` on (on `goal_slots` only, when given), written to
+    `out` once and read back from there."""
     if not out.exists():
-        evaluation.main(evaluation.Args(checkpoint=checkpoint, all=True, episodes=episodes, seed=seed, json=out))
+        evaluation.main(evaluation.Args(checkpoint=checkpoint, all=True, episodes=episodes, seed=seed,
+                                        goal_slots=goal_slots, json=out))
     return {k: v["place_success"] for k, v in json.loads(out.read_text())["tasks"].items()}
 
 
 def main(args: Args) -> Path:
+    if args.goal_slots and args.ship:
+        raise SystemExit("--goal-slots refines on some openings only: its agent is an experiment's, not the shipped one "
+                         "(give --no-ship)")
     args.run_dir.mkdir(parents=True, exist_ok=True)
     wall_times = WallTimes(args.run_dir / "campaign.json")
     timed, record = wall_times.timed, wall_times.record
 
     bank = args.run_dir / "failure_states.pt"
     if not bank.exists():
-        result = timed("bank", lambda: collect_failure_states(args.clone, args.bank_episodes, offsets=args.bank_offsets))
+        result = timed("bank", lambda: collect_failure_states(
+            args.clone, args.bank_episodes, offsets=args.bank_offsets,
+            env_kwargs={"goal_slot_weights": slot_weights(args.goal_slots)} if args.goal_slots else None))
         torch.save(result, bank)
     saved = torch.load(bank, map_location="cpu", weights_only=False)
     if tuple(saved["offsets"]) != tuple(args.bank_offsets) or (args.bank_keeps_clock and "elapsed" not in saved):
@@ -168,7 +182,8 @@ def main(args: Args) -> Path:
     ckpt = args.run_dir / "ppo" / "checkpoint.pt"
     run = ppo_args(args, bank)
     n = args.validation_episodes
-    clone_val = timed("validation", lambda: validate(args.clone, args.run_dir / f"val{n}_clone.json", n))
+    clone_val = timed("validation", lambda: validate(args.clone, args.run_dir / f"val{n}_clone.json", n,
+                                                     goal_slots=args.goal_slots))
     every = args.validate_every or args.total_timesteps
     validated = {}
     for step in [*range(every, args.total_timesteps, every), args.total_timesteps]:
@@ -177,7 +192,8 @@ def main(args: Args) -> Path:
             part = run.replace(total_timesteps=step)
             timed("PPO", lambda: ppo.main(part.replace(resume=str(ckpt), extend=True) if ckpt.exists() else part))
             shutil.copyfile(ckpt, snapshot)
-        validated[step] = timed("validation", lambda: validate(snapshot, args.run_dir / f"val{n}_{step}.json", n))
+        validated[step] = timed("validation", lambda: validate(snapshot, args.run_dir / f"val{n}_{step}.json", n,
+                                                                  goal_slots=args.goal_slots))
         print(f"validation place success at {step} env steps: "
               + ", ".join(f"{k} {clone_val[k]:.3f} -> {v:.3f}" for k, v in validated[step].items()))
     best = best_snapshot(validated)
@@ -189,9 +205,9 @@ def main(args: Args) -> Path:
     if better and args.confirmation_episodes:
         m = args.confirmation_episodes
         confirmed = (timed("confirmation", lambda: validate(args.clone, args.run_dir / f"confirm{m}_clone.json", m,
-                                                            CONFIRMATION_SEED)),
+                                                            CONFIRMATION_SEED, args.goal_slots)),
                      timed("confirmation", lambda: validate(best_ckpt, args.run_dir / f"confirm{m}_{best}.json", m,
-                                                            CONFIRMATION_SEED)))
+                                                            CONFIRMATION_SEED, args.goal_slots)))
         better = beats(confirmed[1], confirmed[0])
         print(f"confirmation on fresh seeds ({CONFIRMATION_SEED} on; clone -> refined): "
               + ", ".join(f"{k} {confirmed[0][k]:.3f} -> {confirmed[1][k]:.3f}" for k in clone_val))

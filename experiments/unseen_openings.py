@@ -4,12 +4,21 @@ held out of training, evaluated with the paper's protocol on the openings it nev
     python -m experiments.unseen_openings --seed 1 --dry-run     # the plan, and where that seed's run stands
     python -m experiments.unseen_openings --seed 1               # train (or resume) to the recipe's budget
     python -m experiments.unseen_openings --seed 1 --evaluate    # the paper's protocol, unseen and seen openings
+    python -m experiments.unseen_openings --imitation            # the imitation twin: demonstrations -> clone ->
+                                                                 # residual PPO on the trained openings, then evaluated
     python -m experiments.unseen_openings --report               # RESULTS' section from the evaluations
 
 The recipe is experiments/from_scratch.py's, unchanged, but for the goal openings its training envs draw
 (`--starts.goal-slot-weights`: HELD_OUT never); its evaluations during training draw every opening. Held out: the
 middle opening of every task type. The window openings at y = -0.85 and +0.85 are each other's mirror image, which
 the recipe's policy meets as one (`mirror_twins`): only the middle one is unseen in every form.
+
+The imitation twin (`--imitation`) is the shipped imitation agent's recipe, its two commands as their records name
+them (IMITATION_CLONE: experiments/general_agent.py's direct-path demonstrations and behaviour clone;
+IMITATION_REFINE: experiments/refine.py's residual PPO on the frozen clone), with `goal_slots` = TRAINED in both:
+no demonstration, takeover, bank state, training episode, validation or confirmation draws a held-out opening. Its
+stages write to runs/unseen_imitation/ and each is skipped when its output is there (demonstrations of about 100 MB
+are not committed: it resumes on the machine that ran it; about 2.5 h on 2 cores).
 """
 
 from __future__ import annotations
@@ -24,12 +33,11 @@ import tyro
 
 from baselines.ppo import evaluation
 from baselines.ppo.args import command_line
-from baselines.ppo.evaluation import pct
+from baselines.ppo.evaluation import pct, training_slot_weights
 from baselines.ppo.start_states import GOAL_SLOTS
 from experiments.campaign import Run, checkpoint_of, describe, run_or_resume
 from experiments.from_scratch import METHOD, scratch_args
 from ms_construction.envs import PAPER_TASK_ENV_IDS
-from ms_construction.parameters import PAPER_KINDS
 from ms_construction.reporting import update_section
 
 HELD_OUT = (1,)
@@ -43,29 +51,52 @@ EVAL_STEPS = 50_000
 
 def seed_run(seed: int, num_envs: Optional[int] = None) -> Run:
     """The recipe from nothing on `seed`, its training envs never drawing the HELD_OUT openings."""
-    weights = tuple(float(s not in HELD_OUT) for _ in PAPER_KINDS for s in range(GOAL_SLOTS))
     name = f"unseen_s{seed}"
-    return Run(name, scratch_args(num_envs, seed=seed, exp_name=name, goal_slot_weights=weights),
+    return Run(name, scratch_args(num_envs, seed=seed, exp_name=name, goal_slot_weights=training_slot_weights(TRAINED)),
                f"the recipe from nothing, seed {seed}, goal openings {', '.join(map(str, HELD_OUT))} held out",
                f"{COMMAND} --seed {seed}", None, method=METHOD)
 
 
-def evaluation_json(seed: int, seen: bool) -> Path:
-    return EVAL_DIR / f"unseen_s{seed}_{'seen' if seen else 'unseen'}.json"
+IMITATION_DIR = Path("runs/unseen_imitation")
+IMITATION_CLONE = dict(branch_preference="fixed", demo_pace="fast", direct_paths=True, window_takeovers=(),
+                       flooring_takeovers=(), ceiling_takeovers=())
+"""experiments/general_agent.py's settings of the shipped clone (general_agent_clone_direct.pt's record)."""
+IMITATION_REFINE = dict(reward_mode="sparse", reward_scale=1.0, gamma=0.999, bootstrap_at_done="truncated",
+                        task_weights=(0.5, 0.25, 0.25), bank_episodes=3000, bank_offsets=(-40, -25, -10),
+                        validation_episodes=1000, confirmation_episodes=1000, total_timesteps=600_000)
+"""experiments/refine.py's settings of the shipped imitation agent (general_agent.pt's record)."""
 
 
-def evaluate(run: Run, seed: int, steps: int = EVAL_STEPS, workers: int = 2) -> None:
+def evaluation_json(seed, seen: bool) -> Path:
+    """A run's evaluation on the unseen or the seen openings: `seed` is the recipe's seed, or "imitation"."""
+    return EVAL_DIR / f"unseen_{'s' if isinstance(seed, int) else ''}{seed}_{'seen' if seen else 'unseen'}.json"
+
+
+def evaluate(checkpoint: Path, seed, steps: int = EVAL_STEPS, workers: int = 2) -> None:
     """The paper's protocol (test seeds, `steps` per task, cp4) on the held-out openings, then on the trained ones."""
     for seen, slots in ((False, HELD_OUT), (True, TRAINED)):
-        evaluation.main(evaluation.Args(checkpoint=checkpoint_of(run), all=True, steps=steps, goal_slots=slots,
+        evaluation.main(evaluation.Args(checkpoint=checkpoint, all=True, steps=steps, goal_slots=slots,
                                         workers=workers, json=evaluation_json(seed, seen)))
 
 
+def imitation(run_dir: Path = IMITATION_DIR, clone: Optional[dict] = None, refine_args: Optional[dict] = None) -> Path:
+    """The imitation twin, stage by stage (each skipped where its output is there): the clone of the expert's
+    demonstrations of the TRAINED openings, its residual PPO refinement on them, the refined policy chosen on
+    validation among them; the policy. `clone`, `refine_args`: overrides of IMITATION_CLONE, IMITATION_REFINE."""
+    from experiments import general_agent, refine
+
+    cloned = general_agent.main(general_agent.Args(run_dir=run_dir / "clone", goal_slots=TRAINED,
+                                                   **{**IMITATION_CLONE, **(clone or {})}))
+    return refine.main(refine.Args(clone=cloned, run_dir=run_dir / "refine", goal_slots=TRAINED, ship=False,
+                                   **{**IMITATION_REFINE, **(refine_args or {})}))
+
+
 def report(results: Path = Path("docs/RESULTS.md"), seeds: tuple[int, ...] = (1, 2)) -> str:
-    """RESULTS' section: per seed evaluated, place success on the unseen and the seen openings per task."""
-    lines = ["| seed | openings | " + " | ".join(f"{k}: placed % [95% CI]" for k in PAPER_TASK_ENV_IDS) + " |",
+    """RESULTS' section: per run evaluated (the recipe's seeds, the imitation twin), place success on the unseen and
+    the seen openings per task."""
+    lines = ["| run | openings | " + " | ".join(f"{k}: placed % [95% CI]" for k in PAPER_TASK_ENV_IDS) + " |",
              "|---|---|" + "---|" * len(PAPER_TASK_ENV_IDS)]
-    for seed in seeds:
+    for seed in (*seeds, "imitation"):
         for seen in (False, True):
             path = evaluation_json(seed, seen)
             if not path.is_file():
@@ -74,11 +105,13 @@ def report(results: Path = Path("docs/RESULTS.md"), seeds: tuple[int, ...] = (1,
             cells = [pct(tasks[e]["place_success"], tasks[e]["place_success_ci95"]) for e in PAPER_TASK_ENV_IDS.values()]
             slots = ", ".join(map(str, TRAINED if seen else HELD_OUT))
             which = f"{'trained on' if seen else 'never trained on'} ({slots})"
-            lines.append(f"| {seed} | {which} | " + " | ".join(cells) + " |")
-    table = "\n".join(lines) if len(lines) > 2 else "No seed has been evaluated yet."
+            name = f"the recipe from nothing, seed {seed}" if isinstance(seed, int) else "imitation (clone + residual PPO)"
+            lines.append(f"| {name} | {which} | " + " | ".join(cells) + " |")
+    table = "\n".join(lines) if len(lines) > 2 else "No run has been evaluated yet."
     body = ("## Openings no agent trained on\n\n"
-            f"Commands: `{COMMAND} --seed S` (training), `{COMMAND} --seed S --evaluate`, `{COMMAND} --report`. The "
-            "from-scratch recipe, its training envs never drawing the held-out goal opening of any task type; the "
+            f"Commands: `{COMMAND} --seed S` (training), `{COMMAND} --seed S --evaluate`, `{COMMAND} --imitation`, "
+            f"`{COMMAND} --report`. The from-scratch recipe and the imitation recipe, their training never drawing the "
+            "held-out goal opening of any task type; the "
             f"paper's protocol ({EVAL_STEPS:,} env steps per task, cp4, test seeds) on each set of openings.\n\n"
             f"{table}\n")
     update_section(results, "unseen-openings", title="Results", body=body)
@@ -97,19 +130,25 @@ class Args:
     """evaluate the seed's run (the paper's protocol on unseen and seen openings), and exit."""
     report: bool = False
     """write RESULTS' section from the evaluations there are, and exit."""
+    imitation: bool = False
+    """run (or resume) the imitation twin (`imitation`) and evaluate its policy, then exit."""
 
 
 def main(args: Args) -> None:
     if args.report:
         print(report())
         return
+    if args.imitation:
+        evaluate(imitation(), "imitation")
+        print(report())
+        return
     if args.seed is None:
-        raise SystemExit("give --seed S (to train, or --evaluate its run), or --report")
+        raise SystemExit("give --seed S (to train, or --evaluate its run), --imitation or --report")
     run = seed_run(args.seed, args.num_envs)
     print(describe(run))
     print("as one ppo.py command: python baselines/ppo/ppo.py " + shlex.join(command_line(run.args)))
     if args.evaluate:
-        evaluate(run, args.seed)
+        evaluate(checkpoint_of(run), args.seed)
     elif not args.dry_run:
         run_or_resume(run)
 

@@ -203,7 +203,7 @@ def test_a_demonstration_worker_drives_the_expert_asked_for(monkeypatch):
     monkeypatch.setattr(demos, "_collector", None)
     try:
         for _ in range(PLAN_TRIES):
-            kept, policy_steps = demos._collect(("WindowInstallation-v1", "cp4", 500_000, 0.0, None, None, fast_fixed))
+            kept, policy_steps = demos._collect(("WindowInstallation-v1", "cp4", 500_000, 0.0, None, None, fast_fixed, None))
             if kept:
                 break
         expert = demos._collector.expert

@@ -197,7 +197,7 @@ def test_a_failed_episode_s_states_are_banked_with_the_steps_they_were_taken_at(
     monkeypatch.setattr(start_states, "_worker", dict(agent=_TurnBase(), env=env))
     # the element never moves here, so its closest approach is noise: ask for two steps apart instead
     monkeypatch.setattr(start_states, "steps_before_closest", lambda dists, offsets: [37, 120])
-    result = start_states._failure_states(("unused.pt", "Flooring-v1", 11, (-30, -10)))
+    result = start_states._failure_states(("unused.pt", "Flooring-v1", 11, (-30, -10), None))
     assert not result["placed"] and result["elapsed"] == [37, 120] and len(result["states"]) == 2
     obs, _ = env.reset(seed=11)  # the same episode again: the arm after t actions is the banked state at t
     arms = [env.unwrapped.get_state_dict()["articulations"]]

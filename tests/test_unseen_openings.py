@@ -41,7 +41,58 @@ def test_the_report_tables_unseen_and_seen_openings_per_seed(tmp_path, monkeypat
         tasks = {e: dict(place_success=placed, place_success_ci95=(placed - 0.1, placed + 0.05)) for e in TASK_ENV_IDS.values()}
         uo.evaluation_json(1, seen).write_text(json.dumps({"tasks": tasks}))
     body = uo.report(tmp_path / "RESULTS.md", seeds=(1, 2))
-    assert "| 1 | never trained on (1) | 50.0 [40.0, 55.0] |" in body and "| 1 | trained on (0, 2) | 90.0" in body
+    assert "| the recipe from nothing, seed 1 | never trained on (1) | 50.0 [40.0, 55.0] |" in body
+    assert "| the recipe from nothing, seed 1 | trained on (0, 2) | 90.0" in body
+    uo.evaluation_json("imitation", False).write_text(json.dumps({"tasks": tasks}))
+    assert uo.evaluation_json("imitation", False).name == "unseen_imitation_unseen.json"
+    body = uo.report(tmp_path / "RESULTS.md", seeds=(1, 2))
+    assert "| imitation (clone + residual PPO) | never trained on (1) | 90.0" in body
     assert "unseen-openings" in (tmp_path / "RESULTS.md").read_text()
     with pytest.raises(SystemExit, match="--seed S"):
         uo.main(uo.Args())
+
+
+def test_the_imitation_twin_demonstrates_clones_refines_and_validates_on_the_trained_openings_only(tmp_path, monkeypatch):
+    """`--imitation` on a tiny budget, end to end: every stage that draws episodes (demonstrations, the clone's
+    validation, the bank, PPO's training envs, the refinement's validations) is given the trained openings only,
+    and the result is a policy."""
+    from baselines.ppo import evaluation
+    from experiments import general_agent, refine
+    from ms_construction.planning import demos
+
+    seen = []
+
+    def spy(module, name, take):
+        real = getattr(module, name)
+
+        def wrapped(*args, **kwargs):
+            seen.append((name, take(*args, **kwargs)))
+            return real(*args, **kwargs)
+
+        monkeypatch.setattr(module, name, wrapped)
+
+    weights = evaluation.slot_weights(uo.TRAINED)
+    spy(general_agent, "record_demos", lambda *a, **k: k["env_kwargs"] == {"goal_slot_weights": weights})
+    spy(refine, "collect_failure_states", lambda *a, **k: k["env_kwargs"] == {"goal_slot_weights": weights})
+    spy(evaluation, "main", lambda args: args.goal_slots == uo.TRAINED)
+    spy(ppo, "main", lambda args: args.starts.goal_slot_weights == evaluation.training_slot_weights(uo.TRAINED))
+    policy = uo.imitation(tmp_path, clone=dict(demos=2, window_demos=0, flooring_demos=0, validation_episodes=1,
+                                               bc_epochs=2, workers=1),
+                          refine_args=dict(bank_episodes=2, total_timesteps=40, num_envs=2, num_steps=20,
+                                           validate_every=40, validation_episodes=1, confirmation_episodes=1))
+    assert policy.is_file() and demos.tried_episodes(tmp_path / "clone" / "demos" / "general.npz") == 2
+    assert {name for name, _ in seen} == {"record_demos", "collect_failure_states", "main"}
+    assert all(ok for _, ok in seen), seen
+
+
+def test_the_expert_s_demonstrations_draw_the_goal_slots_their_kwargs_allow():
+    from baselines.ppo import evaluation
+    from ms_construction.planning.demos import DemoCollector
+
+    collector = DemoCollector("ConstructionPickPlace-v1", env_kwargs={"goal_slot_weights": evaluation.slot_weights(uo.TRAINED)})
+    drawn = set()
+    for seed in range(30):
+        collector.env.reset(seed=seed)
+        drawn.add(int(collector.env.unwrapped.goal_slot[0]))
+    collector.close()
+    assert drawn == set(uo.TRAINED)

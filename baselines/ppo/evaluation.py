@@ -228,6 +228,13 @@ def slot_weights(goal_slots: tuple[int, ...]) -> Optional[dict]:
     return {kind: [float(i in goal_slots) for i in range(GOAL_SLOTS)] for kind in ELEMENT_KINDS}
 
 
+def training_slot_weights(goal_slots: tuple[int, ...]) -> Optional[tuple[float, ...]]:
+    """ppo.py's `--starts.goal-slot-weights` that train on `goal_slots` of every paper task type only (None: all)."""
+    if not goal_slots:
+        return None
+    return tuple(float(i in goal_slots) for _ in PAPER_TASK_ENV_IDS for i in range(GOAL_SLOTS))
+
+
 def summarize(episodes: list[dict]) -> dict:
     n = len(episodes)
     by_slot = {}

@@ -24,7 +24,7 @@ from __future__ import annotations
 import multiprocessing as mp
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Sequence
+from typing import Optional, Sequence
 
 import gymnasium as gym
 import numpy as np
@@ -53,12 +53,12 @@ def _failure_states(job: tuple) -> dict:
     """One deterministic episode of the policy; the states `offsets` steps before the element's
     closest approach to its goal if it did not place (found by replaying the episode's actions from
     its seeded reset, which physx_cpu reproduces: cheaper than saving every step's state)."""
-    checkpoint, env_id, seed, offsets = job
+    checkpoint, env_id, seed, offsets, task_kwargs = job
     torch.set_num_threads(1)
     if "env" not in _worker:
         agent, env_kwargs = load_policy(Path(checkpoint), env_id)
         _worker.update(agent=agent, env=gym.make(env_id, obs_mode="state", reward_mode="sparse", num_envs=1,
-                                                   sim_backend="physx_cpu", **env_kwargs))
+                                                   sim_backend="physx_cpu", **env_kwargs, **(task_kwargs or {})))
     agent, env = _worker["agent"], _worker["env"]
     episode = policy_episode(agent, env, seed)
     actions, placed, task_id = episode.actions, episode.placed, int(episode.info["task_id"][0])
@@ -82,12 +82,14 @@ def steps_before_closest(dists: list[float], offsets: tuple[int, ...]) -> list[i
 
 
 def collect_failure_states(checkpoint: Path, episodes: int, env_id: str = "ConstructionPickPlace-v1",
-                           seed: int = FIRST_SEED, offsets: tuple[int, ...] = (-30, -10), workers: int = 2) -> dict:
+                           seed: int = FIRST_SEED, offsets: tuple[int, ...] = (-30, -10), workers: int = 2,
+                           env_kwargs: Optional[dict] = None) -> dict:
     """The bank: states of the failed episodes among `episodes` (see `_failure_states`), each with the
-    episode's elapsed steps when it was taken, and counts."""
+    episode's elapsed steps when it was taken, and counts. `env_kwargs`: more of the task's kwargs for the episodes
+    (say, `goal_slot_weights` that draw some goal slots only)."""
     if not offsets or max(offsets) > 0:
         raise ValueError(f"offsets {offsets}: steps at or before (<= 0) the closest approach, at least one")
-    jobs = [(str(checkpoint), env_id, seed + i, offsets) for i in range(episodes)]
+    jobs = [(str(checkpoint), env_id, seed + i, offsets, env_kwargs) for i in range(episodes)]
     bank, elapsed, failed, per_task = [], [], 0, np.zeros((len(ELEMENT_KINDS), 2), dtype=int)  # per task: episodes, failures
     with mp.get_context("spawn").Pool(workers) as pool:
         bar = tqdm(pool.imap(_failure_states, jobs), total=episodes, desc="failure states", unit="ep")

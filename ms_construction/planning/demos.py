@@ -121,11 +121,13 @@ class Demo:
 
 
 class DemoCollector:
-    """One env and one expert; `collect(seed, noise)` solves a seeded episode and returns its demo."""
+    """One env and one expert; `collect(seed, noise)` solves a seeded episode and returns its demo. `env_kwargs`: more
+    of the task's kwargs (say, `goal_slot_weights` that draw some goal slots only)."""
 
-    def __init__(self, env_id: str, curriculum_stage: str = FINAL_STAGE, config: ExpertConfig = DEMO_EXPERT_CONFIG):
+    def __init__(self, env_id: str, curriculum_stage: str = FINAL_STAGE, config: ExpertConfig = DEMO_EXPERT_CONFIG,
+                 env_kwargs: Optional[dict] = None):
         env = gym.make(env_id, num_envs=1, obs_mode="state", control_mode=DELTA_CONTROL_MODE, reward_mode="sparse",
-                       sim_backend="physx_cpu", curriculum_stage=curriculum_stage)
+                       sim_backend="physx_cpu", curriculum_stage=curriculum_stage, **(env_kwargs or {}))
         self.env = JointTargetsAsDeltas(env)
         self.obs_dim = env.observation_space.shape[-1]
         self.expert = MotionPlanningExpert(self.env, config)
@@ -173,16 +175,16 @@ PolicyLoader = Callable[[Path, str], tuple]
 _collector, _policy = None, None
 
 
-def _collect(job: tuple[str, str, int, float, Optional[str], Optional[PolicyLoader], ExpertConfig]
+def _collect(job: tuple[str, str, int, float, Optional[str], Optional[PolicyLoader], ExpertConfig, Optional[dict]]
              ) -> tuple[list[dict], int]:
     """One episode in a worker process (its collector kept for the next): the expert's, or with a
     policy checkpoint, the expert's takeovers where that policy fails. Returns the placed
     demonstrations and the env steps the policy took."""
     global _collector, _policy
-    env_id, stage, seed, noise, policy_path, load_policy, expert = job
+    env_id, stage, seed, noise, policy_path, load_policy, expert, env_kwargs = job
     torch.set_num_threads(1)
     if _collector is None:
-        _collector = DemoCollector(env_id, stage, expert)
+        _collector = DemoCollector(env_id, stage, expert, env_kwargs)
     if policy_path is None:
         demos, policy_steps = [_collector.collect(seed, noise)], 0
     else:
@@ -245,20 +247,21 @@ def policy_steps(path: Path) -> int:
 def record_demos(out: Path, episodes: int, env_id: str = "ConstructionPickPlace-v1", seed: int = 100_000,
                  noise: float = 0.1, curriculum_stage: str = FINAL_STAGE, workers: int = 2, save_every: int = 50,
                  resume: bool = False, policy: Optional[Path] = None, load_policy: Optional[PolicyLoader] = None,
-                 expert: ExpertConfig = DEMO_EXPERT_CONFIG) -> Path:
+                 expert: ExpertConfig = DEMO_EXPERT_CONFIG, env_kwargs: Optional[dict] = None) -> Path:
     """Episodes seed, seed + 1, ... (every other one with DART noise `noise`); the placed ones are
     written to `out` every `save_every` episodes and at the end; `resume` continues `out`.
     With a `policy` checkpoint: the expert's takeovers where that policy fails (`DemoCollector.takeovers`);
     `load_policy(path, env_id) -> (policy, control_mode)` loads it in each worker process (a
     module-level function, such as `baselines.ppo.checkpoints.load_policy`: the package does not
-    know the learner's network). `expert`: the demonstrating expert's settings (`demo_expert_config`)."""
+    know the learner's network). `expert`: the demonstrating expert's settings (`demo_expert_config`). `env_kwargs`:
+    more of the task's kwargs for the episodes (`DemoCollector`)."""
     if policy is not None and load_policy is None:
         raise ValueError("record_demos(policy=...) needs load_policy, e.g. baselines.ppo.checkpoints.load_policy")
     demos, tried, wall_s = load_demos(out) if resume and out.exists() else ([], 0, 0.0)
     steps_of_policy = policy_steps(out) if resume and out.exists() else 0
     start = time.time() - wall_s
     policy_job = (None, None) if policy is None else (str(policy), load_policy)
-    jobs = [(env_id, curriculum_stage, seed + i, noise if i % 2 else 0.0, *policy_job, expert)
+    jobs = [(env_id, curriculum_stage, seed + i, noise if i % 2 else 0.0, *policy_job, expert, env_kwargs)
             for i in range(tried, episodes)]
     desc = "expert demos" if policy is None else "expert takeovers"
     bar = tqdm(total=episodes, initial=tried, desc=desc, unit="ep", dynamic_ncols=True)
