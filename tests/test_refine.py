@@ -31,7 +31,7 @@ def stand_ins(tmp_path, monkeypatch):
         ckpt.parent.mkdir(parents=True, exist_ok=True)
         torch.save(dict(step=args.total_timesteps, progress=dict(global_step=args.total_timesteps)), ckpt)
 
-    def fake_validate(checkpoint, out, episodes, seed=refine.VALIDATION_SEED):
+    def fake_validate(checkpoint, out, episodes, seed=refine.VALIDATION_SEED, goal_slots=()):
         name = Path(checkpoint).name
         if name.endswith("clone.pt"):
             return CLONE_VAL
