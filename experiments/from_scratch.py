@@ -334,7 +334,7 @@ def seeds_report(results: Path = Path("docs/RESULTS.md"), log_dir: Path = CAMPAI
              "| seed | env steps done / budget | training wall time | start radius now: ceiling / window / flooring | "
              "training episodes of the last 200,000 steps placed, ordinary resets: ceiling / window / flooring % | "
              "placed, near-goal starts % |", "|---|---|---|---|---|---|"]
-    fig, axes = plt.subplots(1, len(SEEDS), figsize=(10, 3.8), sharey=True, squeeze=False)
+    fig, axes = plt.subplots(1, len(SEEDS), figsize=(10, 4.6), sharey=True, squeeze=False)
     for ax, seed in zip(axes[0], SEEDS):
         run = seed_run(seed)
         progress = log_dir / run.args.exp_name / "progress.csv"
@@ -359,11 +359,13 @@ def seeds_report(results: Path = Path("docs/RESULTS.md"), log_dir: Path = CAMPAI
             ax.axvline(chosen / 1e6, color="black", lw=0.8, ls="--", label="the snapshot rule's choice")
     axes[0][0].set_ylabel(f"% (training episodes: mean of {WINDOW} iterations)")
     axes[0][0].set_ylim(0, 102)
+    for ax in axes[0]:
+        ax.set_xlim(0, BUDGET / 1e6)  # the same scale: where each seed stands in its budget
     handles = [h for ax in axes[0] for h in [ax.get_legend_handles_labels()] if h[0]]
     if handles:
-        axes[0][0].legend(*handles[0], loc="upper left", fontsize=7)
+        fig.legend(*max(handles, key=lambda h: len(h[0])), loc="lower center", ncol=4, fontsize=7)
     fig.suptitle("The recipe from nothing, per seed (cp4)")
-    fig.tight_layout()
+    fig.tight_layout(rect=(0, 0.14, 1, 1))
     SEEDS_CURVE.parent.mkdir(parents=True, exist_ok=True)
     fig.savefig(SEEDS_CURVE, dpi=100)
     plt.close(fig)
