@@ -42,8 +42,9 @@ import shlex
 import shutil
 import dataclasses
 from dataclasses import dataclass
+from functools import partial
 from pathlib import Path
-from typing import Optional
+from typing import Callable, Optional
 
 import numpy as np
 import torch
@@ -395,18 +396,18 @@ CONFIRM_EPISODES = 100
 
 
 def train(run: Run, every: int = SNAPSHOT_EVERY, snapshots: Path = SNAPSHOT_DIR, page: Path = PAGE,
-          seed: Optional[int] = None) -> None:
+          after_snapshot: Optional[Callable[[int, Path], None]] = None) -> None:
     """Run (or resume) the campaign to its budget in parts of `every` env steps, each part's checkpoint copied to
-    `snapshots`; a seed's run (`seed` given) screens each snapshot as it is made (`screen_snapshot`), the first
-    campaign ships the best snapshot at the end (`ship_best`). Ctrl-C stops it with the checkpoint saved (ppo.py)."""
+    `snapshots` and given to `after_snapshot(env steps, path)` (a seed's run: `snapshot_made`); the first campaign
+    ships the best snapshot at the end (`ship_best`). Ctrl-C stops it with the checkpoint saved (ppo.py)."""
     ckpt = checkpoint_of(run)
     snapshots.mkdir(parents=True, exist_ok=True)
     while (done := load_checkpoint(ckpt)["progress"]["global_step"] if ckpt.is_file() else 0) < run.args.total_timesteps:
         part = run.args.replace(total_timesteps=min((done // every + 1) * every, run.args.total_timesteps))
         ppo.main(part.replace(resume=str(ckpt), extend=True) if ckpt.is_file() else part)
         shutil.copyfile(ckpt, snapshots / f"checkpoint_{part.total_timesteps}.pt")
-        if seed is not None:
-            screen_snapshot(seed, part.total_timesteps, snapshots / f"checkpoint_{part.total_timesteps}.pt")
+        if after_snapshot is not None:
+            after_snapshot(part.total_timesteps, snapshots / f"checkpoint_{part.total_timesteps}.pt")
     if run.shipped is not None:
         ship_best(run, snapshots=snapshots, page=page)
 
@@ -488,6 +489,19 @@ def seed_screening(seed: int) -> dict[int, dict]:
             found[int(path.stem.rsplit("_", 1)[1])] = {k: v["place_success"]
                                                        for k, v in json.loads(path.read_text())["tasks"].items()}
     return dict(sorted(found.items()))
+
+
+EVALUATE_AT = (3_000_000,)
+"""env steps at which a seed's snapshot is also evaluated with the paper's protocol as it is made: where other
+experiments compare with the recipe's run (the curriculum question's BUDGET), on any machine."""
+
+
+def snapshot_made(seed: int, step: int, snapshot: Path) -> None:
+    """What a seed's run does with each snapshot as it makes it: screen it (`screen_snapshot`), and at EVALUATE_AT
+    evaluate it with the paper's protocol (`evaluate_seed`)."""
+    screen_snapshot(seed, step, snapshot)
+    if step in EVALUATE_AT:
+        evaluate_seed(seed, step)
 
 
 def screen_snapshot(seed: int, step: int, snapshot: Path) -> dict:
@@ -615,7 +629,7 @@ def main(args: Args) -> None:
         if args.evaluate:
             print(f"wrote {evaluate_seed(args.seed, args.at_step)}")
         elif not args.dry_run:
-            train(run, snapshots=seed_snapshots(args.seed), seed=args.seed)
+            train(run, snapshots=seed_snapshots(args.seed), after_snapshot=partial(snapshot_made, args.seed))
             print(f"wrote {evaluate_seed(args.seed, choose_snapshot(args.seed))}")  # the paper's protocol on the rule's choice
         return
     [run] = scratch_runs(args.num_envs)

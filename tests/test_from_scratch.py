@@ -3,6 +3,7 @@ it ships with a record that says so, and its report writes the curve and the sec
 
 import csv
 import dataclasses
+import functools
 import json
 import shutil
 
@@ -273,8 +274,13 @@ def test_a_seed_s_snapshots_are_screened_as_made_and_the_rule_chooses_among_the_
     run = dataclasses.replace(run, args=run.args.replace(
         num_envs=2, num_steps=10, num_minibatches=2, update_epochs=1, num_eval_envs=1, eval_freq=100, checkpoint_freq=1,
         env_id="Flooring-v1", task_weights=None, total_timesteps=80))
-    fs.train(run, every=20, snapshots=fs.seed_snapshots(1), seed=1)
+    evaluated_at, real_evaluate_seed = [], fs.evaluate_seed
+    monkeypatch.setattr(fs, "EVALUATE_AT", (40,))
+    monkeypatch.setattr(fs, "evaluate_seed", lambda seed, step: evaluated_at.append((seed, step)))
+    fs.train(run, every=20, snapshots=fs.seed_snapshots(1), after_snapshot=functools.partial(fs.snapshot_made, 1))
     assert kept_after == [[20], [20, 40], [20, 60], [20, 60]], "the two best-screened so far, the others deleted"
+    assert evaluated_at == [(1, 40)], "the snapshot at EVALUATE_AT meets the paper's protocol as it is made"
+    monkeypatch.setattr(fs, "evaluate_seed", real_evaluate_seed)
     assert fs.seed_screening(1) == {s: dict(zip(envs, v)) for s, v in screening.items()}
     candidate = torch.load(fs.seed_candidates(1) / "candidate_60.pt", weights_only=False)
     assert candidate["progress"]["global_step"] == 60 and "optimizer" not in candidate and "rng" not in candidate
