@@ -16,7 +16,8 @@ evaluations and the time between sessions not counted).
 What SAC shares with the recipe: the envs, the reward, the observation, the near-goal starts (baselines/sac/sac.py's
 docstring). What it does not: the reach starts and the mirror of the twin openings (PPO's network options). SAC's
 replay buffer (about 140 MB) is written beside its checkpoint and is not committed: its run resumes exactly on the
-machine it ran on only.
+machine it ran on; on a fresh machine it goes on with an empty buffer that its actor refills first
+(`--refill-lost-buffer`, recorded in its checkpoint's clock as `refilled_at`).
 """
 
 from __future__ import annotations
@@ -27,6 +28,7 @@ from pathlib import Path
 from typing import Optional
 
 import numpy as np
+import torch
 import tyro
 
 from baselines.ppo.args import command_line
@@ -132,6 +134,12 @@ def report(results: Path = Path("docs/RESULTS.md"), log_dir: Path = CAMPAIGN_DIR
     CURVES.parent.mkdir(parents=True, exist_ok=True)
     fig.savefig(CURVES, dpi=100)
     plt.close(fig)
+    sac_ckpt = log_dir / sac_args().exp_name / "checkpoint.pt"
+    refilled = (torch.load(sac_ckpt, map_location="cpu", weights_only=False)["clock"].get("refilled_at", [])
+                if sac_ckpt.is_file() else [])
+    if refilled:  # an inexact resume: the reader should know where
+        lines += ["", "SAC's replay buffer was lost between sessions and refilled by its actor at "
+                  + ", ".join(f"{step:,}" for step in refilled) + " env steps (`--refill-lost-buffer`)."]
     body = "\n".join([
         "## Which learner, and curiosity", "",
         f"Commands: `{COMMAND} --arm sac`, `{COMMAND} --arm icm` (the PPO arm is the recipe's seed {SEED}), "
@@ -173,7 +181,7 @@ def main(args: Args) -> None:
     print(f"SAC from nothing, seed {SEED}, to {BUDGET:,} env steps in {ckpt.parent}: "
           + ("resumes" if ckpt.is_file() else "starts fresh"))
     if not args.dry_run:
-        sac.main(sac_args(resume=str(ckpt), extend=True) if ckpt.is_file() else a)
+        sac.main(sac_args(resume=str(ckpt), extend=True, refill_lost_buffer=True) if ckpt.is_file() else a)
 
 
 if __name__ == "__main__":

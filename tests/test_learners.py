@@ -5,6 +5,7 @@ import csv
 
 import numpy as np
 import pytest
+import torch
 
 from baselines.ppo import ppo
 from baselines.ppo.checkpoints import load_checkpoint
@@ -54,6 +55,12 @@ def test_the_report_rows_each_arm_and_says_how_to_run_those_not_run(tmp_path, mo
     assert row.startswith("| PPO (the recipe, seed 1's run) | 200,000 | 0.1 |") and row.endswith("| 176,000 | 0.1 |")
     assert f"not run: `{ln.COMMAND} --arm sac`" in body and f"not run: `{ln.COMMAND} --arm icm`" in body
     assert (tmp_path / "images" / "learners.png").stat().st_size > 0
+    assert "refilled" not in body
+    sac_checkpoint = log_dir / ln.sac_args().exp_name / "checkpoint.pt"
+    sac_checkpoint.parent.mkdir(parents=True)
+    torch.save({"clock": {"refilled_at": [1_250_000]}}, sac_checkpoint)  # the part of a SAC checkpoint read here
+    body = ln.report(tmp_path / "RESULTS.md", log_dir=log_dir)
+    assert "refilled by its actor at 1,250,000 env steps" in body, "an inexact resume is said"
 
 
 def test_an_unknown_arm_is_refused_and_the_icm_arm_is_the_recipe_with_curiosity(tmp_path):

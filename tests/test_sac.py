@@ -98,6 +98,8 @@ def test_resume_refuses_a_checkpoint_without_its_buffer_and_a_ppo_checkpoint(tmp
     (tmp_path / "b" / "replay_buffer_100.pt").unlink()
     with pytest.raises(SystemExit, match="replay buffer .* is missing"):
         sac.setup(sac.Args(resume=str(tmp_path / "b" / "checkpoint.pt")))
+    with pytest.raises(SystemExit, match="--refill-lost-buffer"):
+        sac.setup(sac.Args(resume=str(tmp_path / "b" / "checkpoint.pt")))
     ckpt = torch.load(tmp_path / "b" / "checkpoint.pt", weights_only=False)
     ckpt["args"]["algorithm"] = None  # as a PPO checkpoint's args
     torch.save(ckpt, tmp_path / "ppo.pt")
@@ -160,3 +162,23 @@ def test_evaluate_py_s_loader_reads_a_sac_checkpoint_as_its_deterministic_policy
     with torch.no_grad():
         torch.testing.assert_close(agent.get_action(obs, deterministic=True),
                                    run.learner.actor.get_action(obs, deterministic=True))
+
+
+def test_a_run_whose_buffer_is_lost_goes_on_with_an_empty_one_refilled_before_any_gradient_step(tmp_path):
+    """--refill-lost-buffer (a fresh machine: the buffer is not committed): the actor refills the buffer for
+    --learning-starts env steps without gradient steps, then they go on at the run's rate with no backlog; the
+    clock records where."""
+    run = sac.setup(tiny_args(tmp_path, total_timesteps=200, exp_name="r", learning_starts=50, checkpoint_freq=200))
+    sac.train(run)
+    assert run.clock.updates == 150
+    (tmp_path / "r" / "replay_buffer_200.pt").unlink()
+    resumed = sac.setup(sac.Args(resume=str(tmp_path / "r" / "checkpoint.pt"), refill_lost_buffer=True, extend=True,
+                                 total_timesteps=249))
+    assert resumed.buffer.count == 0 and resumed.clock.refilled_at == [200] and resumed.clock.refill_until == 250
+    sac.train(resumed)
+    assert resumed.clock.updates == 150 and resumed.buffer.count == 49, "refilling: no gradient step yet"
+    again = sac.setup(sac.Args(resume=str(tmp_path / "r" / "checkpoint.pt"), extend=True, total_timesteps=300))
+    assert again.buffer.count == 49, "the refilled buffer is saved and resumes exactly"
+    sac.train(again)
+    assert again.clock.updates == 150 + 51 and again.clock.skipped_updates == 49, "from step 250 on, one a step"
+    assert again.clock.refilled_at == [200]

@@ -107,6 +107,11 @@ class Args:
     """continue the run of this checkpoint exactly: its args, networks, optimizers, replay buffer, progress, RNG."""
     extend: bool = False
     """with --resume: run to this command's --total-timesteps instead of the run's own."""
+    refill_lost_buffer: bool = False
+    """with --resume: where the checkpoint's replay buffer is missing (a fresh machine: the buffer, about 140 MB, is not
+    committed with the checkpoint), go on with an empty one, which the actor refills for --learning-starts env steps
+    before the gradient steps go on (those the refill's env steps would have had are skipped, not made up in a burst).
+    Not an exact resume: the checkpoint's clock records where it happened (`refilled_at`)."""
     log_dir: str = "runs"
     """where run folders go."""
 
@@ -575,6 +580,12 @@ class Clock:
     eval_s: float = 0.0
     checkpoint_s: float = 0.0
     evaluations: int = 0
+    skipped_updates: int = 0
+    """gradient steps not made while a lost replay buffer refilled (--refill-lost-buffer)."""
+    refilled_at: list = dataclasses.field(default_factory=list)
+    """env steps at which the run went on with an empty replay buffer (--refill-lost-buffer)."""
+    refill_until: int = 0
+    """env step until which the latest refill runs without gradient steps."""
 
 
 @dataclass
@@ -642,12 +653,16 @@ def resumed_args(args: Args, saved: dict) -> Args:
 def setup(args: Args) -> Run:
     """Build (or, with --resume, restore) a run: args, envs, seeds, networks, optimizers, replay buffer, progress."""
     resume = load_sac_checkpoint(args.resume, "--resume") if args.resume else None
+    refill = False
     if resume is not None:
+        refill_asked = args.refill_lost_buffer
         args = resumed_args(args, resume["args"])
         buffer_path = Path(args.resume).with_name(resume["replay_buffer"])
-        if not buffer_path.is_file():
+        refill = not buffer_path.is_file()
+        if refill and not refill_asked:
             raise SystemExit(f"--resume {args.resume}: its replay buffer {buffer_path} is missing (a checkpoint's "
-                             "buffer is written beside it: move or copy the two together)")
+                             "buffer is written beside it: move or copy the two together; or give --refill-lost-buffer "
+                             "to go on with an empty one, an inexact resume)")
     validate(args)
     if args.exp_name is None:
         args.exp_name = f"sac__{args.env_id}__s{args.seed}"
@@ -674,9 +689,15 @@ def setup(args: Args) -> Run:
               Progress(), Clock())
     if resume is not None:
         learner.load_state_dict(resume["sac"])
-        run.buffer.load_state_dict(torch.load(buffer_path, map_location="cpu", weights_only=False))
         run.progress, run.clock = Progress(**resume["progress"]), Clock(**resume["clock"])
-        run.buffer_file = resume["replay_buffer"]
+        if refill:
+            run.clock.refilled_at.append(run.progress.global_step)
+            run.clock.refill_until = run.progress.global_step + args.learning_starts
+            print(f"--refill-lost-buffer: {buffer_path} is missing; the actor refills an empty buffer for "
+                  f"{args.learning_starts:,} env steps before the gradient steps go on")
+        else:
+            run.buffer.load_state_dict(torch.load(buffer_path, map_location="cpu", weights_only=False))
+            run.buffer_file = resume["replay_buffer"]
         restore_rng(resume["rng"])
     return run
 
@@ -817,7 +838,9 @@ def train(run: Run) -> Progress:
                 episodes[key] += values
             t1 = time.perf_counter()
             torch.set_num_threads(args.torch_threads)
-            for _ in range(updates_due(args, progress.global_step) - clock.updates):
+            if progress.global_step < clock.refill_until:  # a lost buffer refilling: no gradient steps, no backlog
+                clock.skipped_updates = updates_due(args, progress.global_step) - clock.updates
+            for _ in range(updates_due(args, progress.global_step) - clock.updates - clock.skipped_updates):
                 clock.updates += 1
                 for key, value in sac_update(learner, run.buffer.sample(args.batch_size), args, clock.updates).items():
                     losses[key].append(value)
