@@ -683,6 +683,8 @@ def setup(args: Args) -> Run:
     np.random.seed(args.seed)
     torch.manual_seed(args.seed)
     torch.backends.cudnn.deterministic = args.torch_deterministic
+    # a layer's random init is drawn in chunks, one per thread: the run's thread count, not the machine's cores
+    torch.set_num_threads(args.torch_threads)
 
     learner = Learner.make(args, obs_dim, act_dim)
     run = Run(args, envs, eval_envs, obs_dim, act_dim, learner, ReplayBuffer(args.buffer_size, obs_dim, act_dim),
