@@ -70,7 +70,7 @@ def row_name(checkpoint: str) -> str:
 
 
 @dataclass
-class Args:
+class Args(transfer.TrainOptions):
     episodes: int = 60
     """seeds per task tried by the expert in the static scene (the evaluation set is those it solves)."""
     seed: int = 1_000_000
@@ -83,17 +83,6 @@ class Args:
     """label -> checkpoint of the agents to run."""
     write_results: bool = True
     """write the table into docs/RESULTS.md (section `obstacles-zero-shot`)."""
-    train: Optional[str] = None
-    """train the recipe among obstacles from `nothing` or from the `shipped` reward-only agent (transfer.STARTS), to
-    TRAIN_BUDGET, resuming its checkpoint; then exit."""
-    train_seed: int = 1
-    """with --train: the training run's seed (--seed is the first evaluation seed)."""
-    num_envs: Optional[int] = None
-    """with --train: env processes (default: one per CPU core); a resumed run keeps its own."""
-    evaluate: bool = False
-    """with --train: add that run's policy to the agents (its rows beside the zero-shot ones) instead of training."""
-    dry_run: bool = False
-    """with --train: print the plan and where the run stands, and exit."""
 
 
 _experts: dict = {}

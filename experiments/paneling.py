@@ -64,7 +64,7 @@ def training_run(start: str, seed: int = 1, num_envs: Optional[int] = None) -> R
 
 
 @dataclass
-class Args:
+class Args(transfer.TrainOptions):
     episodes: int = 100
     """seeded episodes per row."""
     seed: int = 1_000_000
@@ -77,17 +77,6 @@ class Args:
     """label -> checkpoint of the agents to run."""
     write_results: bool = True
     """write the table into docs/RESULTS.md (section `paneling-zero-shot`)."""
-    train: Optional[str] = None
-    """train the recipe on paneling from `nothing` or from the `shipped` reward-only agent (transfer.STARTS), to
-    TRAIN_BUDGET, resuming its checkpoint; then exit."""
-    train_seed: int = 1
-    """with --train: the training run's seed (--seed is the first evaluation seed)."""
-    num_envs: Optional[int] = None
-    """with --train: env processes (default: one per CPU core); a resumed run keeps its own."""
-    evaluate: bool = False
-    """with --train: evaluate that run's policy with the paper's protocol on paneling instead of training."""
-    dry_run: bool = False
-    """with --train: print the plan and where the run stands, and exit."""
 
 
 _expert: dict = {}

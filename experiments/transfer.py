@@ -8,6 +8,7 @@ took to place TARGET of them."""
 from __future__ import annotations
 
 import csv
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Optional
 
@@ -22,6 +23,23 @@ STARTS = {"nothing": None, "shipped": "assets/checkpoints/scratch_general_agent.
 the imitation agent's residual network is another)."""
 TARGET = 0.9
 """the place success whose first crossing `steps_to` reports."""
+
+
+@dataclass
+class TrainOptions:
+    """The options of a training run on a new setting: each experiment's Args takes them."""
+
+    train: Optional[str] = None
+    """train the recipe from `nothing` or from the `shipped` reward-only agent (STARTS), to the experiment's
+    TRAIN_BUDGET, resuming its checkpoint; then exit."""
+    train_seed: int = 1
+    """with --train: the training run's seed (--seed is the first evaluation seed)."""
+    num_envs: Optional[int] = None
+    """with --train: env processes (default: one per CPU core); a resumed run keeps its own."""
+    evaluate: bool = False
+    """with --train: evaluate that run's policy, the experiment's way, instead of training."""
+    dry_run: bool = False
+    """with --train: print the plan and where the run stands, and exit."""
 
 
 def transfer_run(name: str, start: str, seed: int, num_envs: Optional[int], budget: int, command: str, what: str,
