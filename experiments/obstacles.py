@@ -64,8 +64,11 @@ def training_run(start: str, seed: int = 1, num_envs: Optional[int] = None) -> R
 
 
 def row_name(checkpoint: str) -> str:
-    """The name an agent's row files take: its checkpoint's file name, or its run's folder for a run's checkpoint.pt."""
+    """The name an agent's row files take: its checkpoint's file name; a run's checkpoint.pt, its run's folder; a
+    seed's candidate snapshot (campaign/<run>/candidates/), the run's folder and the candidate's name."""
     path = Path(checkpoint)
+    if path.parent.name == "candidates":
+        return f"{path.parent.parent.name}_{path.stem}"
     return path.parent.name if path.stem == "checkpoint" else path.stem
 
 

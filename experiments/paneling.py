@@ -38,7 +38,7 @@ from baselines.ppo import evaluation
 from baselines.ppo.evaluation import episode_job, pct, wilson
 from experiments import transfer
 from experiments.campaign import Run, checkpoint_of
-from experiments.obstacles import RESULTS_PATH, run_row
+from experiments.obstacles import RESULTS_PATH, row_name, run_row
 from experiments.transfer import transfer_run
 from ms_construction.curriculum import FINAL_STAGE
 from ms_construction.reporting import update_section
@@ -147,7 +147,7 @@ def main(args: Args) -> dict:
         rows["planning expert"] = summarize(expert, True)
         failures = "; ".join(f"seed {e['seed']} (bay {e['goal_slot']}): {e['failure']}" for e in expert if not e["placed"])
         for label, checkpoint in args.agents.items():
-            name = Path(checkpoint).stem
+            name = row_name(checkpoint)
             episodes = run_row(pool, args.out / f"{name}.json", _agent_episode, [(checkpoint, s) for s in seeds], seeds,
                                f"{name} paneling")
             rows[f"{label}, zero-shot"] = summarize(episodes, False)

@@ -273,6 +273,8 @@ def test_the_recipe_trains_among_obstacles_from_the_shipped_weights_unchanged_bu
     changed = {k for k, v in vars(run.args).items() if v != vars(recipe)[k]}
     assert changed <= {"obstacles", "total_timesteps", "exp_name", "checkpoint"} and run.args.obstacles == "moving"
     assert obstacles.row_name(str(from_scratch.CAMPAIGN_DIR / run.name / "checkpoint.pt")) == run.name
+    assert obstacles.row_name("campaign/scratch_s2/candidates/candidate_5000000.pt") == "scratch_s2_candidate_5000000"
+    assert obstacles.row_name("assets/checkpoints/general_agent.pt") == "general_agent"
     tiny = run.args.replace(total_timesteps=40, num_steps=20, num_minibatches=2, update_epochs=1, num_eval_envs=1,
                             log_dir=str(tmp_path), checkpoint_freq=1, env_id="Flooring-v1", task_weights=None)
     ppo.main(tiny)
