@@ -84,6 +84,8 @@ class Args(transfer.TrainOptions):
     """where each row's episodes go (one JSON per row and task)."""
     agents: dict[str, str] = field(default_factory=lambda: dict(AGENTS))
     """label -> checkpoint of the agents to run."""
+    more_agents: tuple[str, ...] = ()
+    """more agents to run after those, LABEL=CHECKPOINT each (a seed's candidate snapshot, say)."""
     write_results: bool = True
     """write the table into docs/RESULTS.md (section `obstacles-zero-shot`)."""
 
@@ -159,9 +161,21 @@ def table(rows: dict[str, dict[str, dict]]) -> str:
     return "\n".join(lines)
 
 
+def with_more_agents(agents: dict[str, str], specs: tuple[str, ...]) -> dict[str, str]:
+    """`agents` and those of --more-agents LABEL=CHECKPOINT ...; a spec that is not one, or names no file, is refused."""
+    more = {}
+    for spec in specs:
+        label, _, checkpoint = spec.partition("=")
+        if not label or not Path(checkpoint).is_file():
+            raise SystemExit(f"--more-agents {spec}: give LABEL=CHECKPOINT, a checkpoint that exists")
+        more[label] = checkpoint
+    return {**agents, **more}
+
+
 def main(args: Args) -> dict:
     if args.episodes < 1 or args.workers < 1:
         raise SystemExit("--episodes and --workers must be positive")
+    args.agents = with_more_agents(args.agents, args.more_agents)
     if args.train is not None:
         run = training_run(args.train, args.train_seed, args.num_envs)
         if not args.evaluate:

@@ -38,7 +38,7 @@ from baselines.ppo import evaluation
 from baselines.ppo.evaluation import episode_job, pct, wilson
 from experiments import transfer
 from experiments.campaign import Run, checkpoint_of
-from experiments.obstacles import RESULTS_PATH, row_name, run_row
+from experiments.obstacles import RESULTS_PATH, row_name, run_row, with_more_agents
 from experiments.transfer import transfer_run
 from ms_construction.curriculum import FINAL_STAGE
 from ms_construction.reporting import update_section
@@ -75,6 +75,8 @@ class Args(transfer.TrainOptions):
     """where each row's episodes go (one JSON per row)."""
     agents: dict[str, str] = field(default_factory=lambda: dict(AGENTS))
     """label -> checkpoint of the agents to run."""
+    more_agents: tuple[str, ...] = ()
+    """more agents to run after those, LABEL=CHECKPOINT each (a seed's candidate snapshot, say)."""
     write_results: bool = True
     """write the table into docs/RESULTS.md (section `paneling-zero-shot`)."""
 
@@ -139,6 +141,7 @@ def main(args: Args) -> dict:
         return train(args)
     if args.episodes < 1 or args.workers < 1:
         raise SystemExit("--episodes and --workers must be positive")
+    args.agents = with_more_agents(args.agents, args.more_agents)
     command = "python -m experiments.paneling " + " ".join(shlex.quote(a) for a in sys.argv[1:])
     seeds = list(range(args.seed, args.seed + args.episodes))
     rows: dict[str, dict] = {}

@@ -286,3 +286,13 @@ def test_the_recipe_trains_among_obstacles_from_the_shipped_weights_unchanged_bu
     w, w0 = trained["agent"]["actor_mean.0.weight"], before["agent"]["actor_mean.0.weight"]
     rest = torch.cat([w[:, :at], w[:, at + OBSTACLE_OBS_SIZE:]], 1)
     assert torch.allclose(rest, w0, atol=0.05) and not torch.equal(rest, w0), "started from the shipped weights, and trained"
+
+
+def test_more_agents_join_the_shipped_ones_and_a_bad_one_is_refused():
+    from experiments import obstacles
+
+    agents = obstacles.with_more_agents({"a": "x.pt"}, ("seed 1=assets/checkpoints/general_agent.pt",))
+    assert agents == {"a": "x.pt", "seed 1": "assets/checkpoints/general_agent.pt"}
+    for spec in ("no checkpoint", "label=missing.pt"):
+        with pytest.raises(SystemExit, match="LABEL=CHECKPOINT"):
+            obstacles.with_more_agents({}, (spec,))
