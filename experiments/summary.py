@@ -72,8 +72,9 @@ def paper_tasks_table() -> list[str]:
             lines.append(f"| the recipe from nothing, seed {seed}, at {step:,} env steps ({which}) | PPO on the tasks' "
                          f"default dense reward, one recipe unchanged from step 0 | " + " | ".join(cells) + f" | {path} |")
         else:
-            lines.append(f"| the recipe from nothing, seed {seed} | (not evaluated yet: `{from_scratch.COMMAND} --seed "
-                         f"{seed} --evaluate`) | " + " | ".join("-" for _ in TASKS) + " | |")
+            lines.append(f"| the recipe from nothing, seed {seed} | (its run has not ended: `{from_scratch.COMMAND} --seed "
+                         f"{seed}` runs it, and its snapshot rule's choice is evaluated at its end) | "
+                         + " | ".join("-" for _ in TASKS) + " | |")
     return lines
 
 

@@ -24,7 +24,7 @@ def test_each_row_reads_its_file_and_a_seed_shows_its_latest_evaluation(tmp_path
     assert row.split(" | ")[2:5] == [f"{100 * shipped[t]['place_success']:.1f}" for t in sm.TASKS]
     seed1 = next(line for line in body.splitlines() if "seed 1" in line)
     assert "at 6,000,000 env steps" in seed1 and seed1.count("| 92.5 ") == 3
-    assert "`python -m experiments.from_scratch --seed 2 --evaluate`" in body
+    assert "(its run has not ended: `python -m experiments.from_scratch --seed 2` runs it" in body
     from_scratch.chosen_json(1).parent.mkdir()
     from_scratch.chosen_json(1).write_text(json.dumps({"step": 4_000_000}))
     seed1 = next(line for line in sm.summary().splitlines() if "seed 1" in line)
