@@ -111,14 +111,18 @@ def hardware(how: str = "physx_cpu") -> str:
     return f"{platform.machine()}, {os.cpu_count()} CPU cores{'' if torch.cuda.is_available() else ', no GPU'}; {how}"
 
 
+def policy_only(ckpt: dict) -> dict:
+    """A checkpoint's policy (weights, Args, progress) without what only resumes its run (optimizers, RNG states)."""
+    return {k: v for k, v in ckpt.items() if k not in ("optimizer", "icm_optimizer", "rng")}
+
+
 def ship_checkpoint(checkpoint: Path, out: Path, command: str, record: dict, progress_csv: Optional[Path] = None,
                     csv_out: Optional[Path] = None) -> Path:
     """The one way a policy ships: `checkpoint`'s policy (its weights, Args and progress; the optimizers and random
     states stay behind with the run, which they resume) to `out` with its campaign record (the `command` that
     made it and the `record`'s lines: method, env steps, wall time, hardware), for scripts/evaluate.py; the run's
     `progress_csv` copied to `csv_out` beside it when given."""
-    ckpt = load_checkpoint(checkpoint)
-    policy = {k: v for k, v in ckpt.items() if k not in ("optimizer", "icm_optimizer", "rng")}
+    policy = policy_only(load_checkpoint(checkpoint))
     policy["campaign"] = dict(command=command, record=record)
     out.parent.mkdir(parents=True, exist_ok=True)
     torch.save(policy, out)

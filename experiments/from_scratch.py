@@ -54,7 +54,8 @@ from baselines.ppo import evaluation, ppo
 from baselines.ppo.args import command_line
 from baselines.ppo.checkpoints import load_checkpoint
 from baselines.ppo.evaluation import PAPER_TABLE_II, failures, kinds, pct
-from experiments.campaign import CAMPAIGN_DIR, SHIPPED_DIR, Run, checkpoint_of, describe, ship, training_wall_s
+from experiments.campaign import (CAMPAIGN_DIR, SHIPPED_DIR, Run, checkpoint_of, describe, policy_only, ship,
+                                 training_wall_s)
 from experiments.expert_modes import placed_per_slot
 from experiments.refine import (CONFIRMATION_SEED, VALIDATION_SEED, best_snapshot, content_tag, ranked_snapshots,
                                validate)
@@ -516,8 +517,7 @@ def screen_snapshot(seed: int, step: int, snapshot: Path) -> dict:
     folder = seed_candidates(seed)
     folder.mkdir(parents=True, exist_ok=True)
     if step in top and not (folder / f"candidate_{step}.pt").is_file():
-        policy = {k: v for k, v in load_checkpoint(snapshot).items() if k not in ("optimizer", "icm_optimizer", "rng")}
-        torch.save(policy, folder / f"candidate_{step}.pt")
+        torch.save(policy_only(load_checkpoint(snapshot)), folder / f"candidate_{step}.pt")
     for path in folder.glob("candidate_*.pt"):
         if int(path.stem.split("_")[1]) not in top:
             path.unlink()
