@@ -3,19 +3,23 @@
     python scripts/benchmark.py                     # CPU sections, and the GPU section where CUDA is there
     python scripts/benchmark.py --steps 300 --rounds 2 --no-write
     python scripts/benchmark.py --no-cpu            # the GPU section only
+    python scripts/benchmark.py --workers 16 --trainings free-none free-recipe free-recipe-cuda \
+        --cpu-section cpu-speed-16-cores            # a larger machine's CPU figures, beside this one's
 
 CPU (physx_cpu, state observations, pd_joint_delta_pos, uniform random actions):
 
 - one env in this process: each task against ManiSkill's PickCube-v1 (dense reward), with and
   without the element held by the plate (the grasp's per-substep tracking; most of every real
-  pick-carry-place episode);
+  pick-carry-place episode); and with rgb observations (the 128x128 camera rendered every step, on
+  sapien's CUDA device where there is one, else on the CPU's Vulkan);
 - env processes: ms_construction.vector_env.CPUVectorEnv (one env per process, the first in the
   learner's) with 1, 2 and 4 envs: PickCube-v1, the general task (also with every env in a worker
   process, the layout before env 0 moved into the learner's, as a reference in the same round), the
   general task with the element held, and
   baselines/ppo/ppo.py training on the same number of processes (its env steps/s with the PPO update
   included; the learner's defaults but for the number of envs), free-running and held, ICM off and
-  on, against those processes simulating alone: the share of the simulator's speed the learner keeps;
+  on, and the from-scratch recipe (`--trainings`; `-cuda`: its learner on the GPU), against those
+  processes simulating alone: the share of the simulator's speed the learner keeps;
 - peak host memory: the resident set of this process and of each env worker process.
 
 Each figure is the median over rounds that alternate between the things compared, so the drifts of
@@ -62,6 +66,12 @@ GENERAL = "ConstructionPickPlace-v1"
 """the task the general agent trains on: the vectorized and training measurements use it."""
 
 
+TRAINING = (("free", "none"), ("free", "icm"), ("held", "none"), ("held", "icm"), ("free", "recipe"))
+"""the PPO trainings measured against the simulation alone: free-running or held steps, ICM off or on (the paper's
+learner: sparse reward), and the from-scratch recipe (experiments/from_scratch.py: the dense reward, its
+observation's joint moves, near-goal starts, its rollout and update sizes)."""
+
+
 @dataclass
 class Args:
     steps: int = 1000
@@ -74,6 +84,11 @@ class Args:
     """env processes of the vectorized and training measurements."""
     train_iterations: int = 3
     """timed PPO iterations per training measurement (one untimed start-up iteration before them)."""
+    rgb_steps: int = 200
+    """env steps per rgb-camera measurement (one env; 0: skip it)."""
+    trainings: tuple[str, ...] = tuple(f"{steps}-{curiosity}" for steps, curiosity in TRAINING)
+    """the PPO trainings measured against the simulation alone, each STEPS-CURIOSITY of TRAINING; with `-cuda` after
+    it (free-recipe-cuda), the same with the learner on the GPU (its rollouts' forward passes and its update)."""
     cpu: bool = True
     """run the CPU sections."""
     gpu: bool = True
@@ -89,6 +104,23 @@ class Args:
     write: bool = True
     """write the sections into --out."""
     out: Path = Path("docs/BENCHMARKS.md")
+    cpu_section: str = "cpu-speed"
+    """the section of --out the CPU figures replace: another machine's figures go in a section of their own beside
+    this machine's (for example `cpu-speed-16-cores`)."""
+
+
+def trainings(args: Args) -> list[tuple[str, str, str]]:
+    """--trainings as (steps, curiosity, learner device) of TRAINING; a clear error for any other, and for a learner
+    on the GPU where there is none."""
+    allowed = {f"{steps}-{curiosity}{suffix}": (steps, curiosity, device) for steps, curiosity in TRAINING
+               for suffix, device in (("", "cpu"), ("-cuda", "cuda"))}
+    unknown = [t for t in args.trainings if t not in allowed]
+    if unknown:
+        raise SystemExit(f"--trainings: unknown {', '.join(unknown)}; allowed: "
+                         f"{', '.join(t for t in allowed if not t.endswith('-cuda'))}, each also with -cuda")
+    if any(allowed[t][2] == "cuda" for t in args.trainings) and not torch.cuda.is_available():
+        raise SystemExit("--trainings: a learner on the GPU (-cuda) needs a CUDA GPU, and this machine has none")
+    return [allowed[t] for t in args.trainings]
 
 
 def main(args: Args) -> None:
@@ -96,7 +128,7 @@ def main(args: Args) -> None:
         body = cpu_sections(args)
         print(body)
         if args.write:
-            update_section(args.out, "cpu-speed", title="Benchmarks", body=body)
+            update_section(args.out, args.cpu_section, title="Benchmarks", body=body)
             print(f"wrote {args.out}")
     if args.gpu:
         if not torch.cuda.is_available():
@@ -114,7 +146,7 @@ def command(args: Args) -> str:
     out = []
     for name, default in vars(Args()).items():
         value = getattr(args, name)
-        if value != default and name not in ("write", "out"):
+        if value != default and name not in ("write", "out", "cpu_section"):
             flag = "--" + name.replace("_", "-")
             if isinstance(value, bool):
                 out.append(flag if value else "--no-" + name.replace("_", "-"))
@@ -124,8 +156,10 @@ def command(args: Args) -> str:
 
 
 def machine() -> str:
-    return (f"{platform.machine()}, {os.cpu_count()} CPU cores, Python {sys.version.split()[0]}, torch {torch.__version__}, "
-            f"sapien {__import__('sapien').__version__}, mani_skill {__import__('mani_skill').__version__}")
+    gpu = f", {torch.cuda.get_device_name(0)} GPU" if torch.cuda.is_available() else ", no GPU"
+    return (f"{platform.machine()}, {os.cpu_count()} CPU cores{gpu}, Python {sys.version.split()[0]}, "
+            f"torch {torch.__version__}, sapien {__import__('sapien').__version__}, "
+            f"mani_skill {__import__('mani_skill').__version__}")
 
 
 # ------------------------------------------------------------------------------------------------- #
@@ -164,10 +198,10 @@ class AlwaysHeld(HoldElement):
 CPU_KWARGS = dict(obs_mode="state", control_mode="pd_joint_delta_pos", render_mode=None)
 
 
-def make(env_id: str):
+def make(env_id: str, obs_mode: str = "state"):
     # render_backend for PickCube-v1 too: ManiSkill's own envs would warn without CUDA
     return gym.make(env_id, num_envs=1, sim_backend="physx_cpu", reward_mode="dense",
-                    render_backend=default_render_backend(), **CPU_KWARGS)
+                    render_backend=default_render_backend(), **dict(CPU_KWARGS, obs_mode=obs_mode))
 
 
 def steps_per_second(env, steps: int, seed: int, held: bool = False) -> float:
@@ -222,14 +256,8 @@ def held_training_envs():
         ppo.make_envs = make_envs
 
 
-TRAINING = (("free", "none"), ("free", "icm"), ("held", "none"), ("held", "icm"), ("free", "recipe"))
-"""the PPO trainings measured against the simulation alone: free-running or held steps, ICM off or on (the paper's
-learner: sparse reward), and the from-scratch recipe (experiments/from_scratch.py: the dense reward, its
-observation's joint moves, near-goal starts, its rollout and update sizes)."""
-
-
 def ppo_steps_per_second(iterations: int, backend: str, num_envs: Optional[int] = None, held: bool = False,
-                         curiosity: Optional[str] = None) -> dict:
+                         curiosity: Optional[str] = None, learner: Optional[str] = None) -> dict:
     """baselines/ppo/ppo.py on GENERAL with its defaults but the paper's sparse reward (and `num_envs` and `curiosity`,
     when given), or the from-scratch recipe (`curiosity="recipe"`): the median env steps/s of `iterations` iterations (rollout and update; the first, start-up, iteration and the last,
     whose final evaluation is cut to one step, left out). No checkpoints."""
@@ -240,10 +268,12 @@ def ppo_steps_per_second(iterations: int, backend: str, num_envs: Optional[int] 
     from experiments.from_scratch import scratch_args
 
     with tempfile.TemporaryDirectory() as log_dir:
-        common = dict(sim_backend=backend, num_eval_envs=1, num_eval_steps=1, eval_freq=10**9, save_model=False,
-                      log_dir=log_dir, exp_name="benchmark")
+        # the learner on the GPU with physx_cuda, on the CPU with physx_cpu (as the recipe trains) unless `learner`
+        common = dict(sim_backend=backend, cuda=(learner or ("cuda" if backend == "physx_cuda" else "cpu")) == "cuda",
+                      num_eval_envs=1, num_eval_steps=1,
+                      eval_freq=10**9, save_model=False, log_dir=log_dir, exp_name="benchmark")
         if curiosity == "recipe":
-            run_args = scratch_args(num_envs, cuda=backend == "physx_cuda", **common)
+            run_args = scratch_args(num_envs, **common)
         else:
             run_args = ppo.Args.of(env_id=GENERAL, num_envs=num_envs, reward_mode="sparse", **common,
                                    **({} if curiosity is None else dict(curiosity=curiosity)))
@@ -269,10 +299,11 @@ def worker_peak_rss_mib(envs: CPUVectorEnv) -> float:
 def cpu_sections(args: Args) -> str:
     load_before = os.getloadavg()[0]
     one_env = one_env_table(args)
+    rgb = rgb_table(args) if args.rgb_steps else None
     processes, training, worker_rss = process_table(args)
     learner_rss = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
     return "\n".join([
-        "## CPU (physx_cpu)",
+        f"## CPU (physx_cpu), {os.cpu_count()} cores",
         "",
         f"Command: `{command(args)}` ({time.strftime('%Y-%m-%d %H:%M')}).",
         f"Machine: {machine()}. Load average (1 min): {load_before:.1f} when the run began, {os.getloadavg()[0]:.1f} "
@@ -288,6 +319,16 @@ def cpu_sections(args: Args) -> str:
         "",
         one_env,
         "",
+        *([] if rgb is None else [
+            "### Rendering",
+            "",
+            f"One env as above, with rgb observations (its cameras rendered every step; render backend "
+            f"\"{default_render_backend()}\": sapien's CUDA device where there is one, else the CPU's Vulkan) against "
+            f"state observations; median of {args.rounds} runs of {args.rgb_steps} steps.",
+            "",
+            rgb,
+            "",
+        ]),
         "### Env processes",
         "",
         "ms_construction.vector_env.CPUVectorEnv: one env per process, env 0 in the learner's (this one) and the "
@@ -305,7 +346,8 @@ def cpu_sections(args: Args) -> str:
         "and the curiosity, or (curiosity \"recipe\") the from-scratch recipe (experiments/from_scratch.py: its dense "
         "reward, the joint moves in its observation, near-goal and reach starts, 2,000-step rollouts); "
         f"{args.train_iterations} timed iterations after an untimed one, each its rollout and its PPO update (and ICM's "
-        "where on); free-running steps, or the element held in every training env from every reset on. \"Share\": "
+        "where on); free-running steps, or the element held in every training env from every reset on; \"learner\": where "
+        "its policy's forward passes and its update run (the env processes on the CPU either way). \"Share\": "
         "training's env steps/s over those of the same processes simulating alone with the sparse reward (the table "
         f"above) in the same round; median (range) of {args.rounds} rounds that alternate between them. Target: 0.6 or "
         "more (stretch 0.8), the recipe included.",
@@ -342,13 +384,33 @@ def one_env_table(args: Args) -> str:
     return "\n".join(rows)
 
 
+def rgb_table(args: Args) -> str:
+    """One env with rgb observations (its sensor cameras rendered every step) against state observations, on the
+    render backend this machine has (sapien's CUDA device, else the CPU's Vulkan)."""
+    envs = {(eid, mode): make(eid, mode) for eid in (REFERENCE, GENERAL) for mode in ("state", "rgb")}
+    for env in envs.values():  # warm-up
+        steps_per_second(env, 10, seed=0)
+    sps = {k: [] for k in envs}
+    for r in tqdm(range(args.rounds), desc="rgb camera", unit="round"):
+        for key, env in envs.items():
+            sps[key].append(steps_per_second(env, args.rgb_steps, seed=r))
+    rows = ["| env | cameras | steps/s, state | steps/s, rgb | rgb / state |", "|---|---|---|---|---|"]
+    for eid in (GENERAL, REFERENCE):
+        state, rgb = statistics.median(sps[eid, "state"]), statistics.median(sps[eid, "rgb"])
+        cams = ", ".join(f"{c.config.width}x{c.config.height}" for c in envs[eid, "rgb"].unwrapped._sensors.values())
+        rows.append(f"| {eid} | {cams} | {state:.0f} | {rgb:.0f} | {rgb / state:.2f} |")
+    for env in envs.values():
+        env.close()
+    return "\n".join(rows)
+
+
 def process_table(args: Args) -> tuple[str, str, float]:
     """The env processes' steps/s simulating alone, and PPO's training steps/s on the same number of
     processes, free-running and held, ICM off and on, with its share of the simulation alone."""
     sim_rows = [f"| env processes | {REFERENCE} | {GENERAL} | {GENERAL}, held | {GENERAL}, every env in a worker | "
                 "gain: env 0 in the learner's process |", "|---|---|---|---|---|---|"]
-    ppo_rows = ["| env processes | env steps | curiosity | PPO training, env steps/s | simulating alone, env steps/s | "
-                "share: training / simulating alone |", "|---|---|---|---|---|---|"]
+    ppo_rows = ["| env processes | env steps | curiosity | learner | PPO training, env steps/s | "
+                "simulating alone, env steps/s | share: training / simulating alone |", "|---|---|---|---|---|---|---|"]
     worker_rss = 0.0
     for n in args.workers:
         ref = CPUVectorEnv(REFERENCE, n, dict(CPU_KWARGS, reward_mode="sparse"))
@@ -356,7 +418,8 @@ def process_table(args: Args) -> tuple[str, str, float]:
         apart = CPUVectorEnv(GENERAL, n, dict(CPU_KWARGS, reward_mode="sparse"), first_env_in_process=False)
         for envs in (ref, ours, apart):  # warm-up
             vector_steps_per_second(envs, 20, seed=0)
-        m = {k: [] for k in ("ref", "free", "held", "apart", *TRAINING)}
+        measured = trainings(args)
+        m = {k: [] for k in ("ref", "free", "held", "apart", *measured)}
         for r in tqdm(range(args.rounds), desc=f"{n} env processes", unit="round"):
             m["ref"].append(vector_steps_per_second(ref, args.vector_steps, seed=r))
             m["apart"].append(vector_steps_per_second(apart, args.vector_steps, seed=r))
@@ -364,21 +427,23 @@ def process_table(args: Args) -> tuple[str, str, float]:
             m["free"].append(vector_steps_per_second(ours, args.vector_steps, seed=r))
             ours.call("set_hold", True)
             m["held"].append(vector_steps_per_second(ours, args.vector_steps, seed=r))
-            for steps, curiosity in TRAINING:
-                m[steps, curiosity].append(ppo_steps_per_second(args.train_iterations, "physx_cpu", n, held=steps == "held",
-                                                                curiosity=curiosity)["sps"])
+            for steps, curiosity, learner in measured:
+                m[steps, curiosity, learner].append(ppo_steps_per_second(
+                    args.train_iterations, "physx_cpu", n, held=steps == "held", curiosity=curiosity,
+                    learner=learner)["sps"])
         worker_rss = max(worker_rss, worker_peak_rss_mib(ours))
         for envs in (ref, ours, apart):
             envs.close()
         med = {k: statistics.median(v) for k, v in m.items()}
         gain = statistics.median(f / a for f, a in zip(m["free"], m["apart"]))
         sim_rows.append(f"| {n} | {med['ref']:.0f} | {med['free']:.0f} | {med['held']:.0f} | {med['apart']:.0f} | {gain:.2f} |")
-        for steps, curiosity in TRAINING:
+        for steps, curiosity, learner in measured:
             # each round's training over the same round's simulation alone
-            share = [t / a for t, a in zip(m[steps, curiosity], m[steps])]
-            ppo_rows.append(f"| {n} | {steps} | {curiosity} | {med[steps, curiosity]:.0f} | {med[steps]:.0f} | "
+            share = [t / a for t, a in zip(m[steps, curiosity, learner], m[steps])]
+            ppo_rows.append(f"| {n} | {steps} | {curiosity} | {learner} | {med[steps, curiosity, learner]:.0f} | "
+                            f"{med[steps]:.0f} | "
                             f"{statistics.median(share):.2f} ({min(share):.2f}-{max(share):.2f}) |")
-        print("\n".join(sim_rows[-1:] + ppo_rows[-len(TRAINING):]), flush=True)
+        print("\n".join(sim_rows[-1:] + ppo_rows[-len(measured):]), flush=True)
     return "\n".join(sim_rows), "\n".join(ppo_rows), worker_rss
 
 
