@@ -1,5 +1,6 @@
-"""experiments/recipe_probes.py: each probe is the from-scratch recipe with only its named changes, and the report
-tables what the probes' CSVs say (when each radius reached the whole path; ordinary picks and places)."""
+"""experiments/recipe_probes.py: each probe is the from-scratch recipe with only its named changes, on a seed, and the
+report tables what the probes' CSVs say (when each near-goal radius reached the whole path; how far the least-widened
+reach-start radius came; ordinary picks and places), the recipe's own probes read from the recipe's runs."""
 
 import csv
 
@@ -10,28 +11,51 @@ from experiments import from_scratch as fs
 from experiments import recipe_probes as rp
 
 
-def test_each_probe_is_the_recipe_with_its_changes_alone():
+def test_each_probe_is_the_recipe_with_its_changes_alone_on_its_seed():
     recipe = fs.scratch_args(2).flat()
-    for name, (_, changes) in rp.PROBES.items():
-        args = rp.probe_args(name).flat()
+    for name, (_, changes, steps) in rp.PROBES.items():
+        args = rp.probe_args(name, seed=3).flat()
         differ = {k for k in recipe if args[k] != recipe[k]}
-        assert differ == {"exp_name", "log_dir", "total_timesteps", "eval_freq"} | set(changes), (name, differ)
-        assert args["total_timesteps"] == rp.PROBE_STEPS and args["seed"] == 1
+        assert differ == {"exp_name", "log_dir", "total_timesteps", "eval_freq", "seed"} | set(changes), (name, differ)
+        assert args["total_timesteps"] == steps and args["seed"] == 3 and args["exp_name"] == f"{name}_s3"
     assert rp.PROBES["recipe"][1] == {}, "the recipe's own probe"
     with pytest.raises(SystemExit, match="without_reach_starts"):
         rp.probe_args("no_such_probe")
 
 
-def test_the_table_says_when_each_radius_reached_the_path_and_what_ordinary_resets_did(tmp_path):
-    with open(tmp_path / "recipe.csv", "w", newline="") as f:
+def test_the_recipes_own_probe_on_a_seed_with_a_recipe_run_is_not_run_again(tmp_path, monkeypatch):
+    monkeypatch.setattr(rp, "CAMPAIGN_DIR", tmp_path)
+    (tmp_path / "scratch_s2").mkdir()
+    (tmp_path / "scratch_s2" / "progress.csv").write_text("global_step\n")
+    with pytest.raises(SystemExit, match="holds this probe's steps"):
+        rp.run("recipe_1m", 2)
+
+
+def write_csv(path, rows):
+    with open(path, "w", newline="") as f:
         w = csv.DictWriter(f, fieldnames=CSV_FIELDS)
         w.writeheader()
-        for i in range(1, 201):  # past the probes' length: the control's rows after it do not count
-            w.writerow(dict(global_step=2000 * i, iteration=i, near_goal_place_success=0.5,
-                            near_goal_radius_ceiling=1.0 if i >= 100 else 0.5, near_goal_radius_window=0.5,
-                            near_goal_radius_flooring=1.0, ordinary_pick_ceiling=0.2 if i <= 150 else 1.0, ordinary_pick_window="",
-                            ordinary_pick_flooring=0.5, ordinary_place_ceiling=0.0, ordinary_place_window="",
-                            ordinary_place_flooring=0.1))
-    body = rp.table(tmp_path)
-    assert "grasped from their side | 300,000 | 200,000 / - / 2,000 | 20.0 / - / 50.0 | 0.0 / - / 10.0 | 50.0 |" in body
-    assert "without_reach_starts" not in body.split("|---|")[-1], "a probe that has not run has no row"
+        w.writerows(rows)
+
+
+def test_the_table_rows_each_probe_and_seed_with_what_its_csv_says(tmp_path):
+    data, campaign = tmp_path / "data", tmp_path / "campaign"
+    data.mkdir()
+    (campaign / "scratch_s2").mkdir(parents=True)
+    rows = []
+    for i in range(1, 201):  # past the 300,000-step probes' length: the rows after it do not count
+        rows.append(dict(global_step=2000 * i, iteration=i, near_goal_place_success=0.5,
+                         near_goal_radius_ceiling=1.0 if i >= 100 else 0.5, near_goal_radius_window=0.5,
+                         near_goal_radius_flooring=1.0, ordinary_pick_ceiling=0.2 if i <= 150 else 1.0,
+                         ordinary_pick_window="", ordinary_pick_flooring=0.5, ordinary_place_ceiling=0.0,
+                         ordinary_place_window="", ordinary_place_flooring=0.1,
+                         **{f"reach_start_radius_{k}{s}": 0.1 * (s + 1) for k in ("ceiling", "window", "flooring")
+                            for s in range(3)}))
+    write_csv(data / "without_reach_starts_s1.csv", rows)
+    write_csv(campaign / "scratch_s2" / "progress.csv", rows)  # the recipe's run on seed 2: its own probes
+    body = rp.table(data, campaign)
+    assert ("| 1 | 300,000 | 200,000 / - / 2,000 | 0.1 / 0.1 / 0.1 | 20.0 / - / 50.0 | 0.0 / - / 10.0 | 50.0 |"
+            in body.split("without_reach_starts:")[1].splitlines()[0])
+    recipe_rows = [line for line in body.splitlines() if line.startswith("| recipe")]
+    assert [line.split(" | ")[1:3] for line in recipe_rows] == [["2", "300,000"], ["2", "400,000"]]
+    assert "| 2 | 400,000 | 200,000 / - / 2,000 | 0.1 / 0.1 / 0.1 | 100.0 / - / 50.0 |" in recipe_rows[1]
