@@ -16,6 +16,7 @@ table regenerates.
 from __future__ import annotations
 
 import csv
+import re
 import shutil
 from dataclasses import dataclass
 from pathlib import Path
@@ -34,22 +35,18 @@ from ms_construction.reporting import update_section
 
 LOG_DIR = Path("runs/recipe_probes")
 DATA_DIR = Path("docs/data/recipe_probes")
-RECIPE_TEXT = ("the recipe: half of the resets that are not near-goal starts start on the last tenth of the reach path "
-               "down to the element, each goal slot's part widened by 0.1 once 60% of its last 20 such episodes "
-               "grasped from their side")
 PROBES = {
     "without_reach_starts": ("the recipe without reach starts, as the campaign ended (`--reach-start-share 0`)",
                              dict(reach_start_share=0.0, reach_start_radius=None), 300_000),
-    "recipe": (RECIPE_TEXT, {}, 300_000),
-    "recipe_1m": ("the recipe (as above) to 1M env steps: by then seed 1's reach-start radii had widened and seed 2's had "
-                  "stopped", {}, 1_000_000),
+    "recipe": ("the recipe: half of the resets that are not near-goal starts start on the last tenth of the reach path "
+               "down to the element, each goal slot's part widened by 0.1 once 60% of its last 20 such episodes "
+               "grasped from their side", {}, 300_000),
+    "recipe_1m": ("the recipe, to 1M env steps", {}, 1_000_000),
 }
 """name: (what it is, its changes to the recipe, its env steps)."""
 
 
 def probe_args(name: str, seed: int = 1) -> ppo.Args:
-    if name not in PROBES:
-        raise SystemExit(f"--run {name}: no such probe; the probes are {', '.join(PROBES)}")
     _, changes, steps = PROBES[name]
     return scratch_args(2, seed=seed, exp_name=probe_name(name, seed), log_dir=str(LOG_DIR), total_timesteps=steps,
                         eval_freq=10**6, **changes)
@@ -67,6 +64,8 @@ def recipe_run_csv(seed: int) -> Path:
 def run(name: str, seed: int) -> None:
     """Run (or resume) the probe on `seed`, then keep its progress.csv in DATA_DIR. The recipe's own probes on a seed
     with a recipe run are read from that run instead."""
+    if name not in PROBES:
+        raise SystemExit(f"--run {name}: no such probe; the probes are {', '.join(PROBES)}")
     if not PROBES[name][1] and recipe_run_csv(seed).is_file():
         raise SystemExit(f"--run {name} --seed {seed}: the recipe's run on seed {seed} ({recipe_run_csv(seed)}) holds "
                          "this probe's steps; --report reads them from there")
@@ -93,25 +92,25 @@ def probe_csvs(data_dir: Path = DATA_DIR, campaign_dir: Path = CAMPAIGN_DIR) -> 
     copies in `data_dir`, and the recipe's own probes from the recipe's runs in `campaign_dir`."""
     found = []
     for name, (_, changes, _) in PROBES.items():
-        seeds = {int(p.stem.rsplit("_s", 1)[1]): p for p in data_dir.glob(f"{name}_s*.csv")
-                 if p.stem.rsplit("_s", 1)[1].isdigit()}
-        if not changes:
-            seeds.update({int(p.parent.name.rsplit("_s", 1)[1]): p for p in campaign_dir.glob("scratch_s*/progress.csv")
-                          if p.parent.name.rsplit("_s", 1)[1].isdigit()})
+        seeds = {int(m[1]): p for p in data_dir.glob("*.csv")
+                 if (m := re.fullmatch(rf"{re.escape(name)}_s(\d+)", p.stem))}
+        if not changes:  # the recipe's own runs hold its own probes
+            seeds.update({int(m[1]): p / "progress.csv" for p in campaign_dir.glob("scratch_s*")
+                          if (m := re.fullmatch(r"scratch_s(\d+)", p.name)) and (p / "progress.csv").is_file()})
         found += [(name, seed, seeds[seed]) for seed in sorted(seeds)]
     return found
 
 
 def table(data_dir: Path = DATA_DIR, campaign_dir: Path = CAMPAIGN_DIR) -> str:
     """A row per probe and seed run so far: when each task type's near-goal start radius reached the whole path, how
-    far the reach-start radius of its least-widened goal slot had come at the probe's end, and over the probe's last
+    far each goal slot's reach-start radius had come at the probe's end, and over the probe's last
     100,000 env steps its training episodes from ordinary resets picked and placed per task type, and those from
     near-goal starts placed. A probe still running shows where it is."""
     lines = ["Command: `python -m experiments.recipe_probes --report` (each probe: the recipe from nothing on a seed, "
              "with the changes named, for its env steps; from docs/data/recipe_probes/, and the recipe's own probes "
              "from the first env steps of its runs, campaign/scratch_s<seed>/progress.csv).", "",
              "| probe | seed | env steps | near-goal radius 1.0 at (env steps): ceiling / window / flooring | "
-             "reach-start radius at the end, least-widened slot: ceiling / window / flooring | last 100,000 steps, "
+             "reach-start radius at the end, per goal slot: ceiling / window / flooring | last 100,000 steps, "
              "ordinary resets picked: ceiling / window / flooring % | placed % | near-goal starts placed % |",
              "|---|---|---|---|---|---|---|---|"]
     for name, seed, path in probe_csvs(data_dir, campaign_dir):
@@ -127,14 +126,14 @@ def table(data_dir: Path = DATA_DIR, campaign_dir: Path = CAMPAIGN_DIR) -> str:
             x = csv_column(late, key)
             return f"{100 * np.nanmean(x):.1f}" if np.isfinite(x).any() else "-"
 
-        def least_reach_radius(kind: str) -> str:
+        def reach_radii(kind: str) -> str:
             radii = [rows[-1].get(f"reach_start_radius_{kind}{s}", "") for s in range(GOAL_SLOTS)]
-            return "-" if "" in radii or None in radii else f"{min(float(r) for r in radii):.1f}"
+            return "-" if "" in radii or None in radii else ", ".join(f"{float(r):.1f}" for r in radii)
 
         reached = [first_step(rows, f"near_goal_radius_{k}", 1.0) for k in PAPER_KINDS]
         lines.append(f"| {name}: {what} | {seed} | {done:,} | "
                      + " / ".join("-" if s is None else f"{s:,}" for s in reached) + " | "
-                     + " / ".join(least_reach_radius(k) for k in PAPER_KINDS) + " | "
+                     + " / ".join(reach_radii(k) for k in PAPER_KINDS) + " | "
                      + " / ".join(pct(f"ordinary_pick_{k}") for k in PAPER_KINDS) + " | "
                      + " / ".join(pct(f"ordinary_place_{k}") for k in PAPER_KINDS)
                      + f" | {pct('near_goal_place_success')} |")
@@ -153,8 +152,6 @@ class Args:
 
 def main(args: Args) -> None:
     if args.run is not None:
-        if args.run not in PROBES:
-            raise SystemExit(f"--run {args.run}: no such probe; the probes are {', '.join(PROBES)}")
         run(args.run, args.seed)
     if args.report:
         body = table()

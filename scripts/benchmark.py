@@ -87,8 +87,9 @@ class Args:
     rgb_steps: int = 200
     """env steps per rgb-camera measurement (one env; 0: skip it)."""
     trainings: tuple[str, ...] = tuple(f"{steps}-{curiosity}" for steps, curiosity in TRAINING)
-    """the PPO trainings measured against the simulation alone, each STEPS-CURIOSITY of TRAINING; with `-cuda` after
-    it (free-recipe-cuda), the same with the learner on the GPU (its rollouts' forward passes and its update)."""
+    """the PPO trainings measured against the simulation alone, each STEPS-CURIOSITY of TRAINING (free-none, free-icm,
+    held-none, held-icm, free-recipe); with `-cuda` after it (free-recipe-cuda), the same with the learner on the GPU
+    (its rollouts' forward passes and its update)."""
     cpu: bool = True
     """run the CPU sections."""
     gpu: bool = True
@@ -115,6 +116,8 @@ def trainings(args: Args) -> list[tuple[str, str, str]]:
     allowed = {f"{steps}-{curiosity}{suffix}": (steps, curiosity, device) for steps, curiosity in TRAINING
                for suffix, device in (("", "cpu"), ("-cuda", "cuda"))}
     unknown = [t for t in args.trainings if t not in allowed]
+    if not args.trainings or len(set(args.trainings)) < len(args.trainings):
+        raise SystemExit(f"--trainings {' '.join(args.trainings)}: give one or more, each once")
     if unknown:
         raise SystemExit(f"--trainings: unknown {', '.join(unknown)}; allowed: "
                          f"{', '.join(t for t in allowed if not t.endswith('-cuda'))}, each also with -cuda")
@@ -124,6 +127,7 @@ def trainings(args: Args) -> list[tuple[str, str, str]]:
 
 
 def main(args: Args) -> None:
+    trainings(args)  # a wrong --trainings stops here, not after minutes of measurements
     if args.cpu:
         body = cpu_sections(args)
         print(body)
@@ -146,7 +150,7 @@ def command(args: Args) -> str:
     out = []
     for name, default in vars(Args()).items():
         value = getattr(args, name)
-        if value != default and name not in ("write", "out", "cpu_section"):
+        if value != default and name not in ("write", "out"):
             flag = "--" + name.replace("_", "-")
             if isinstance(value, bool):
                 out.append(flag if value else "--no-" + name.replace("_", "-"))
@@ -259,8 +263,10 @@ def held_training_envs():
 def ppo_steps_per_second(iterations: int, backend: str, num_envs: Optional[int] = None, held: bool = False,
                          curiosity: Optional[str] = None, learner: Optional[str] = None) -> dict:
     """baselines/ppo/ppo.py on GENERAL with its defaults but the paper's sparse reward (and `num_envs` and `curiosity`,
-    when given), or the from-scratch recipe (`curiosity="recipe"`): the median env steps/s of `iterations` iterations (rollout and update; the first, start-up, iteration and the last,
-    whose final evaluation is cut to one step, left out). No checkpoints."""
+    when given), or the from-scratch recipe (`curiosity="recipe"`): the median env steps/s of `iterations` iterations
+    (rollout and update; the first, start-up, iteration and the last, whose final evaluation is cut to one step, left
+    out). The learner on `learner` ("cpu" or "cuda"; None: the GPU with physx_cuda, the CPU with physx_cpu, as the
+    recipe trains). No checkpoints."""
     import csv
 
     from baselines.ppo import ppo
@@ -268,8 +274,7 @@ def ppo_steps_per_second(iterations: int, backend: str, num_envs: Optional[int] 
     from experiments.from_scratch import scratch_args
 
     with tempfile.TemporaryDirectory() as log_dir:
-        # the learner on the GPU with physx_cuda, on the CPU with physx_cpu (as the recipe trains) unless `learner`
-        common = dict(sim_backend=backend, cuda=(learner or ("cuda" if backend == "physx_cuda" else "cpu")) == "cuda",
+        common = dict(sim_backend=backend, cuda=learner == "cuda" if learner else backend == "physx_cuda",
                       num_eval_envs=1, num_eval_steps=1,
                       eval_freq=10**9, save_model=False, log_dir=log_dir, exp_name="benchmark")
         if curiosity == "recipe":
@@ -322,9 +327,9 @@ def cpu_sections(args: Args) -> str:
         *([] if rgb is None else [
             "### Rendering",
             "",
-            f"One env as above, with rgb observations (its cameras rendered every step; render backend "
-            f"\"{default_render_backend()}\": sapien's CUDA device where there is one, else the CPU's Vulkan) against "
-            f"state observations; median of {args.rounds} runs of {args.rgb_steps} steps.",
+            "One env as above, with rgb observations (its cameras rendered every step, "
+            + ("on sapien's CUDA device" if default_render_backend() == "gpu" else "on the CPU's Vulkan")
+            + f") against state observations; median of {args.rounds} runs of {args.rgb_steps} steps.",
             "",
             rgb,
             "",
@@ -412,13 +417,13 @@ def process_table(args: Args) -> tuple[str, str, float]:
     ppo_rows = ["| env processes | env steps | curiosity | learner | PPO training, env steps/s | "
                 "simulating alone, env steps/s | share: training / simulating alone |", "|---|---|---|---|---|---|---|"]
     worker_rss = 0.0
+    measured = trainings(args)
     for n in args.workers:
         ref = CPUVectorEnv(REFERENCE, n, dict(CPU_KWARGS, reward_mode="sparse"))
         ours = CPUVectorEnv(GENERAL, n, dict(CPU_KWARGS, reward_mode="sparse"), wrappers=[HoldElement])
         apart = CPUVectorEnv(GENERAL, n, dict(CPU_KWARGS, reward_mode="sparse"), first_env_in_process=False)
         for envs in (ref, ours, apart):  # warm-up
             vector_steps_per_second(envs, 20, seed=0)
-        measured = trainings(args)
         m = {k: [] for k in ("ref", "free", "held", "apart", *measured)}
         for r in tqdm(range(args.rounds), desc=f"{n} env processes", unit="round"):
             m["ref"].append(vector_steps_per_second(ref, args.vector_steps, seed=r))

@@ -19,8 +19,8 @@ def test_each_probe_is_the_recipe_with_its_changes_alone_on_its_seed():
         assert differ == {"exp_name", "log_dir", "total_timesteps", "eval_freq", "seed"} | set(changes), (name, differ)
         assert args["total_timesteps"] == steps and args["seed"] == 3 and args["exp_name"] == f"{name}_s3"
     assert rp.PROBES["recipe"][1] == {}, "the recipe's own probe"
-    with pytest.raises(SystemExit, match="without_reach_starts"):
-        rp.probe_args("no_such_probe")
+    with pytest.raises(SystemExit, match="the probes are without_reach_starts"):
+        rp.run("no_such_probe", 1)
 
 
 def test_the_recipes_own_probe_on_a_seed_with_a_recipe_run_is_not_run_again(tmp_path, monkeypatch):
@@ -53,9 +53,15 @@ def test_the_table_rows_each_probe_and_seed_with_what_its_csv_says(tmp_path):
                             for s in range(3)}))
     write_csv(data / "without_reach_starts_s1.csv", rows)
     write_csv(campaign / "scratch_s2" / "progress.csv", rows)  # the recipe's run on seed 2: its own probes
+    write_csv(data / "recipe_s2.csv", rows[:10])  # a copy of a probe the recipe's run holds: the run wins
+    write_csv(data / "recipe_1m_s3.csv", rows[:50])  # a probe whose name another's begins: only its own rows
     body = rp.table(data, campaign)
-    assert ("| 1 | 300,000 | 200,000 / - / 2,000 | 0.1 / 0.1 / 0.1 | 20.0 / - / 50.0 | 0.0 / - / 10.0 | 50.0 |"
+    radii = "0.1, 0.2, 0.3 / 0.1, 0.2, 0.3 / 0.1, 0.2, 0.3"
+    assert (f"| 1 | 300,000 | 200,000 / - / 2,000 | {radii} | 20.0 / - / 50.0 | 0.0 / - / 10.0 | 50.0 |"
             in body.split("without_reach_starts:")[1].splitlines()[0])
-    recipe_rows = [line for line in body.splitlines() if line.startswith("| recipe")]
-    assert [line.split(" | ")[1:3] for line in recipe_rows] == [["2", "300,000"], ["2", "400,000"]]
-    assert "| 2 | 400,000 | 200,000 / - / 2,000 | 0.1 / 0.1 / 0.1 | 100.0 / - / 50.0 |" in recipe_rows[1]
+    rows_of = {}
+    for line in body.splitlines()[4:]:
+        rows_of.setdefault(line.split(":")[0].lstrip("| "), []).append(line.split(" | ")[1:3])
+    assert rows_of == {"without_reach_starts": [["1", "300,000"]], "recipe": [["2", "300,000"]],
+                       "recipe_1m": [["2", "400,000"], ["3", "100,000"]]}
+    assert f"| 2 | 400,000 | 200,000 / - / 2,000 | {radii} | 100.0 / - / 50.0 |" in body
