@@ -42,6 +42,13 @@ PROBES = {
                "down to the element, each goal slot's part widened by 0.1 once 60% of its last 20 such episodes "
                "grasped from their side", {}, 300_000),
     "recipe_1m": ("the recipe, to 1M env steps", {}, 1_000_000),
+    # seed 2's ceiling policy turned away from the table with its wrist's mean before tanh past its flat end, where
+    # no advantage moves it (docs/experiments/from_scratch.md): two changes that could keep the reach learnable
+    "saturation_penalty": ("the recipe with a penalty on the policy's mean before tanh beyond +-2 on every joint "
+                           "(`--mean-saturation-coef 0.01`), to 1M env steps", dict(mean_saturation_coef=0.01),
+                           1_000_000),
+    "fewer_near_goal": ("the recipe with 60% near-goal starts instead of 80%: twice the reach starts and ordinary "
+                        "resets, to 1M env steps", dict(near_goal_share=0.6), 1_000_000),
 }
 """name: (what it is, its changes to the recipe, its env steps)."""
 
