@@ -54,6 +54,7 @@ from baselines.ppo import evaluation, ppo
 from baselines.ppo.args import command_line
 from baselines.ppo.checkpoints import load_checkpoint
 from baselines.ppo.evaluation import PAPER_TABLE_II, failures, kinds, pct
+from baselines.ppo.start_states import GOAL_SLOTS
 from experiments.campaign import (CAMPAIGN_DIR, SHIPPED_DIR, Run, checkpoint_of, describe, policy_only, ship,
                                  training_wall_s)
 from experiments.expert_modes import placed_per_slot
@@ -323,6 +324,21 @@ def rule_table() -> list[str]:
     return lines
 
 
+def reach_radius(rows: list[dict], kind: str) -> np.ndarray:
+    """The mean of the task type's goal slots' reach-start radii at each row of a progress.csv (NaN where not logged)."""
+    return np.mean([csv_column(rows, f"reach_start_radius_{kind}{s}") for s in range(GOAL_SLOTS)], 0)
+
+
+def reach_radii_now(rows: list[dict]) -> str:
+    """Each goal slot's reach-start radius at the last row, per task type: "0.2, 1.0, 0.3 / ... / ..." ("-" if not
+    logged)."""
+    def of(kind: str) -> str:
+        radii = [rows[-1].get(f"reach_start_radius_{kind}{s}") for s in range(GOAL_SLOTS)]
+        return "-" if any(r in ("", None) for r in radii) else ", ".join(f"{float(r):.1f}" for r in radii)
+
+    return " / ".join(of(kind) for kind in PAPER_KINDS)
+
+
 def seeds_report(results: Path = Path("docs/RESULTS.md"), log_dir: Path = CAMPAIGN_DIR) -> str:
     """The section `from-scratch-seeds` of docs/RESULTS.md: where the recipe's run from nothing stands on each seed
     (its progress.csv in `log_dir`/scratch_s<seed>/), a row per seed, and their curves side by side."""
@@ -333,9 +349,10 @@ def seeds_report(results: Path = Path("docs/RESULTS.md"), log_dir: Path = CAMPAI
 
     lines = [f"Command: `{COMMAND} --report` (from campaign/scratch_s<seed>/progress.csv; the recipe: `scratch_args` in "
              "experiments/from_scratch.py, unchanged from step 0). Demonstrations: none.", "",
-             "| seed | env steps done / budget | training wall time | start radius now: ceiling / window / flooring | "
-             "training episodes of the last 200,000 steps placed, ordinary resets: ceiling / window / flooring % | "
-             "placed, near-goal starts % |", "|---|---|---|---|---|---|"]
+             "| seed | env steps done / budget | training wall time | near-goal start radius now: ceiling / window / "
+             "flooring | reach-start radius now, per goal slot: ceiling / window / flooring | training episodes of the "
+             "last 200,000 steps placed, ordinary resets: ceiling / window / flooring % | placed, near-goal starts % |",
+             "|---|---|---|---|---|---|---|"]
     fig, axes = plt.subplots(1, len(SEEDS), figsize=(10, 4.6), sharey=True, squeeze=False)
     for ax, seed in zip(axes[0], SEEDS):
         run = seed_run(seed)
@@ -343,16 +360,16 @@ def seeds_report(results: Path = Path("docs/RESULTS.md"), log_dir: Path = CAMPAI
         ax.set_title(f"seed {seed}")
         ax.set_xlabel("env steps (millions)")
         if not progress.is_file():
-            lines.append(f"| {seed} | not started: `{run.command}` | | | | |")
+            lines.append(f"| {seed} | not started: `{run.command}` | | | | | |")
             continue
         rows, cells = standing(run, progress)
-        lines.append(f"| {seed} | " + " | ".join(cells[:5]) + " |")
+        lines.append(f"| {seed} | " + " | ".join([*cells[:3], reach_radii_now(rows), *cells[3:5]]) + " |")
         steps = csv_column(rows, "global_step") / 1e6
         for kind, color in zip(PAPER_KINDS, ("tab:blue", "tab:orange", "tab:green")):
             ax.plot(steps, 100 * moving_mean(csv_column(rows, f"ordinary_place_{kind}"), WINDOW), color=color,
                     label=f"placed, ordinary resets: {kind}")
-            ax.plot(steps, 100 * csv_column(rows, f"near_goal_radius_{kind}"), color=color, lw=0.8, ls=":",
-                    label=f"start radius x 100: {kind}")
+            ax.plot(steps, 100 * reach_radius(rows, kind), color=color, lw=0.8, ls=":",
+                    label=f"reach-start radius x 100: {kind}")
         screened = seed_screening(seed)
         for i, (kind, color) in enumerate(zip(PAPER_KINDS, ("tab:blue", "tab:orange", "tab:green"))):
             ax.scatter([s / 1e6 for s in screened], [100 * v[list(PAPER_TABLE_II)[i]] for v in screened.values()], s=9,
@@ -373,7 +390,8 @@ def seeds_report(results: Path = Path("docs/RESULTS.md"), log_dir: Path = CAMPAI
     plt.close(fig)
     lines += ["", *seed_evaluations_table(), "", *rule_table(), "", f"![the recipe from nothing, per seed]({Path(*SEEDS_CURVE.parts[1:])})", "",
               f"*Made by `{COMMAND} --report`: each seed's training episodes placed from ordinary resets per task (solid), "
-              f"its near-goal start radius per task (dotted, x 100), each snapshot placed on {VALIDATION_EPISODES} "
+              f"its reach-start radius per task, the mean of its goal slots' (dotted, x 100: how far out the reach and "
+              f"grasp are trained from), each snapshot placed on {VALIDATION_EPISODES} "
               "validation episodes per task (dots) and the snapshot the rule chose (dashed).*"]
     body = "\n".join(lines)
     update_section(results, "from-scratch-seeds", body, "Results")

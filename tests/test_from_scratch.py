@@ -197,11 +197,16 @@ def test_the_seeds_report_has_a_row_per_seed_and_says_how_a_seed_not_started_sta
         for i in range(1, 151):
             w.writerow(dict(global_step=2000 * i, iteration=i, stage="cp4", episodes=10, sps=500, near_goal_place_success=0.5,
                             near_goal_radius_ceiling=0.3, near_goal_radius_window=0.6, near_goal_radius_flooring=1.0,
-                            ordinary_place_ceiling=0.0, ordinary_place_window=0.1, ordinary_place_flooring=""))
+                            ordinary_place_ceiling=0.0, ordinary_place_window=0.1, ordinary_place_flooring="",
+                            **{f"reach_start_radius_{k}{s}": 0.1 * (s + 1) for k in ("ceiling", "window", "flooring")
+                               for s in range(3)}))
     monkeypatch.setattr(fs, "SEEDS_CURVE", tmp_path / "images" / "seeds.png")
     results = tmp_path / "RESULTS.md"
     body = fs.seeds_report(results, log_dir=tmp_path / "campaign")
-    assert "| 1 | 300,000 / 10,000,000 | 0.2 h | 0.3 / 0.6 / 1.0 | 0.0 / 10.0 / - | 50.0 |" in body
+    assert ("| 1 | 300,000 / 10,000,000 | 0.2 h | 0.3 / 0.6 / 1.0 | 0.1, 0.2, 0.3 / 0.1, 0.2, 0.3 / 0.1, 0.2, 0.3 | "
+            "0.0 / 10.0 / - | 50.0 |") in body
+    with open(run_dir / "progress.csv", newline="") as f:
+        assert fs.reach_radius(list(csv.DictReader(f)), "window")[-1] == pytest.approx(0.2)
     assert "| 2 | not started: `python -m experiments.from_scratch --seed 2` |" in body
     assert (tmp_path / "images" / "seeds.png").stat().st_size > 0
     assert "<!-- begin from-scratch-seeds (generated) -->" in results.read_text()
