@@ -27,9 +27,8 @@ import tyro
 
 from baselines.ppo import ppo
 from baselines.ppo.checkpoints import load_checkpoint
-from baselines.ppo.start_states import GOAL_SLOTS
 from experiments.campaign import CAMPAIGN_DIR
-from experiments.from_scratch import PAGE, csv_column, scratch_args
+from experiments.from_scratch import PAGE, csv_column, reach_radii_now, scratch_args
 from ms_construction.parameters import PAPER_KINDS
 from ms_construction.reporting import update_section
 
@@ -133,14 +132,10 @@ def table(data_dir: Path = DATA_DIR, campaign_dir: Path = CAMPAIGN_DIR) -> str:
             x = csv_column(late, key)
             return f"{100 * np.nanmean(x):.1f}" if np.isfinite(x).any() else "-"
 
-        def reach_radii(kind: str) -> str:
-            radii = [rows[-1].get(f"reach_start_radius_{kind}{s}", "") for s in range(GOAL_SLOTS)]
-            return "-" if "" in radii or None in radii else ", ".join(f"{float(r):.1f}" for r in radii)
-
         reached = [first_step(rows, f"near_goal_radius_{k}", 1.0) for k in PAPER_KINDS]
         lines.append(f"| {name}: {what} | {seed} | {done:,} | "
                      + " / ".join("-" if s is None else f"{s:,}" for s in reached) + " | "
-                     + " / ".join(reach_radii(k) for k in PAPER_KINDS) + " | "
+                     + reach_radii_now(rows) + " | "
                      + " / ".join(pct(f"ordinary_pick_{k}") for k in PAPER_KINDS) + " | "
                      + " / ".join(pct(f"ordinary_place_{k}") for k in PAPER_KINDS)
                      + f" | {pct('near_goal_place_success')} |")
