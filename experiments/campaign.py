@@ -80,16 +80,16 @@ def training_wall_s(progress_csv: Path, samples_per_iteration: int, until_step: 
                    if row["sps"] and (until_step is None or int(row["global_step"]) <= until_step))
 
 
-def ship(run: Run, before_the_end: bool = False, snapshot: Optional[Path] = None, chosen: Optional[str] = None) -> Path:
+def ship(run: Run, snapshot: Optional[Path] = None, chosen: Optional[str] = None) -> Path:
     """The final policy of a run that has reached the end of its plan to `run.shipped`, with its Args and
     its campaign record (method, env steps, stages, wall time, hardware), for scripts/evaluate.py; the
     optimizers and random states stay in the run's own checkpoint in campaign/, which resumes it. With
-    `before_the_end`, the policy where the run stands now (its record says at which step of its plan); with
-    `snapshot`, that earlier checkpoint of the run instead, the record saying how it was `chosen`."""
+    `snapshot`, that earlier checkpoint of the run instead (its record says at which step of the plan), the record
+    saying how it was `chosen`."""
     path = snapshot or checkpoint_of(run)
     ckpt = load_checkpoint(path)
     a, progress = ckpt["args"], ckpt["progress"]
-    if progress["global_step"] < run.args.total_timesteps and not before_the_end and snapshot is None:
+    if progress["global_step"] < run.args.total_timesteps and snapshot is None:
         raise SystemExit(f"{run.name}: at step {progress['global_step']:,} of {run.args.total_timesteps:,}; "
                          f"ship it when it has run to the end ({run.command})")
     wall = training_wall_s(checkpoint_of(run).with_name("progress.csv"), a["num_envs"] * a["num_steps"],

@@ -42,7 +42,7 @@ from experiments import from_scratch
 from experiments.campaign import Run, checkpoint_of, describe
 from experiments.from_scratch import SNAPSHOT_EVERY, VALIDATION_EPISODES, csv_column, moving_mean, scratch_args, train
 from experiments.refine import VALIDATION_SEED, validate
-from ms_construction.curriculum import FINAL_STAGE, STAGE_NAMES
+from ms_construction.curriculum import STAGE_NAMES
 from ms_construction.envs import PAPER_TASK_ENV_IDS
 from ms_construction.reporting import update_section
 

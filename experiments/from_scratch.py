@@ -8,16 +8,16 @@
                                                             # and docs/data/from_scratch/)
     python -m experiments.from_scratch --seed 1 --evaluate  # the paper's protocol on that seed's latest snapshot, or
                                                             # --at-step N
-    python -m experiments.from_scratch --report             # the campaign's section of docs/RESULTS.md and its curve
+    python -m experiments.from_scratch --report             # the seeds' and the shipped agent's sections of
+                                                            # docs/RESULTS.md, and the seeds' curves
     python -m experiments.from_scratch --ship-seeds         # ship the better seed's chosen snapshot once both have run
-    python -m experiments.from_scratch --ship-best          # ship the first campaign's snapshot best on validation
 
 The recipe (`scratch_args`) runs unchanged from step 0 to its budget, one PPO run (baselines/ppo/ppo.py) on
-ConstructionPickPlace-v1 per seed, in campaign/scratch_s<seed>/ (resumed from its checkpoint there). The campaign
-that reached the target first (campaign/scratch_general_agent/, shipped as
-assets/checkpoints/scratch_general_agent.pt) changed its recipe seven times on the way (STARTS; its history is
-docs/experiments/from_scratch.md); the recipe is where it ended, with the task's one dense reward and without its
-sampling weights on one task type and one opening. What each part is for:
+ConstructionPickPlace-v1 per seed, in campaign/scratch_s<seed>/ (resumed from its checkpoint there); the better seed's
+chosen snapshot ships as assets/checkpoints/scratch_general_agent.pt. The first campaign from reward alone changed its
+recipe seven times on the way to its target (docs/experiments/from_scratch.md is its history); the recipe is where it
+ended, with the task's one dense reward and without its sampling weights on one task type and one opening. What each
+part is for:
 
 | setting | value | why |
 |---|---|---|
@@ -58,7 +58,7 @@ from baselines.ppo.start_states import GOAL_SLOTS
 from experiments.campaign import (CAMPAIGN_DIR, SHIPPED_DIR, Run, checkpoint_of, describe, policy_only, ship,
                                  training_wall_s)
 from experiments.expert_modes import placed_per_slot
-from experiments.refine import (CONFIRMATION_SEED, VALIDATION_SEED, best_snapshot, content_tag, ranked_snapshots,
+from experiments.refine import (CONFIRMATION_SEED, VALIDATION_SEED, best_snapshot, ranked_snapshots,
                                validate)
 from ms_construction.parameters import PAPER_KINDS
 from ms_construction.reporting import update_section
@@ -67,22 +67,10 @@ from ms_construction.curriculum import FINAL_STAGE
 BUDGET = 10_000_000
 """env steps of the recipe from nothing, per seed."""
 CAMPAIGN = "scratch_general_agent"
-CAMPAIGN_BUDGET = 20_000_000
-"""the first campaign's run folder in campaign/ and its budget (spent)."""
+"""the shipped agent's name (assets/checkpoints/<CAMPAIGN>.pt)."""
 COMMAND = "python -m experiments.from_scratch"
 PAGE = Path("docs/experiments/from_scratch.md")
-"""the experiment page: the diagnosis and the snapshots' validations are written into it."""
-STARTS = {1_682_000: "fifth start: carry along the start paths, reach in joint space",
-          10_010_000: "observation mended: each reset sets the nominal hold (a8d32d8)",
-          17_250_000: "sixth start: reach toward the path sides, a fifth of the episodes from near-goal starts (probe U)",
-          17_540_000: "seventh start: the window opening at y = +0.85 reached from -pi along a planned via, 80% near-goal "
-                      "starts again (probe W)",
-          17_676_000: "windows sampled twice as often (probe X)",
-          18_062_000: "path offset in the observation (probe Y)",
-          18_742_000: "carry kept to the planned via's path, its window opening drawn three times as often and met as "
-                      "the mirror image of the one at -0.85, held half a turn about the plate's axis (probe AM)"}
-"""env step: the change the campaign went on with there, of the recipe or of the tasks (the fourth start's steps before
-the first; the experiment page says how each came to be)."""
+"""the experiment page: the recipe's probes (experiments/recipe_probes.py) are written into it."""
 
 
 def scratch_args(num_envs: Optional[int] = None, **overrides) -> ppo.Args:
@@ -112,17 +100,8 @@ def seed_run(seed: int, num_envs: Optional[int] = None) -> Run:
                f"{COMMAND} --seed {seed}", None, method=METHOD)
 
 
-def scratch_runs(num_envs: Optional[int] = None, seed: int = 1) -> list[Run]:
-    """The first campaign (its report, its snapshots, the policy it shipped): its folder and budget with the recipe's
-    arguments (its checkpoint keeps the ones it ran with)."""
-    return [Run(CAMPAIGN, scratch_args(num_envs, seed=seed, exp_name=CAMPAIGN, total_timesteps=CAMPAIGN_BUDGET),
-                "the general agent from reward alone: no demonstrations", COMMAND, SHIPPED_DIR / f"{CAMPAIGN}.pt",
-                method=METHOD)]
-
-
 EVAL_JSON = Path("docs/data/paper/scratch_general_agent_eval_50k.json")
 """the shipped agent's evaluation with the paper's protocol (the command `report` prints writes it)."""
-CURVE = Path("docs/images/scratch_curve.png")
 WINDOW = 50
 """iterations in the curve's moving average (100,000 env steps at 2,000 per iteration)."""
 
@@ -139,43 +118,6 @@ def moving_mean(x: np.ndarray, window: int) -> np.ndarray:
         if np.isfinite(part).any():
             out[i] = np.nanmean(part)
     return out
-
-
-def draw_curve(rows: list[dict], out: Path) -> None:
-    """Place success of the training episodes from ordinary resets per task, and of the near-goal starts, against
-    env steps (moving averages over WINDOW iterations; the policy's sampled actions)."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    steps = csv_column(rows, "global_step") / 1e6
-    fig, ax = plt.subplots(figsize=(8, 4.2))
-    for kind, color in zip(PAPER_KINDS, ("tab:blue", "tab:orange", "tab:green")):
-        ax.plot(steps, 100 * moving_mean(csv_column(rows, f"ordinary_place_{kind}"), WINDOW), color=color,
-                label=f"placed, ordinary resets: {kind}")
-    ax.plot(steps, 100 * moving_mean(csv_column(rows, "near_goal_place_success"), WINDOW), color="gray", ls="--",
-            label="placed, near-goal starts (all tasks)")
-    ax2 = ax.twinx()
-    for kind, color in zip(PAPER_KINDS, ("tab:blue", "tab:orange", "tab:green")):
-        ax2.plot(steps, csv_column(rows, f"near_goal_radius_{kind}"), color=color, lw=0.8, ls=":",
-                 label=f"start radius: {kind} (right axis)")
-    for step, what in STARTS.items():
-        ax.axvline(step / 1e6, color="black", lw=0.8, ls="-.")
-        ax.text(step / 1e6, 2, " " + what.split(":")[0], fontsize=7, rotation=90, va="bottom")  # the caption has the rest
-    ax2.set_ylim(0, 1.05)
-    ax2.set_ylabel("near-goal start radius (fraction of the path)")
-    ax.set_xlabel("env steps (millions)")
-    ax.set_ylabel(f"training episodes placed, % (mean of {WINDOW} iterations)")
-    ax.set_ylim(0, 100)
-    ax.set_title("The general agent from reward alone: training curve (cp4)")
-    lines = ax.get_legend_handles_labels()
-    more = ax2.get_legend_handles_labels()
-    ax.legend(lines[0] + more[0], lines[1] + more[1], loc="upper left", fontsize=8)
-    fig.tight_layout()
-    out.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(out, dpi=110)
-    plt.close(fig)
 
 
 def standing(run: Run, progress: Path) -> tuple[list[dict], list[str]]:
@@ -198,30 +140,38 @@ def standing(run: Run, progress: Path) -> tuple[list[dict], list[str]]:
                   pct_of("pick_success")]
 
 
-def report(run: Run, results: Path = Path("docs/RESULTS.md")) -> str:
-    """The section `from-scratch` of docs/RESULTS.md: where the campaign stands, its curve, and (once shipped
-    and evaluated) its Table II row beside the paper's with its failures by kind."""
-    rows, cells = standing(run, Path(run.args.log_dir) / run.args.exp_name / "progress.csv")
-    draw_curve(rows, CURVE)
-    lines = [f"Command: `{COMMAND} --report` (from campaign/{run.args.exp_name}/progress.csv; the recipe: "
-             "experiments/from_scratch.py). Demonstrations: none.", "",
-             "| env steps done / budget | training wall time | start radius now: ceiling / window / flooring | training episodes of the last 200,000 "
-             "steps placed, ordinary resets: ceiling / window / flooring % | placed, near-goal starts % | picked % |",
-             "|---|---|---|---|---|---|", "| " + " | ".join(cells) + " |", "",
-             f"![from-scratch curve]({Path(*CURVE.parts[1:])})", "",
-             f"*Made by `{COMMAND} --report`: the training episodes' place success per task (ordinary resets) and "
-             "from near-goal starts, with the start radius; "
-             + "; ".join(f"from {step:,} steps the {what}" for step, what in STARTS.items())
-             + " ([the experiment](experiments/from_scratch.md)).*", ""]
-    if EVAL_JSON.is_file():
+SHIPPED = SHIPPED_DIR / f"{CAMPAIGN}.pt"
+
+
+def shipped_how(shipped: Path = SHIPPED) -> str:
+    """How the shipped agent learnt, from its record: the recipe's seed and env steps, or (a policy shipped before the
+    recipe ran from nothing) the first campaign's."""
+    if not shipped.is_file():
+        return "not shipped yet"
+    record = load_checkpoint(shipped)["campaign"]["record"]
+    steps = record["env steps"].split(" ")[0]
+    if record.get("chosen", "").startswith("seed "):
+        return (f"PPO on the dense reward, no demonstrations; the recipe unchanged from step 0, "
+                f"{record['chosen'].split(' (')[0]}, {steps} env steps")
+    return f"PPO on the dense reward, no demonstrations; one hand-steered campaign, {steps} env steps"
+
+
+def shipped_report(results: Path = Path("docs/RESULTS.md"), shipped: Path = SHIPPED) -> str:
+    """The section `from-scratch` of docs/RESULTS.md: the shipped agent from reward alone (its record: the seed, the
+    snapshot, the recipe's commit) and its evaluation with the paper's protocol (EVAL_JSON) beside the paper's Table II,
+    with its placements per goal slot and its failures by kind."""
+    if not (shipped.is_file() and EVAL_JSON.is_file()):
+        lines = [f"Not shipped yet: `{COMMAND} --ship-seeds` ships the better seed's chosen snapshot once every seed "
+                 "has run to its end."]
+    else:
         data = json.loads(EVAL_JSON.read_text())
-        shipped = load_checkpoint(run.shipped)["campaign"]["record"] if run.shipped.is_file() else {}
-        lines += [f"The shipped policy ({run.shipped}; {shipped.get('method', '?')}; env steps: {shipped.get('env steps', '?')}"
-                  + (f"; {shipped['chosen']}" if shipped.get("chosen") else "")
-                  + f"), evaluated with the paper's protocol: `{data['command']}`.", "",
-                  "| task | pick % [95% CI] | place % [95% CI] | paper's general agent: pick / place % | placed per goal slot "
-                  "(0, 1, 2) | failures by kind |",
-                  "|---|---|---|---|---|---|"]
+        record = load_checkpoint(shipped)["campaign"]["record"]
+        lines = [f"Command: `{COMMAND} --report`. The shipped policy ({shipped}; {record['method']}; env steps: "
+                 f"{record['env steps']}" + (f"; {record['chosen']}" if record.get("chosen") else "")
+                 + f"), evaluated with the paper's protocol: `{data['command']}`.", "",
+                 "| task | pick % [95% CI] | place % [95% CI] | paper's general agent: pick / place % | placed per goal "
+                 "slot (0, 1, 2) | failures by kind |",
+                 "|---|---|---|---|---|---|"]
         for env_id, r in data["tasks"].items():
             lost = [e for e in r["episode_results"] if not e["placed"]]
             not_picked = sum(not e["picked"] for e in lost)
@@ -231,9 +181,6 @@ def report(run: Run, results: Path = Path("docs/RESULTS.md")) -> str:
             lines.append(f"| {env_id} | {pct(r['pick_success'], r['pick_success_ci95'])} | "
                          f"{pct(r['place_success'], r['place_success_ci95'])} | {paper[0]:.2f} / {paper[1]:.2f} | "
                          f"{placed_per_slot(env_id, r['episode_results'])} | {text} |")
-    else:
-        lines.append(f"Not shipped yet: `{COMMAND} --ship-now` ships the policy where the run stands, then "
-                     f"`python scripts/evaluate.py --checkpoint {run.shipped} --all --steps 50000 --json {EVAL_JSON}`.")
     body = "\n".join(lines)
     update_section(results, "from-scratch", body, "Results")
     return body
@@ -402,8 +349,8 @@ SNAPSHOT_EVERY = 250_000
 (window placements 22% and 8% on the same 50 test seeds at 6,782,000 and 7,168,000 env steps, ceiling panels 2% and
 18%: docs/experiments/from_scratch.md), so the run keeps snapshots and ships the one that validates best."""
 SNAPSHOT_DIR = Path("runs/scratch_snapshots")
-"""where the snapshots are kept (checkpoint_<env steps>.pt, with their validations): not committed, so the candidates
-are those of the sessions on this machine, and the shipped policy."""
+"""a seed's snapshots go to <SNAPSHOT_DIR>_s<seed>/ (checkpoint_<env steps>.pt): not committed; the candidates the
+snapshot rule keeps are (`seed_candidates`)."""
 VALIDATION_EPISODES = 30
 """episodes per task (validation seeds, VALIDATION_SEED on: never the test seeds) that screen each snapshot."""
 CONFIRM_TOP = 3
@@ -414,11 +361,11 @@ CONFIRM_EPISODES = 100
 """episodes per task (CONFIRMATION_SEED on: neither the screening's nor the test seeds) that choose the snapshot."""
 
 
-def train(run: Run, every: int = SNAPSHOT_EVERY, snapshots: Path = SNAPSHOT_DIR, page: Path = PAGE,
+def train(run: Run, snapshots: Path, every: int = SNAPSHOT_EVERY,
           after_snapshot: Optional[Callable[[int, Path], None]] = None) -> None:
-    """Run (or resume) the campaign to its budget in parts of `every` env steps, each part's checkpoint copied to
-    `snapshots` and given to `after_snapshot(env steps, path)` (a seed's run: `snapshot_made`); the first campaign
-    ships the best snapshot at the end (`ship_best`). Ctrl-C stops it with the checkpoint saved (ppo.py)."""
+    """Run (or resume) `run` to its budget in parts of `every` env steps, each part's checkpoint copied to `snapshots`
+    and given to `after_snapshot(env steps, path)` (a seed's run: `snapshot_made`). Ctrl-C stops it with the
+    checkpoint saved (ppo.py)."""
     ckpt = checkpoint_of(run)
     snapshots.mkdir(parents=True, exist_ok=True)
     while (done := load_checkpoint(ckpt)["progress"]["global_step"] if ckpt.is_file() else 0) < run.args.total_timesteps:
@@ -427,64 +374,6 @@ def train(run: Run, every: int = SNAPSHOT_EVERY, snapshots: Path = SNAPSHOT_DIR,
         shutil.copyfile(ckpt, snapshots / f"checkpoint_{part.total_timesteps}.pt")
         if after_snapshot is not None:
             after_snapshot(part.total_timesteps, snapshots / f"checkpoint_{part.total_timesteps}.pt")
-    if run.shipped is not None:
-        ship_best(run, snapshots=snapshots, page=page)
-
-
-def ship_best(run: Run, episodes: int = VALIDATION_EPISODES, snapshots: Path = SNAPSHOT_DIR,
-              page: Path = PAGE) -> Optional[Path]:
-    """Screen every snapshot in `snapshots` and the policy shipped now (`episodes` per task from VALIDATION_SEED),
-    validate the CONFIRM_TOP best of them again on CONFIRM_EPISODES per task from CONFIRMATION_SEED, and ship the
-    one that places most there on its worst task, then on average (`refine.best_snapshot`); the shipped policy
-    stays where it confirms best. Each validation is kept beside the snapshots; all go to the section
-    `snapshot-validations` of `page`. The snapshot shipped, or None."""
-    candidates = {int(p.stem.split("_")[1]): p for p in snapshots.glob("checkpoint_*.pt")}
-    if not candidates:
-        raise SystemExit(f"no snapshots in {snapshots}: `{COMMAND}` keeps one every {SNAPSHOT_EVERY:,} env steps")
-    tags = {step: str(step) for step in candidates}
-    if run.shipped.is_file():
-        candidates[-1], tags[-1] = run.shipped, f"shipped_{content_tag(run.shipped)}"
-    screened = {step: validate(candidates[step], snapshots / f"val{episodes}_{tags[step]}.json", episodes)
-                for step in sorted(candidates, key=lambda k: (k < 0, k))}  # the policy shipped before last
-    top = ranked_snapshots(screened)[:CONFIRM_TOP]
-    confirmed = {step: validate(candidates[step], snapshots / f"val{CONFIRM_EPISODES}_{tags[step]}_confirm.json",
-                                CONFIRM_EPISODES, seed=CONFIRMATION_SEED) for step in top}
-    for step, placed in screened.items():
-        print(f"{'shipped now' if step < 0 else f'{step:,} env steps'}: placed on validation "
-              + ", ".join(f"{k} {v:.2f}" for k, v in placed.items())
-              + ("; confirmed " + ", ".join(f"{k} {v:.2f}" for k, v in confirmed[step].items()) if step in confirmed else ""))
-    best = best_snapshot(confirmed)
-    update_section(page, "snapshot-validations", snapshot_table(screened, confirmed, best, episodes),
-                   "Learning from reward alone: the experiment")
-    if best < 0:
-        print(f"{run.shipped} validates best: it stays")
-        return None
-    steps = [step for step in candidates if step >= 0]
-    chosen = (f"the best of {len(steps)} snapshots ({min(steps):,} to {max(steps):,} env steps"
-              + (", and the policy shipped before" if -1 in candidates else "")
-              + f") on {CONFIRM_EPISODES} fresh validation episodes per task (seeds {CONFIRMATION_SEED:,} on) among the "
-              + f"{len(confirmed)} best on {episodes} (seeds {VALIDATION_SEED:,} on): placed "
-              + ", ".join(f"{k} {v:.2f}" for k, v in confirmed[best].items()))
-    ship(run, snapshot=candidates[best], chosen=chosen)
-    return candidates[best]
-
-
-def snapshot_table(screened: dict, confirmed: dict, best: int, episodes: int) -> str:
-    """`ship_best`'s validations as a table: a row per candidate (env steps; -1 the policy shipped before it)."""
-    tasks = " / ".join(k.removesuffix("-v1") for k in next(iter(screened.values())))
-    lines = [f"Command: `{COMMAND} --ship-best` (the policy's mean: {episodes} validation episodes per task, seeds "
-             f"{VALIDATION_SEED:,} on, then {CONFIRM_EPISODES} more, seeds {CONFIRMATION_SEED:,} on, for the "
-             f"{CONFIRM_TOP} best, which choose; the snapshots kept on the machine that ran it).", "",
-             f"| policy | placed on validation: {tasks} % | worst task % | placed on confirmation: {tasks} % | "
-             "worst task % | shipped |", "|---|---|---|---|---|---|"]
-    for step, placed in screened.items():
-        again = confirmed.get(step)
-        lines.append(f"| {'shipped before' if step < 0 else f'snapshot at {step:,} env steps'} | "
-                     + " / ".join(f"{100 * v:.0f}" for v in placed.values()) + f" | {100 * min(placed.values()):.0f} | "
-                     + ("- | - |" if again is None else " / ".join(f"{100 * v:.0f}" for v in again.values())
-                        + f" | {100 * min(again.values()):.0f} |")
-                     + f" {'yes' if step == best else ''} |")
-    return "\n".join(lines)
 
 
 def seed_validation_json(seed: int, step: int, confirm: bool = False) -> Path:
@@ -583,7 +472,7 @@ def recipe_commit() -> str:
     return next((line for line in log.splitlines() if line and all(c in "0123456789abcdef" for c in line)), "unknown")
 
 
-def ship_seeds(shipped: Path = SHIPPED_DIR / f"{CAMPAIGN}.pt") -> Optional[Path]:
+def ship_seeds(shipped: Path = SHIPPED) -> Optional[Path]:
     """Ship the better seed's chosen snapshot as the general agent learnt from reward alone, once every seed of
     SEEDS has run to its end (its snapshot chosen and evaluated with the paper's protocol). The better seed is the
     one whose choice confirmed best on the validation seeds (most placed on its worst task, then on average); it
@@ -617,26 +506,21 @@ def ship_seeds(shipped: Path = SHIPPED_DIR / f"{CAMPAIGN}.pt") -> Optional[Path]
 @dataclass
 class Args:
     seed: Optional[int] = None
-    """run (or resume) the recipe from nothing on this seed (campaign/scratch_s<seed>/); without it, --report,
-    --ship-now and --ship-best act on the first campaign (campaign/scratch_general_agent/)."""
+    """run (or resume) the recipe from nothing on this seed (campaign/scratch_s<seed>/)."""
     num_envs: Optional[int] = None
     """env processes (default: one per CPU core); a run resumed from a checkpoint keeps its own."""
     dry_run: bool = False
-    """print the plan and where the run stands, and exit."""
-    ship_now: bool = False
-    """ship the campaign's policy where it stands now (its record says at which step of the plan), and exit."""
-    ship_seeds: bool = False
-    """ship the better seed's chosen snapshot (`ship_seeds`) once every seed has run to its end, and exit."""
-    ship_best: bool = False
-    """validate the campaign's snapshots on this machine and the shipped policy, ship the snapshot that places most
-    (if that is not the shipped one), and exit."""
-    report: bool = False
-    """write the campaign's section of docs/RESULTS.md and its curve (docs/images/scratch_curve.png), and exit."""
+    """with --seed: print the plan and where the run stands, and exit."""
     evaluate: bool = False
     """with --seed: evaluate the seed's snapshot with the paper's protocol (`evaluate_seed`) and exit; a run that
-    reaches its budget does this itself on its last snapshot."""
+    reaches its budget does this itself on the snapshot its rule chose."""
     at_step: Optional[int] = None
     """with --evaluate: the snapshot at this many env steps (default: the latest)."""
+    ship_seeds: bool = False
+    """ship the better seed's chosen snapshot (`ship_seeds`) once every seed has run to its end, and exit."""
+    report: bool = False
+    """write the seeds' section of docs/RESULTS.md with their curves (docs/images/scratch_seeds_curve.png) and the
+    shipped agent's section, and exit."""
 
 
 def main(args: Args) -> None:
@@ -649,21 +533,14 @@ def main(args: Args) -> None:
         elif not args.dry_run:
             train(run, snapshots=seed_snapshots(args.seed), after_snapshot=partial(snapshot_made, args.seed))
             print(f"wrote {evaluate_seed(args.seed, choose_snapshot(args.seed))}")  # the paper's protocol on the rule's choice
-        return
-    [run] = scratch_runs(args.num_envs)
-    print(describe(run))
-    if args.report:
-        print(report(run))
-        print(seeds_report())
-    elif args.ship_now:
-        ship(run, before_the_end=True)
-    elif args.ship_best:
-        ship_best(run)
     elif args.ship_seeds:
         ship_seeds()
-    elif not args.dry_run:
-        raise SystemExit("the campaign has spent its budget: give --seed S to run the recipe from nothing, or --report, "
-                         "--ship-now, --ship-best")
+    elif args.report:
+        print(seeds_report())
+        print(shipped_report())
+    else:
+        raise SystemExit("give --seed S to run (or resume) the recipe from nothing on seed S, or --report, or "
+                         "--ship-seeds")
 
 
 if __name__ == "__main__":

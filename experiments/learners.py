@@ -33,7 +33,7 @@ import tyro
 
 from baselines.ppo.args import command_line
 from baselines.sac import sac
-from experiments.campaign import CAMPAIGN_DIR, Run, checkpoint_of, describe, run_or_resume
+from experiments.campaign import CAMPAIGN_DIR, Run, describe, run_or_resume
 from experiments.from_scratch import csv_column, moving_mean, scratch_args, seed_run
 from ms_construction.parameters import PAPER_KINDS
 from ms_construction.reporting import update_section

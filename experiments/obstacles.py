@@ -45,7 +45,7 @@ from ms_construction.reporting import update_section
 
 AGENTS = {
     "general agent (imitation: clone + residual PPO)": "assets/checkpoints/general_agent.pt",
-    "scratch general agent (reward alone, the campaign's)": "assets/checkpoints/scratch_general_agent.pt",
+    "scratch general agent (reward alone, shipped)": "assets/checkpoints/scratch_general_agent.pt",
 }
 SCENES = ("none", "static", "moving")
 RESULTS_PATH = Path("docs/RESULTS.md")

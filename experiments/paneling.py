@@ -46,7 +46,7 @@ from ms_construction.reporting import update_section
 ENV_ID = "PanelInstallation-v1"
 AGENTS = {
     "general agent (imitation: clone + residual PPO)": "assets/checkpoints/general_agent.pt",
-    "scratch general agent (reward alone, the campaign's)": "assets/checkpoints/scratch_general_agent.pt",
+    "scratch general agent (reward alone, shipped)": "assets/checkpoints/scratch_general_agent.pt",
     "paper setting (sparse reward, ICM, Table I stages)": "assets/checkpoints/paper_general_agent.pt",
 }
 

@@ -18,19 +18,17 @@ from ms_construction.reporting import update_section
 
 TASKS = tuple(PAPER_TABLE_II)
 """the paper's three tasks, Table II's rows."""
-AGENTS = (  # label, how it learnt, its evaluation with the paper's protocol
+AGENTS = (  # label, how it learnt (None: from the shipped policy's record), its evaluation with the paper's protocol
     ("imitation general agent (general_agent.pt, shipped)",
      "expert demonstrations, behaviour cloning, residual PPO", Path("docs/data/general_agent_eval_50k.json")),
-    ("reward-only general agent (scratch_general_agent.pt, shipped)",
-     "PPO on the dense reward, no demonstrations; one hand-steered campaign, 19.4M env steps",
-     Path("docs/data/paper/scratch_general_agent_eval_50k.json")),
+    ("reward-only general agent (scratch_general_agent.pt, shipped)", None, from_scratch.EVAL_JSON),
     ("the paper's setting (paper_general_agent.pt)",
      "PPO + ICM on the sparse reward, Table I's stages, 8M env steps", Path("docs/data/paper/paper_general_agent_eval_50k.json")),
 )
 GENERALIZATION = (  # label, the agent's label in the obstacle and paneling tables
     ("planning expert", "planning expert"),
     ("imitation general agent", "general agent (imitation: clone + residual PPO)"),
-    ("reward-only general agent", "scratch general agent (reward alone, the campaign's)"),
+    ("reward-only general agent", "scratch general agent (reward alone, shipped)"),
     ("the paper's setting", "paper setting (sparse reward, ICM, Table I stages)"),
 )
 OBSTACLES = Path("docs/data/obstacles/summary.json")
@@ -56,6 +54,7 @@ def paper_tasks_table() -> list[str]:
                  + f" | {EXPERT_RESULTS} |")
     for label, how, path in AGENTS:
         data = _read(path)
+        how = how or from_scratch.shipped_how()
         lines.append(f"| {label} | {how} | " + " | ".join(_placed(data and data["tasks"])) + f" | {path} |")
     latest: dict[int, tuple[int, Path]] = {}
     for path in from_scratch.SEED_EVAL_DIR.glob("scratch_s*_eval50k_*.json"):
@@ -101,7 +100,7 @@ def summary() -> str:
         "Generalization, zero-shot: agents trained on the paper's three tasks on the site as built, met with what they "
         "never saw (the expert plans for each episode as it comes; cp4; seeds from 1,000,000):", "",
         *generalization_table(), "",
-        f"*Made by `python -m experiments.summary` from the files named; each section below gives the command that "
+        "*Made by `python -m experiments.summary` from the files named; each section below gives the command that "
         "wrote them, its intervals and its failures.*"])
 
 

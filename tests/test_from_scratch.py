@@ -1,11 +1,12 @@
 """The from-scratch pipeline (experiments/from_scratch.py): its recipe is a valid ppo.py run with no demonstrations,
-it ships with a record that says so, and its report writes the curve and the section from the campaign's CSV."""
+it ships with a record that says so, and its reports write the seeds' curves and sections from their CSVs."""
 
 import csv
 import dataclasses
 import functools
 import json
 import shutil
+from pathlib import Path
 
 import pytest
 import torch
@@ -31,8 +32,7 @@ def test_the_recipe_learns_from_reward_alone_on_the_tasks_default_reward_from_no
     assert a.warm.demos == () and a.warm.bc_coef == 0 and a.checkpoint is None and a.warm.residual_of is None and a.starts.start_states is None
     assert a.num_envs * a.num_steps == 2000
     assert "demonstrations: none" in run.method
-    [campaign_run] = fs.scratch_runs(num_envs=2)
-    assert campaign_run.shipped.name == "scratch_general_agent.pt" and campaign_run.args.total_timesteps == fs.CAMPAIGN_BUDGET
+    assert fs.SHIPPED.name == "scratch_general_agent.pt"
     # written down as one ppo.py command, it is the same run
     assert tyro.cli(ppo.Args, args=command_line(a)) == a
 
@@ -84,52 +84,49 @@ def test_the_recipe_changes_the_policy_and_a_stopped_run_resumes_in_the_uninterr
     assert resumed.global_step == u.global_step == 320 and resumed.iteration == u.iteration
 
 
-def test_a_tiny_run_ships_before_its_end_with_a_record_that_says_where_it_stands(tmp_path):
+def test_a_run_ships_at_its_end_or_a_chosen_snapshot_with_a_record_that_says_where_it_stands(tmp_path):
     small = dict(num_envs=2, num_steps=20, num_minibatches=2, update_epochs=1, num_eval_envs=1, eval_freq=100,
                  checkpoint_freq=1, env_id="Flooring-v1", task_weights=None, log_dir=str(tmp_path), exp_name="tiny", total_timesteps=80)
-    [run] = fs.scratch_runs(num_envs=2)
-    run = dataclasses.replace(run, args=fs.scratch_args(**small), shipped=tmp_path / "scratch.pt")
+    run = dataclasses.replace(fs.seed_run(1), args=fs.scratch_args(**small), shipped=tmp_path / "scratch.pt")
     campaign.run_or_resume(dataclasses.replace(run, shipped=None))
     longer = dataclasses.replace(run, args=run.args.replace(total_timesteps=160))
     with pytest.raises(SystemExit, match="at step 80 of 160"):
         campaign.ship(longer)
-    campaign.ship(longer, before_the_end=True)
+    campaign.ship(longer, snapshot=tmp_path / "tiny" / "checkpoint.pt", chosen="the test's choice")
     record = torch.load(run.shipped, weights_only=False)["campaign"]["record"]
     assert record["env steps"] == "80 (of the 160 planned)" and "demonstrations: none" in record["method"]
+    assert record["chosen"] == "the test's choice"
 
 
-def test_the_report_draws_the_curve_and_writes_the_section(tmp_path, monkeypatch):
-    run_dir = tmp_path / "campaign" / "scratch_general_agent"
-    run_dir.mkdir(parents=True)
-    with open(run_dir / "progress.csv", "w", newline="") as f:
-        w = csv.DictWriter(f, fieldnames=CSV_FIELDS)
-        w.writeheader()
-        for i in range(1, 301):
-            w.writerow(dict(global_step=2000 * i, iteration=i, stage="cp4", episodes=10, pick_success=0.8, sps=500,
-                            place_success=0.3, near_goal_radius=0.5, near_goal_place_success=0.7, near_goal_radius_ceiling=0.2,
-                            near_goal_radius_window=0.4, near_goal_radius_flooring=min(1.0, 0.1 * (1 + i // 30)),
-                            ordinary_place_ceiling=0.0, ordinary_place_window="" if i % 2 else 0.5,
-                            ordinary_place_flooring=0.25 if i > 200 else 0.0))
-    monkeypatch.setattr(fs, "CURVE", tmp_path / "images" / "scratch_curve.png")
-    monkeypatch.setattr(fs, "EVAL_JSON", tmp_path / "none.json")
-    [run] = fs.scratch_runs(num_envs=2)
-    run = dataclasses.replace(run, args=run.args.replace(log_dir=str(tmp_path / "campaign")))
+def test_the_shipped_agent_s_section_is_its_evaluation_beside_the_paper_s_or_says_how_it_ships(tmp_path, monkeypatch):
     results = tmp_path / "RESULTS.md"
-    body = fs.report(run, results)
-    assert "| 600,000 / 20,000,000 | 0.3 h | 0.2 / 0.4 / 1.0 | 0.0 / 50.0 / 25.0 | 70.0 | 80.0 |" in body
-    assert (tmp_path / "images" / "scratch_curve.png").stat().st_size > 0
-    assert "<!-- begin from-scratch (generated) -->" in results.read_text() and "Not shipped yet" in body
+    monkeypatch.setattr(fs, "EVAL_JSON", tmp_path / "none.json")
+    body = fs.shipped_report(results, shipped=tmp_path / "none.pt")
+    assert body.startswith("Not shipped yet: `python -m experiments.from_scratch --ship-seeds`")
+    assert "<!-- begin from-scratch (generated) -->" in results.read_text()
+    shipped = tmp_path / "scratch.pt"
+    campaign.ship_checkpoint(Path(__file__).resolve().parents[1] / fs.SHIPPED, shipped, "cmd", dict(method="PPO; demonstrations: none", **{"env steps": "40"},
+                                                               chosen="seed 1 of 2 (the better on validation)"))
+    episodes = [dict(placed=True, picked=True, goal_slot=0)] * 3 + [dict(placed=False, picked=False, goal_slot=1)]
+    fs.EVAL_JSON.write_text(json.dumps(dict(command="python scripts/evaluate.py ...", tasks={
+        env: dict(pick_success=0.75, pick_success_ci95=[0.3, 0.95], place_success=0.75, place_success_ci95=[0.3, 0.95],
+                  episode_results=episodes) for env in fs.PAPER_TABLE_II})))
+    body = fs.shipped_report(results, shipped=shipped)
+    assert f"The shipped policy ({shipped}; PPO; demonstrations: none; env steps: 40; seed 1 of 2 (the better on validation))" in body
+    row = next(line for line in body.splitlines() if line.startswith("| CeilingInstallation-v1 |"))
+    assert "| 84.55 / 68.04 |" in row and row.endswith("| 1 never picked |")
+    assert fs.shipped_how(shipped) == ("PPO on the dense reward, no demonstrations; the recipe unchanged from step 0, "
+                                       "seed 1 of 2, 40 env steps")
+    assert fs.shipped_how(tmp_path / "none.pt") == "not shipped yet"
 
 
 def test_the_shipped_agent_from_reward_alone_has_no_demonstrations_in_it_and_plays(tmp_path):
     """assets/checkpoints/scratch_general_agent.pt: its record says how far its campaign got and that it saw no
     demonstrations, its args hold no warm start, residual base or expert states, and scripts/evaluate.py runs it."""
-    from pathlib import Path
-
     from baselines.ppo import evaluation
 
     path = Path(__file__).resolve().parents[1] / "assets/checkpoints/scratch_general_agent.pt"
-    assert path.is_file(), f"{path} is missing (`python -m experiments.from_scratch --ship-now` ships it)"
+    assert path.is_file(), f"{path} is missing (`python -m experiments.from_scratch --ship-seeds` ships it)"
     ckpt = torch.load(path, map_location="cpu", weights_only=False)
     record = ckpt["campaign"]["record"]
     assert "demonstrations: none" in record["method"] and "wall time" in record and "hardware" in record
@@ -139,53 +136,6 @@ def test_the_shipped_agent_from_reward_alone_has_no_demonstrations_in_it_and_pla
     out = tmp_path / "eval.json"
     evaluation.main(evaluation.Args(checkpoint=path, env_id="Flooring-v1", episodes=1, workers=1, json=out))
     assert json.loads(out.read_text())["episodes"] == 1
-
-
-def test_the_campaign_keeps_snapshots_and_ships_the_one_that_validates_best(tmp_path, monkeypatch):
-    """`train` runs in parts, a snapshot at the end of each; it then screens the snapshots on validation, validates
-    the best of them again on fresh episodes, and ships the one that places most there on its worst task, with a
-    record that says so; a shipped policy that confirms better than every snapshot stays."""
-    small = dict(num_envs=2, num_steps=20, num_minibatches=2, update_epochs=1, num_eval_envs=1, eval_freq=100,
-                 checkpoint_freq=1, env_id="Flooring-v1", task_weights=None, log_dir=str(tmp_path), exp_name="tiny", total_timesteps=80)
-    [run] = fs.scratch_runs(num_envs=2)
-    run = dataclasses.replace(run, args=fs.scratch_args(**small), shipped=tmp_path / "scratch.pt")
-    screening = {"checkpoint_40": dict(ceiling=0.5, window=0.4), "checkpoint_80": dict(ceiling=0.9, window=0.1),
-                 "scratch": dict(ceiling=1.0, window=1.0)}
-    confirmation = {"checkpoint_40": dict(ceiling=0.3, window=0.3), "checkpoint_80": dict(ceiling=0.6, window=0.5),
-                    "scratch": dict(ceiling=0.9, window=0.9)}
-    validated = []
-
-    def fake_validate(checkpoint, out, episodes, seed=fs.VALIDATION_SEED):
-        assert out.parent == tmp_path / "snapshots" and not out.exists()
-        confirming = (episodes, seed) == (fs.CONFIRM_EPISODES, fs.CONFIRMATION_SEED)
-        assert confirming or (episodes, seed) == (fs.VALIDATION_EPISODES, fs.VALIDATION_SEED)
-        validated.append((checkpoint.stem, confirming))
-        return (confirmation if confirming else screening)[checkpoint.stem]
-
-    monkeypatch.setattr(fs, "validate", fake_validate)
-    monkeypatch.setattr(fs, "CONFIRM_TOP", 2)
-    fs.train(run, every=40, snapshots=tmp_path / "snapshots", page=tmp_path / "page.md")
-    assert sorted(p.name for p in (tmp_path / "snapshots").glob("*.pt")) == ["checkpoint_40.pt", "checkpoint_80.pt"]
-    assert sorted(validated) == [("checkpoint_40", False), ("checkpoint_40", True), ("checkpoint_80", False),
-                                 ("checkpoint_80", True)], "nothing shipped before: the snapshots alone, both confirmed"
-    shipped = torch.load(run.shipped, weights_only=False)
-    assert shipped["progress"]["global_step"] == 80, "the confirmation chooses, not the screening"
-    assert "the best of 2 snapshots" in shipped["campaign"]["record"]["chosen"]
-    assert "among the 2 best on 30" in shipped["campaign"]["record"]["chosen"]
-    assert shipped["campaign"]["record"]["env steps"] == "80"
-    rows = [r for r in (tmp_path / "page.md").read_text().splitlines() if r.startswith("| snapshot")]
-    assert rows == ["| snapshot at 40 env steps | 50 / 40 | 40 | 30 / 30 | 30 |  |",
-                    "| snapshot at 80 env steps | 90 / 10 | 10 | 60 / 50 | 50 | yes |"]
-    before, validated[:] = run.shipped.read_bytes(), []
-    assert fs.ship_best(run, snapshots=tmp_path / "snapshots", page=tmp_path / "page.md") is None
-    assert run.shipped.read_bytes() == before
-    assert ("checkpoint_80", True) not in validated, "only the best on the screening are confirmed"
-    page = (tmp_path / "page.md").read_text()
-    assert "| snapshot at 80 env steps | 90 / 10 | 10 | - | - |  |" in page
-    assert "| shipped before | 100 / 100 | 100 | 90 / 90 | 90 | yes |" in page
-    # the run is done: train again only ships (no part is run)
-    fs.train(run, every=40, snapshots=tmp_path / "snapshots", page=tmp_path / "page.md")
-    assert len(list((tmp_path / "snapshots").glob("*.pt"))) == 2
 
 
 def test_the_seeds_report_has_a_row_per_seed_and_says_how_a_seed_not_started_starts(tmp_path, monkeypatch):

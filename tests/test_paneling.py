@@ -21,10 +21,13 @@ from ms_construction.parameters import ELEMENT_KINDS, PAPER_KINDS
 from ms_construction.planning import MotionPlanningExpert
 from ms_construction.planning.collision_model import load_convex_parts
 from ms_construction.planning.site_check import install_sweep_hits
-from tests.helpers import PLAN_TRIES, TEST_EXPERT_CONFIG, make_env, to_sapien
+from tests.helpers import PLAN_TRIES, TEST_EXPERT_CONFIG, make_env
 
 ROOT = Path(__file__).resolve().parent.parent
 SHIPPED_OUTPUTS = Path(__file__).parent / "data" / "shipped_policy_outputs.npz"
+BEFORE_PANELING = {"scratch_general_agent": Path(__file__).parent / "data" / "scratch_general_agent_before_paneling.pt"}
+"""checkpoints of SHIPPED_OUTPUTS shipped no more: the first campaign's reward-only agent (its policy, as it shipped
+until the recipe's seeds replaced it), kept here as the from-scratch agent from before paneling."""
 """Actions and values of shipped checkpoints on 72 observations of the paper's three task types each (six seeded
 episodes of the general task, the policy's own first 12 steps), computed by the code of commit ed49227, before
 paneling: the observations there have the three-slot task one-hot."""
@@ -128,7 +131,8 @@ def test_shipped_checkpoints_act_as_before_on_the_papers_tasks(name):
     """A checkpoint from before paneling reads the task one-hot's new slot with zero weights: on the paper's task
     types (the slot is 0) its actions and values are those the code before paneling computed."""
     saved = np.load(SHIPPED_OUTPUTS)
-    agent, _ = load_policy(ROOT / "assets" / "checkpoints" / f"{name}.pt", "ConstructionPickPlace-v1")
+    path = BEFORE_PANELING.get(name, ROOT / "assets" / "checkpoints" / f"{name}.pt")
+    agent, _ = load_policy(path, "ConstructionPickPlace-v1")
     old = torch.as_tensor(saved[f"{name}/obs"])
     at = STATE_TASK_START + TASK_SLOTS_BEFORE_PANELING
     obs = torch.cat([old[:, :at], torch.zeros(len(old), 1), old[:, at:]], 1)
@@ -164,8 +168,8 @@ def test_an_old_run_resumes_with_the_new_slot_held_at_zero():
     assert zero(agent.residual_mean[0].weight) == columns and zero(agent.critic[0].weight) == columns
     assert zero(agent.base.actor_mean[0].weight) == columns, "the frozen base reads the new slot with zero weights too"
 
-    old = torch.load(ROOT / "assets/checkpoints/scratch_general_agent.pt", map_location="cpu", weights_only=False)
-    progress = load_checkpoint(ROOT / "assets/checkpoints/scratch_general_agent.pt")["progress"]
+    old = torch.load(BEFORE_PANELING["scratch_general_agent"], map_location="cpu", weights_only=False)
+    progress = load_checkpoint(BEFORE_PANELING["scratch_general_agent"])["progress"]
     assert progress["near_goal_radius"] == old["progress"]["near_goal_radius"] + [old["args"]["near_goal_radius"]]
     assert progress["near_goal_recent"][:3] == old["progress"]["near_goal_recent"] and progress["near_goal_recent"][3] == []
 
