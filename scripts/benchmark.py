@@ -292,6 +292,103 @@ def ppo_steps_per_second(iterations: int, backend: str, num_envs: Optional[int] 
                 curiosity=run.args.icm.curiosity, reward_mode=run.args.reward_mode)
 
 
+START_UP = "start-up and shut-down"
+"""the training envs made and closed: timed apart, and left out of the vector step."""
+
+
+def step_parts() -> list[tuple[type, str, str]]:
+    """(class, method, label) of what a training's vector step spends its time in, in the learner's process: env 0's
+    step (it runs there) by part, the wait for the other env processes, the policy's forward passes, the update."""
+    from baselines.ppo import networks, ppo
+    from ms_construction.envs.carry_geometry import CarryGeometry
+    from ms_construction.envs.construction_env import ConstructionTaskEnv
+
+    return [(ConstructionTaskEnv, "_step_action", "env 0: action, physics substeps and the hold"),
+            (ConstructionTaskEnv, "evaluate", "env 0: evaluate (placement, grasp)"),
+            (ConstructionTaskEnv, "_get_obs_extra", "env 0: the task's observation"),
+            (CarryGeometry, "project", "env 0: of which the start-path projection"),
+            (ConstructionTaskEnv, "get_reward", "env 0: reward"),
+            (ConstructionTaskEnv, "reset", "env 0: resets (start states included)"),
+            (CPUVectorEnv, "_wait_for_workers", "waiting for the other env processes"),
+            (networks.Agent, "get_action", "the policy's forward pass, one per vector step"),
+            (ppo, "ppo_update", "PPO's update (per vector step of its rollout)"),
+            (ppo, "make_envs", START_UP),
+            (CPUVectorEnv, "close", START_UP),
+            (ppo, "train", "the training iterations in all")]
+
+
+@contextmanager
+def timing(parts: list[tuple[type, str, str]], spent: dict, outer: str, inner: str):
+    """While open, the wall time of the calls of each (owner, method, label) of `parts` adds up in `spent` (seconds, by
+    label). A call inside another part's counts as that part's (a reset's observation is the reset's), but for
+    the `outer` part (the whole) and the `inner` one (reported as an "of which"). The methods are restored at the end."""
+    saved, active = [], []
+    for owner, name, label in parts:
+        defined = next(k for k in (owner.__mro__ if isinstance(owner, type) else (owner,)) if name in vars(k))
+
+        def timed(*a, _f=getattr(owner, name), _label=label, **k):
+            if _label not in (outer, inner) and active:
+                return _f(*a, **k)
+            t = time.perf_counter()
+            if _label != outer:
+                active.append(_label)
+            try:
+                return _f(*a, **k)
+            finally:
+                if _label != outer:
+                    active.pop()
+                spent[_label] = spent.get(_label, 0.0) + time.perf_counter() - t
+
+        saved.append((owner, name, vars(defined)[name] if defined is owner else None))
+        setattr(owner, name, timed)
+    try:
+        yield spent
+    finally:
+        for owner, name, original in reversed(saved):
+            if original is None:
+                delattr(owner, name)
+            else:
+                setattr(owner, name, original)
+
+
+def step_split(iterations: int, num_envs: int, curiosity: str) -> tuple[dict, int]:
+    """`ppo_steps_per_second`'s training (`curiosity` "none": the paper's sparse reward; "recipe": the from-scratch
+    recipe) timed by part (`step_parts`), ms per vector step over all its iterations (its envs' start-up and shut-down
+    left out), and its vector steps."""
+    spent: dict = {}
+    parts = step_parts()
+    with timing(parts, spent, outer=parts[-1][2], inner=parts[3][2]):
+        run = ppo_steps_per_second(iterations, "physx_cpu", num_envs, curiosity=curiosity)
+    vector_steps = run["num_steps"] * (iterations + 2)
+    spent[parts[-1][2]] -= spent.pop(START_UP, 0.0)
+    return {label: 1e3 * spent.get(label, 0.0) / vector_steps for _, _, label in parts if label != START_UP}, vector_steps
+
+
+def split_table(args: Args) -> str:
+    """Where a training's vector step goes, plain PPO (sparse reward) beside the recipe, on the most env processes of
+    --workers that the cores hold; the rest: the rollout's bookkeeping (buffers, episode statistics, start-state
+    curricula), logs and the evaluations."""
+    n = max([w for w in args.workers if w <= (os.cpu_count() or 1)] or [min(args.workers)])
+    columns = {name: step_split(args.train_iterations, n, curiosity) for name, curiosity in
+               (("plain PPO, sparse reward", "none"), ("the from-scratch recipe", "recipe"))}
+    labels = [label for _, _, label in step_parts() if label != START_UP]
+    whole, nested = labels[-1], labels[3]
+    for ms, _ in columns.values():
+        ms["the rest: the rollout's bookkeeping, logs, evaluations"] = ms[whole] - sum(
+            v for k, v in ms.items() if k not in (whole, nested))
+    rows = [*labels[:-1], "the rest: the rollout's bookkeeping, logs, evaluations", whole]
+    lines = [f"| ms per vector step ({n} env processes) | " + " | ".join(columns) + " | recipe / plain |",
+             "|---|" + "---|" * (len(columns) + 1)]
+    for label in rows:
+        plain, recipe = (ms[label] for ms, _ in columns.values())
+        bold = "**" if label == whole else ""
+        lines.append(f"| {bold}{label}{bold} | {plain:.2f} | {recipe:.2f} | "
+                     + (f"{recipe / plain:.1f} |" if plain > 0.005 else "- |"))
+    lines.append("| env steps/s it makes | " + " | ".join(f"{1e3 * n / ms[whole]:.0f}" for ms, _ in columns.values())
+                 + " | |")
+    return "\n".join(lines)
+
+
 def worker_peak_rss_mib(envs: CPUVectorEnv) -> float:
     """The largest peak resident set (VmHWM) of the vector env's worker processes, MiB (Linux)."""
     peaks = []
@@ -306,6 +403,7 @@ def cpu_sections(args: Args) -> str:
     one_env = one_env_table(args)
     rgb = rgb_table(args) if args.rgb_steps else None
     processes, training, worker_rss = process_table(args)
+    split = split_table(args)
     learner_rss = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
     return "\n".join([
         f"## CPU (physx_cpu), {os.cpu_count()} cores",
@@ -358,6 +456,16 @@ def cpu_sections(args: Args) -> str:
         "more (stretch 0.8), the recipe included.",
         "",
         training,
+        "",
+        "### Where a training step's time goes",
+        "",
+        f"The trainings above (plain PPO: free-none) timed by part in the learner's process over {args.train_iterations + 2} "
+        "iterations: env 0 runs there, so its step is timed by part (a call inside another part counts as that "
+        "part's: a reset's observation is the reset's; the projection is the part of the observation the recipe's "
+        "reward shares); the other env processes step meanwhile, and the learner waits for them; then its policy's "
+        "forward pass for every env, and once per rollout its update. One run of each.",
+        "",
+        split,
         "",
         f"Peak host memory (resident set): the benchmark's process (learner, its env 0 and the one-env runs) "
         f"{learner_rss:,.0f} MiB; "

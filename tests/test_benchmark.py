@@ -51,3 +51,51 @@ def test_recorded_command_names_what_differs_from_the_defaults_and_its_section_b
     assert bench.command(args) == ("python scripts/benchmark.py --workers 16 --trainings free-none free-recipe "
                                    "--no-gpu --cpu-section cpu-speed-16-cores")
     assert bench.command(bench.Args()) == "python scripts/benchmark.py"
+
+
+def test_timing_counts_each_part_once_a_call_inside_another_as_that_one_s_and_restores_the_methods(monkeypatch):
+    ticks = iter(range(100))
+    monkeypatch.setattr(bench.time, "perf_counter", lambda: float(next(ticks)))
+
+    class Env:
+        def step(self):
+            return self.obs() + self.project()
+
+        def obs(self):
+            return self.project()
+
+        def project(self):
+            return 1
+
+    class Learner(Env):
+        def whole(self):
+            return self.step() + self.obs()
+
+    before = (Env.step, Env.obs, Env.project, Learner.whole)
+    spent = {}
+    parts = [(Learner, "step", "step"), (Env, "obs", "obs"), (Env, "project", "project"), (Learner, "whole", "whole")]
+    with bench.timing(parts, spent, outer="whole", inner="project"):
+        assert Learner().whole() == 3
+    assert (Env.step, Env.obs, Env.project, Learner.whole) == before and "step" not in vars(Learner)
+    # one tick per clock reading: whole 0-11 holds step 1-6 (its obs untimed, its projections 2-3 and 4-5) and obs 7-10
+    # (its projection 8-9)
+    assert spent == {"whole": 11.0, "step": 5.0, "obs": 3.0, "project": 3.0}
+
+
+def test_the_split_table_has_a_row_per_part_the_rest_and_the_whole(monkeypatch):
+    labels = [label for _, _, label in bench.step_parts() if label != bench.START_UP]
+
+    def fake_split(iterations, num_envs, curiosity):
+        ms = dict.fromkeys(labels, 0.5)
+        ms[labels[-1]] = 10.0 if curiosity == "recipe" else 5.0
+        return ms, 1000
+
+    monkeypatch.setattr(bench, "step_split", fake_split)
+    table = bench.split_table(bench.Args(workers=(2,)))
+    rows = table.splitlines()
+    assert rows[0].startswith("| ms per vector step (2 env processes) | plain PPO, sparse reward | the from-scratch recipe")
+    assert len(rows) == 2 + len(labels) + 2
+    # the rest: the whole less every part but the projection, which is inside the observation
+    assert "| the rest: the rollout's bookkeeping, logs, evaluations | 1.00 | 6.00 | 6.0 |" in rows
+    assert f"| **{labels[-1]}** | 5.00 | 10.00 | 2.0 |" in rows
+    assert rows[-1] == "| env steps/s it makes | 400 | 200 | |"
