@@ -286,6 +286,18 @@ def reach_radii_now(rows: list[dict]) -> str:
     return " / ".join(of(kind) for kind in PAPER_KINDS)
 
 
+def latest_screening_per_slot(seed: int) -> str:
+    """Placed / episodes per goal slot, per task, on the screening of the seed's latest snapshot: "0/12, 9/9, 9/9 /
+    ..." with its env steps ("-" before the first). A slot the policy has not learnt fails in all its episodes."""
+    screened = seed_screening(seed)
+    if not screened:
+        return "-"
+    step = max(screened)
+    tasks = json.loads(seed_validation_json(seed, step).read_text())["tasks"]
+    return (" / ".join(placed_per_slot(env_id, r["episode_results"]) for env_id, r in tasks.items())
+            + f" (at {step:,})")
+
+
 def seeds_report(results: Path = Path("docs/RESULTS.md"), log_dir: Path = CAMPAIGN_DIR) -> str:
     """The section `from-scratch-seeds` of docs/RESULTS.md: where the recipe's run from nothing stands on each seed
     (its progress.csv in `log_dir`/scratch_s<seed>/), a row per seed, and their curves side by side."""
@@ -298,8 +310,9 @@ def seeds_report(results: Path = Path("docs/RESULTS.md"), log_dir: Path = CAMPAI
              "experiments/from_scratch.py, unchanged from step 0). Demonstrations: none.", "",
              "| seed | env steps done / budget | training wall time | near-goal start radius now: ceiling / window / "
              "flooring | reach-start radius now, per goal slot: ceiling / window / flooring | training episodes of the "
-             "last 200,000 steps placed, ordinary resets: ceiling / window / flooring % | placed, near-goal starts % |",
-             "|---|---|---|---|---|---|---|"]
+             "last 200,000 steps placed, ordinary resets: ceiling / window / flooring % | placed, near-goal starts % | "
+             "the latest snapshot's screening, placed per goal slot: ceiling / window / flooring |",
+             "|---|---|---|---|---|---|---|---|"]
     fig, axes = plt.subplots(1, len(SEEDS), figsize=(10, 4.6), sharey=True, squeeze=False)
     for ax, seed in zip(axes[0], SEEDS):
         run = seed_run(seed)
@@ -307,10 +320,11 @@ def seeds_report(results: Path = Path("docs/RESULTS.md"), log_dir: Path = CAMPAI
         ax.set_title(f"seed {seed}")
         ax.set_xlabel("env steps (millions)")
         if not progress.is_file():
-            lines.append(f"| {seed} | not started: `{run.command}` | | | | | |")
+            lines.append(f"| {seed} | not started: `{run.command}` | | | | | | |")
             continue
         rows, cells = standing(run, progress)
-        lines.append(f"| {seed} | " + " | ".join([*cells[:3], reach_radii_now(rows), *cells[3:5]]) + " |")
+        lines.append(f"| {seed} | " + " | ".join([*cells[:3], reach_radii_now(rows), *cells[3:5],
+                                                   latest_screening_per_slot(seed)]) + " |")
         steps = csv_column(rows, "global_step") / 1e6
         for kind, color in zip(PAPER_KINDS, ("tab:blue", "tab:orange", "tab:green")):
             ax.plot(steps, 100 * moving_mean(csv_column(rows, f"ordinary_place_{kind}"), WINDOW), color=color,

@@ -214,7 +214,9 @@ def test_a_seed_s_snapshots_are_screened_as_made_and_the_rule_chooses_among_the_
         confirming = (episodes, seed) == (fs.CONFIRM_EPISODES, fs.CONFIRMATION_SEED)
         assert confirming == (checkpoint.parent == fs.seed_candidates(1)), "confirmed from the committed candidates"
         placed = dict(zip(envs, (confirmation if confirming else screening)[step]))
-        out.write_text(json.dumps(dict(tasks={e: dict(place_success=v) for e, v in placed.items()})))
+        episodes = {e: [dict(goal_slot=i % 3, placed=i < round(10 * v)) for i in range(10)] for e, v in placed.items()}
+        out.write_text(json.dumps(dict(tasks={e: dict(place_success=v, episode_results=episodes[e])
+                                              for e, v in placed.items()})))
         return placed
 
     def screen_and_look(seed, step, snapshot):
@@ -257,6 +259,8 @@ def test_a_seed_s_snapshots_are_screened_as_made_and_the_rule_chooses_among_the_
     body = fs.seeds_report(tmp_path / "RESULTS.md", log_dir=tmp_path / "campaign")
     assert next(line for line in body.splitlines() if line.startswith("| 1 | 20 |")).endswith("| **yes** |")
     assert "| 1 | 4 | 20 (80 / 70 / 90); 60 (40 / 90 / 90) | 20 |" in body
+    # the latest screening (80 env steps: 70 / 20 / 80 % of 10 episodes, slots 0, 1, 2 in turn) per goal slot
+    assert "| 3/4, 2/3, 2/3 / 1/4, 1/3, 0/3 / 3/4, 3/3, 2/3 (at 80) |" in body
     assert "| 2 | 0 | (chosen at the end of its run) | - |" in body
 
 
