@@ -160,9 +160,12 @@ def shipped_report(results: Path = Path("docs/RESULTS.md"), shipped: Path = SHIP
     """The section `from-scratch` of docs/RESULTS.md: the shipped agent from reward alone (its record: the seed, the
     snapshot, the recipe's commit) and its evaluation with the paper's protocol (EVAL_JSON) beside the paper's Table II,
     with its placements per goal slot and its failures by kind."""
-    if not (shipped.is_file() and EVAL_JSON.is_file()):
+    if not shipped.is_file():
         lines = [f"Not shipped yet: `{COMMAND} --ship-seeds` ships the better seed's chosen snapshot once every seed "
                  "has run to its end."]
+    elif not EVAL_JSON.is_file():
+        lines = [f"{shipped} is not evaluated yet: `python scripts/evaluate.py --checkpoint {shipped} --all --steps "
+                 f"{EVAL_STEPS} --json {EVAL_JSON}`."]
     else:
         data = json.loads(EVAL_JSON.read_text())
         record = load_checkpoint(shipped)["campaign"]["record"]
@@ -363,8 +366,8 @@ SNAPSHOT_EVERY = 250_000
 (window placements 22% and 8% on the same 50 test seeds at 6,782,000 and 7,168,000 env steps, ceiling panels 2% and
 18%: docs/experiments/from_scratch.md), so the run keeps snapshots and ships the one that validates best."""
 SNAPSHOT_DIR = Path("runs/scratch_snapshots")
-"""a seed's snapshots go to <SNAPSHOT_DIR>_s<seed>/ (checkpoint_<env steps>.pt): not committed; the candidates the
-snapshot rule keeps are (`seed_candidates`)."""
+"""a seed's snapshots go to <SNAPSHOT_DIR>_s<seed>/ (checkpoint_<env steps>.pt): not committed; the snapshot rule's
+candidates among them are (`seed_candidates`)."""
 VALIDATION_EPISODES = 30
 """episodes per task (validation seeds, VALIDATION_SEED on: never the test seeds) that screen each snapshot."""
 CONFIRM_TOP = 3

@@ -318,30 +318,33 @@ def step_parts() -> list[tuple[type, str, str]]:
 
 
 @contextmanager
-def timing(parts: list[tuple[type, str, str]], spent: dict, outer: str, inner: str):
-    """While open, the wall time of the calls of each (owner, method, label) of `parts` adds up in `spent` (seconds, by
-    label). A call inside another part's counts as that part's (a reset's observation is the reset's), but for
-    the `outer` part (the whole) and the `inner` one (reported as an "of which"). The methods are restored at the end."""
+def timing(parts: list[tuple[type, str, str]], spent: dict, outer: str, inner: str, apart: str):
+    """While open, the wall time of the calls of each (owner, method, label) of `parts` made within the `outer` part's
+    (the whole) adds up in `spent` (seconds, by label). A call inside another part's counts as that part's (a
+    reset's observation is the reset's), but for the `inner` part (reported as an "of which"), which counts inside
+    any part but `apart` (the start-up: a first call's compilation is not a step's). The methods are restored at the
+    end."""
     saved, active = [], []
-    for owner, name, label in parts:
-        defined = next(k for k in (owner.__mro__ if isinstance(owner, type) else (owner,)) if name in vars(k))
 
-        def timed(*a, _f=getattr(owner, name), _label=label, **k):
-            if _label not in (outer, inner) and active:
-                return _f(*a, **k)
-            t = time.perf_counter()
-            if _label != outer:
-                active.append(_label)
-            try:
-                return _f(*a, **k)
-            finally:
-                if _label != outer:
-                    active.pop()
-                spent[_label] = spent.get(_label, 0.0) + time.perf_counter() - t
+    def timed_call(f, label, *a, **k):
+        if label != outer and (outer not in active or (label == inner and apart in active)
+                               or (label != inner and active[-1] != outer)):
+            return f(*a, **k)
+        t = time.perf_counter()
+        active.append(label)
+        try:
+            return f(*a, **k)
+        finally:
+            active.pop()
+            spent[label] = spent.get(label, 0.0) + time.perf_counter() - t
 
-        saved.append((owner, name, vars(defined)[name] if defined is owner else None))
-        setattr(owner, name, timed)
     try:
+        for owner, name, label in parts:
+            defined = next((k for k in (owner.__mro__ if isinstance(owner, type) else (owner,)) if name in vars(k)), None)
+            if defined is None:
+                raise AttributeError(f"{getattr(owner, '__name__', owner)} has no {name} to time")
+            saved.append((owner, name, vars(defined)[name] if defined is owner else None))
+            setattr(owner, name, _timed(timed_call, getattr(owner, name), label))
         yield spent
     finally:
         for owner, name, original in reversed(saved):
@@ -351,13 +354,20 @@ def timing(parts: list[tuple[type, str, str]], spent: dict, outer: str, inner: s
                 setattr(owner, name, original)
 
 
+def _timed(timed_call: Callable, f: Callable, label: str) -> Callable:
+    """`f` called through `timed_call` under `label` (a plain function: bound as a method where `f` is one)."""
+    def timed(*a, **k):
+        return timed_call(f, label, *a, **k)
+    return timed
+
+
 def step_split(iterations: int, num_envs: int, curiosity: str) -> tuple[dict, int]:
     """`ppo_steps_per_second`'s training (`curiosity` "none": the paper's sparse reward; "recipe": the from-scratch
     recipe) timed by part (`step_parts`), ms per vector step over all its iterations (its envs' start-up and shut-down
     left out), and its vector steps."""
     spent: dict = {}
     parts = step_parts()
-    with timing(parts, spent, outer=parts[-1][2], inner=parts[3][2]):
+    with timing(parts, spent, outer=parts[-1][2], inner=parts[3][2], apart=START_UP):
         run = ppo_steps_per_second(iterations, "physx_cpu", num_envs, curiosity=curiosity)
     vector_steps = run["num_steps"] * (iterations + 2)
     spent[parts[-1][2]] -= spent.pop(START_UP, 0.0)
@@ -459,8 +469,8 @@ def cpu_sections(args: Args) -> str:
         "",
         "### Where a training step's time goes",
         "",
-        f"The trainings above (plain PPO: free-none) timed by part in the learner's process over {args.train_iterations + 2} "
-        "iterations: env 0 runs there, so its step is timed by part (a call inside another part counts as that "
+        "Two of the trainings above run again, plain PPO (free-none) and the recipe (free-recipe), each timed by part "
+        f"in the learner's process over its {args.train_iterations + 2} iterations: env 0 runs there, so its step is timed by part (a call inside another part counts as that "
         "part's: a reset's observation is the reset's; the projection is the part of the observation the recipe's "
         "reward shares); the other env processes step meanwhile, and the learner waits for them; then its policy's "
         "forward pass for every env, and once per rollout its update. One run of each.",

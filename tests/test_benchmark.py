@@ -53,11 +53,15 @@ def test_recorded_command_names_what_differs_from_the_defaults_and_its_section_b
     assert bench.command(bench.Args()) == "python scripts/benchmark.py"
 
 
-def test_timing_counts_each_part_once_a_call_inside_another_as_that_one_s_and_restores_the_methods(monkeypatch):
+def test_timing_counts_each_part_within_the_whole_a_call_inside_another_as_that_one_s_and_restores_the_methods(
+        monkeypatch):
     ticks = iter(range(100))
     monkeypatch.setattr(bench.time, "perf_counter", lambda: float(next(ticks)))
 
     class Env:
+        def make(self):
+            return self.project()  # a first call's compilation: the start-up's
+
         def step(self):
             return self.obs() + self.project()
 
@@ -69,17 +73,31 @@ def test_timing_counts_each_part_once_a_call_inside_another_as_that_one_s_and_re
 
     class Learner(Env):
         def whole(self):
-            return self.step() + self.obs()
+            return self.make() + self.step() + self.obs()
 
-    before = (Env.step, Env.obs, Env.project, Learner.whole)
+    before = (Env.make, Env.step, Env.obs, Env.project, Learner.whole)
     spent = {}
-    parts = [(Learner, "step", "step"), (Env, "obs", "obs"), (Env, "project", "project"), (Learner, "whole", "whole")]
-    with bench.timing(parts, spent, outer="whole", inner="project"):
-        assert Learner().whole() == 3
-    assert (Env.step, Env.obs, Env.project, Learner.whole) == before and "step" not in vars(Learner)
-    # one tick per clock reading: whole 0-11 holds step 1-6 (its obs untimed, its projections 2-3 and 4-5) and obs 7-10
-    # (its projection 8-9)
-    assert spent == {"whole": 11.0, "step": 5.0, "obs": 3.0, "project": 3.0}
+    parts = [(Env, "make", "start"), (Learner, "step", "step"), (Env, "obs", "obs"), (Env, "project", "project"),
+             (Learner, "whole", "whole")]
+    with bench.timing(parts, spent, outer="whole", inner="project", apart="start"):
+        assert Env().obs() == 1 and not spent, "outside the whole: not timed"
+        assert Learner().whole() == 4
+    assert (Env.make, Env.step, Env.obs, Env.project, Learner.whole) == before and "step" not in vars(Learner)
+    # one tick per clock reading: whole 0-13 holds make 1-2 (its projection untimed), step 3-8 (its obs untimed, its
+    # projections 4-5 and 6-7) and obs 9-12 (its projection 10-11)
+    assert spent == {"whole": 13.0, "start": 1.0, "step": 5.0, "obs": 3.0, "project": 3.0}
+
+
+def test_timing_restores_what_it_patched_when_a_part_names_no_method():
+    class Env:
+        def obs(self):
+            return 1
+
+    before = Env.obs
+    with pytest.raises(AttributeError, match="Env has no no_such_method to time"):
+        with bench.timing([(Env, "obs", "obs"), (Env, "no_such_method", "x")], {}, outer="w", inner="i", apart="a"):
+            pass
+    assert Env.obs is before and "obs" in vars(Env)
 
 
 def test_the_split_table_has_a_row_per_part_the_rest_and_the_whole(monkeypatch):

@@ -105,6 +105,9 @@ def test_the_shipped_agent_s_section_is_its_evaluation_beside_the_paper_s_or_say
     assert body.startswith("Not shipped yet: `python -m experiments.from_scratch --ship-seeds`")
     assert "<!-- begin from-scratch (generated) -->" in results.read_text()
     shipped = tmp_path / "scratch.pt"
+    assert fs.shipped_report(results, shipped=Path(__file__).resolve().parents[1] / fs.SHIPPED).endswith(
+        f"is not evaluated yet: `python scripts/evaluate.py --checkpoint {Path(__file__).resolve().parents[1] / fs.SHIPPED} "
+        f"--all --steps 50000 --json {fs.EVAL_JSON}`.")
     campaign.ship_checkpoint(Path(__file__).resolve().parents[1] / fs.SHIPPED, shipped, "cmd", dict(method="PPO; demonstrations: none", **{"env steps": "40"},
                                                                chosen="seed 1 of 2 (the better on validation)"))
     episodes = [dict(placed=True, picked=True, goal_slot=0)] * 3 + [dict(placed=False, picked=False, goal_slot=1)]

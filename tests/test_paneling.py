@@ -25,12 +25,13 @@ from tests.helpers import PLAN_TRIES, TEST_EXPERT_CONFIG, make_env
 
 ROOT = Path(__file__).resolve().parent.parent
 SHIPPED_OUTPUTS = Path(__file__).parent / "data" / "shipped_policy_outputs.npz"
-BEFORE_PANELING = {"scratch_general_agent": Path(__file__).parent / "data" / "scratch_general_agent_before_paneling.pt"}
-"""checkpoints of SHIPPED_OUTPUTS shipped no more: the first campaign's reward-only agent (its policy, as it shipped
-until the recipe's seeds replaced it), kept here as the from-scratch agent from before paneling."""
 """Actions and values of shipped checkpoints on 72 observations of the paper's three task types each (six seeded
 episodes of the general task, the policy's own first 12 steps), computed by the code of commit ed49227, before
 paneling: the observations there have the three-slot task one-hot."""
+BEFORE_PANELING = {"scratch_general_agent": Path(__file__).parent / "data" / "scratch_general_agent_before_paneling.pt"}
+"""checkpoints of SHIPPED_OUTPUTS kept here: the first campaign's reward-only agent, the from-scratch agent from before
+paneling, which assets/checkpoints/scratch_general_agent.pt holds until `experiments.from_scratch --ship-seeds` ships
+the recipe's better seed there."""
 
 
 def _partition_parts(manifest: dict) -> list[str]:
