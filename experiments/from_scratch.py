@@ -123,7 +123,7 @@ def moving_mean(x: np.ndarray, window: int) -> np.ndarray:
 def standing(run: Run, progress: Path) -> tuple[list[dict], list[str]]:
     """The rows of a run's progress.csv, and where it stands: env steps done / budget, training wall time, each task
     type's start radius now, and over its last 200,000 env steps its training episodes placed from ordinary resets
-    per task type, placed from near-goal starts, and picked (%)."""
+    per task type and placed from near-goal starts (%)."""
     with open(progress, newline="") as f:
         rows = list(csv.DictReader(f))
     done = int(rows[-1]["global_step"])
@@ -136,8 +136,7 @@ def standing(run: Run, progress: Path) -> tuple[list[dict], list[str]]:
     wall = training_wall_s(progress, run.args.num_envs * run.args.num_steps)
     return rows, [f"{done:,} / {run.args.total_timesteps:,}", f"{wall / 3600:.1f} h",
                   " / ".join(f"{float(rows[-1].get(f'near_goal_radius_{k}') or 0):.1f}" for k in PAPER_KINDS),
-                  " / ".join(pct_of(f"ordinary_place_{k}") for k in PAPER_KINDS), pct_of("near_goal_place_success"),
-                  pct_of("pick_success")]
+                  " / ".join(pct_of(f"ordinary_place_{k}") for k in PAPER_KINDS), pct_of("near_goal_place_success")]
 
 
 SHIPPED = SHIPPED_DIR / f"{CAMPAIGN}.pt"
@@ -326,7 +325,7 @@ def seeds_report(results: Path = Path("docs/RESULTS.md"), log_dir: Path = CAMPAI
             lines.append(f"| {seed} | not started: `{run.command}` | | | | | | |")
             continue
         rows, cells = standing(run, progress)
-        lines.append(f"| {seed} | " + " | ".join([*cells[:3], reach_radii_now(rows), *cells[3:5],
+        lines.append(f"| {seed} | " + " | ".join([*cells[:3], reach_radii_now(rows), *cells[3:],
                                                    latest_screening_per_slot(seed)]) + " |")
         steps = csv_column(rows, "global_step") / 1e6
         for kind, color in zip(PAPER_KINDS, ("tab:blue", "tab:orange", "tab:green")):
