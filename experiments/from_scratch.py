@@ -90,11 +90,11 @@ def scratch_args(num_envs: Optional[int] = None, **overrides) -> ppo.Args:
     return args.replace(**overrides)
 
 
-METHOD = "PPO from scratch on the dense reward with near-goal start states (experiments/from_scratch.py); demonstrations: none"
+METHOD = "PPO from nothing on the tasks' default dense reward, near-goal and reach start states (experiments/from_scratch.py); demonstrations: none"
 
 
 def seed_run(seed: int, num_envs: Optional[int] = None) -> Run:
-    """The recipe from nothing on `seed`, to BUDGET; shipped by hand (the better seed, once both are evaluated)."""
+    """The recipe from nothing on `seed`, to BUDGET; `ship_seeds` ships the better seed once both have run."""
     name = f"scratch_s{seed}"
     return Run(name, scratch_args(num_envs, seed=seed, exp_name=name), f"the recipe from nothing, seed {seed}",
                f"{COMMAND} --seed {seed}", None, method=METHOD)
@@ -515,7 +515,12 @@ def ship_seeds(shipped: Path = SHIPPED) -> Optional[Path]:
               + f"), its snapshot at {step:,} env steps chosen by the snapshot rule; the recipe: scratch_args of "
               f"experiments/from_scratch.py at commit {recipe_commit()}, unchanged from step 0; demonstrations: none")
     out = ship(run, snapshot=seed_candidates(seed) / f"candidate_{step}.pt", chosen=chosen)
-    shutil.copyfile(seed_evaluation_json(seed, step), EVAL_JSON)
+    # the shipped policy is the snapshot's, weight for weight: its evaluation is the snapshot's, written down as the
+    # command that repeats it on the shipped file
+    data = json.loads(seed_evaluation_json(seed, step).read_text())
+    data.update(command=evaluation.command_of(evaluation.Args(checkpoint=out, all=True, steps=EVAL_STEPS, json=EVAL_JSON)),
+                checkpoint=str(out), evaluated_as=dict(checkpoint=data["checkpoint"], json=str(seed_evaluation_json(seed, step))))
+    EVAL_JSON.write_text(json.dumps(data, indent=1) + "\n")
     return out
 
 

@@ -185,8 +185,8 @@ def scratch_row(eval_dir: Path = EVAL_DIR) -> TableRow:
     from experiments.from_scratch import COMMAND, SHIPPED
 
     pending = f"not shipped yet: `{COMMAND} --ship-seeds`" if not SHIPPED.is_file() else "not evaluated yet"
-    return _evaluation_row("ours: from reward alone", "PPO on the dense reward with near-goal start states; no "
-                           "demonstrations (docs/RESULTS.md, its section)", SHIPPED, SHIPPED.stem,
+    return _evaluation_row("ours: from reward alone", "PPO from nothing on the default dense reward, near-goal and reach starts, one "
+                           "recipe unchanged from step 0, the better of two seeds; no demonstrations (its section)", SHIPPED, SHIPPED.stem,
                            tuple(PAPER_TASK_ENV_IDS.values()), pending, eval_dir)
 
 

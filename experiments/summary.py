@@ -56,6 +56,7 @@ def paper_tasks_table() -> list[str]:
         data = _read(path)
         how = how or from_scratch.shipped_how()
         lines.append(f"| {label} | {how} | " + " | ".join(_placed(data and data["tasks"])) + f" | {path} |")
+    shipped_from = ((_read(from_scratch.EVAL_JSON) or {}).get("evaluated_as") or {}).get("json")
     latest: dict[int, tuple[int, Path]] = {}
     for path in from_scratch.SEED_EVAL_DIR.glob("scratch_s*_eval50k_*.json"):
         seed, step = map(int, path.stem[len("scratch_s"):].split("_eval50k_"))
@@ -64,6 +65,8 @@ def paper_tasks_table() -> list[str]:
         chosen = from_scratch.chosen_step(seed)
         if chosen is not None and from_scratch.seed_evaluation_json(seed, chosen).is_file():
             latest[seed] = (chosen, from_scratch.seed_evaluation_json(seed, chosen))
+        if seed in latest and str(latest[seed][1]) == shipped_from:
+            continue  # the shipped reward-only agent's row above is this seed's choice, weight for weight
         if seed in latest:
             step, path = latest[seed]
             cells = _placed(json.loads(path.read_text())["tasks"])

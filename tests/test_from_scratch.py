@@ -189,6 +189,8 @@ def test_a_seed_is_evaluated_on_its_latest_snapshot_once_and_its_row_joins_the_s
     tasks = json.loads(out.read_text())["tasks"]
     assert set(tasks) == {"CeilingInstallation-v1", "WindowInstallation-v1", "Flooring-v1"}
     assert all(t["steps"] >= 300 and t["episodes"] >= 1 for t in tasks.values())
+    assert json.loads(out.read_text())["command"] == (f"python scripts/evaluate.py --checkpoint {tmp_path}/campaign/scratch_s1/"
+                                                      f"checkpoint.pt --all --steps 300 --json {out} --workers 1")
     written = out.stat().st_mtime_ns
     assert fs.evaluate_seed(1) == out and out.stat().st_mtime_ns == written  # kept, not run again
     body = fs.seeds_report(tmp_path / "RESULTS.md", log_dir=tmp_path / "campaign")
@@ -285,7 +287,8 @@ def test_the_better_seed_on_validation_ships_only_if_it_places_what_the_shipped_
     envs = list(fs.PAPER_TABLE_II)
 
     def tasks(placed):
-        return {"tasks": {e: dict(pick_success=1.0, place_success=placed, place_success_ci95=[0, 1]) for e in envs}}
+        return {"command": "python scripts/evaluate.py ...", "checkpoint": "runs/snapshot.pt",
+                "tasks": {e: dict(pick_success=1.0, place_success=placed, place_success_ci95=[0, 1]) for e in envs}}
 
     for seed, (validated, tested) in {1: (0.8, 0.97), 2: (0.9, 0.9)}.items():
         fs.seed_candidates(seed).mkdir(parents=True)
@@ -301,4 +304,7 @@ def test_the_better_seed_on_validation_ships_only_if_it_places_what_the_shipped_
     record = torch.load(shipped, weights_only=False)["campaign"]["record"]
     assert record["chosen"].startswith("seed 2 of 2") and "demonstrations: none" in record["chosen"]
     assert f"at commit {fs.recipe_commit()}" in record["chosen"] and fs.recipe_commit() != "unknown"
-    assert json.loads(fs.EVAL_JSON.read_text()) == tasks(0.9), "its evaluation is the shipped policy's now"
+    now = json.loads(fs.EVAL_JSON.read_text())
+    assert now["tasks"] == tasks(0.9)["tasks"], "its evaluation is the shipped policy's now"
+    assert now["command"] == f"python scripts/evaluate.py --checkpoint {shipped} --all --steps 50000 --json {fs.EVAL_JSON}"
+    assert now["evaluated_as"] == dict(checkpoint="runs/snapshot.pt", json=str(fs.seed_evaluation_json(2, 40)))

@@ -22,13 +22,20 @@ def test_each_row_reads_its_file_and_a_seed_shows_its_latest_evaluation(tmp_path
     shipped = json.loads(path.read_text())["tasks"]
     row = next(line for line in body.splitlines() if line.startswith(f"| {label} |"))
     assert row.split(" | ")[2:5] == [f"{100 * shipped[t]['place_success']:.1f}" for t in sm.TASKS]
-    seed1 = next(line for line in body.splitlines() if "seed 1" in line)
+    seed1 = next(line for line in body.splitlines() if "the recipe from nothing, seed 1" in line)
     assert "at 6,000,000 env steps" in seed1 and seed1.count("| 92.5 ") == 3
     assert "(its run has not ended: `python -m experiments.from_scratch --seed 2` runs it" in body
     from_scratch.chosen_json(1).parent.mkdir()
     from_scratch.chosen_json(1).write_text(json.dumps({"step": 4_000_000}))
-    seed1 = next(line for line in sm.summary().splitlines() if "seed 1" in line)
+    seed1 = next(line for line in sm.summary().splitlines() if "the recipe from nothing, seed 1" in line)
     assert "at 4,000,000 env steps (the snapshot rule's choice)" in seed1 and seed1.count("| 50.0 ") == 3
+    # once shipped, the seed's choice is the reward-only agent's row, not a second row of the same policy
+    shipped_eval = tmp_path / "shipped_eval.json"
+    shipped_eval.write_text(json.dumps({"tasks": _tasks(0.5), "evaluated_as": {
+        "json": str(from_scratch.seed_evaluation_json(1, 4_000_000))}}))
+    monkeypatch.setattr(from_scratch, "EVAL_JSON", shipped_eval)
+    body = sm.summary()
+    assert "the recipe from nothing, seed 1" not in body and "the recipe from nothing, seed 2" in body
 
 
 def test_a_file_not_there_yet_shows_a_dash_and_the_section_lands_between_its_markers(tmp_path, monkeypatch):

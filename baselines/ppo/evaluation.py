@@ -24,8 +24,7 @@ import math
 import multiprocessing as mp
 import os
 import shlex
-import sys
-from dataclasses import dataclass
+from dataclasses import dataclass, fields
 from pathlib import Path
 from typing import Optional
 
@@ -104,6 +103,24 @@ class Args:
     obstacles: Optional[str] = None
     """the tasks' `obstacles` option ('static' or 'moving'); a policy trained without them meets them blind. Each
     episode's record then says whether it collided (which ends it)."""
+
+
+def command_of(args: Args) -> str:
+    """The `python scripts/evaluate.py` command that makes `args` (its flags that differ from the defaults), so that
+    an evaluation run from code (experiments/) writes down the command a reader can run, not its caller's argv."""
+    flags, default = [], Args()
+    for field in fields(Args):
+        value = getattr(args, field.name)
+        if value == getattr(default, field.name):
+            continue
+        flag = "--" + field.name.replace("_", "-")
+        if isinstance(value, bool):
+            flags.append(flag if value else "--no-" + field.name.replace("_", "-"))
+        elif isinstance(value, (tuple, list)):
+            flags += [flag, *map(str, value)]
+        else:
+            flags += [flag, str(value)]
+    return " ".join(["python scripts/evaluate.py", *map(shlex.quote, flags)])
 
 
 def wilson(successes: int, n: int, z: float = 1.96) -> tuple[float, float]:
@@ -384,7 +401,7 @@ def main(args: Args) -> dict[str, dict]:
                   f"{r['place_success']:.1%} within {r['max_episode_steps']}")
     if args.json:
         args.json.parent.mkdir(parents=True, exist_ok=True)
-        command = "python scripts/evaluate.py " + " ".join(shlex.quote(a) for a in sys.argv[1:])
+        command = command_of(args)
         out = results[env_ids[0]] if len(env_ids) == 1 else {"tasks": results}
         args.json.write_text(json.dumps({"command": command, "checkpoint": str(args.checkpoint),
                                          "curriculum_stage": args.curriculum_stage,
@@ -428,7 +445,7 @@ def beside_table(beside: dict[str, dict]) -> str:
 def write_results(args: Args, results: dict[str, dict], beside: Optional[dict[str, dict]] = None) -> None:
     """The general agent's section of docs/RESULTS.md: our Table II and the checkpoint's training record."""
     campaign = load_checkpoint(args.checkpoint).get("campaign", {})
-    command = "python scripts/evaluate.py " + " ".join(shlex.quote(a) for a in sys.argv[1:])
+    command = command_of(args)
     lines = ["## The general agent (our recipe)", "", f"Command: `{command}`", "",
              f"One policy (`{args.checkpoint}`, {args.checkpoint.stat().st_size / 1e6:.1f} MB) on the three tasks at "
              f"{args.curriculum_stage}; deterministic actions; ordinary seeded resets, seeds {args.seed} on "
