@@ -16,6 +16,7 @@ from __future__ import annotations
 import csv
 import json
 import math
+import os
 import shlex
 import subprocess
 import sys
@@ -48,6 +49,8 @@ class Args:
     write_results: bool = False
     """write the section `paper-experiment` of docs/RESULTS.md and the figures into docs/images/."""
     results: Path = Path("docs/RESULTS.md")
+    experiment_page: Path = Path("docs/experiments/paper.md")
+    """where each run's stages and the settings go (its section `paper-stages`), with --write-results."""
     readme: Path = Path("README.md")
     """where the headline table goes (its section `headline`)."""
     images: Path = Path("docs/images")
@@ -87,8 +90,8 @@ HEADER = ("training episodes | picked % | placed % | extrinsic return | intrinsi
           "end: angle to goal (deg) | end: held %")
 
 
-def report(campaign_dir: Path) -> tuple[str, dict[str, Path]]:
-    """The tables (markdown) and the progress.csv of each run that has one."""
+def report(campaign_dir: Path) -> tuple[str, str, dict[str, Path]]:
+    """The runs' table and their stages' table (markdown), and the progress.csv of each run that has one."""
     plans = {r.name: r for r in general_runs() + control_group_runs()}
     continued = {r.name: r for r in control_group_runs(4 * STAGE_STEPS)}  # a control group past 2M is on its way to 8M
     csvs = {name: campaign_dir / name / "progress.csv" for name in plans if (campaign_dir / name / "progress.csv").is_file()}
@@ -107,9 +110,8 @@ def report(campaign_dir: Path) -> tuple[str, dict[str, Path]]:
         window = done - (int(before[-1]["global_step"]) if before else 0)
         lines.append(f"| {name} | {run.what} | {done:,} / {run.args.total_timesteps:,} | {rows[-1]['stage']} | "
                      f"{window:,} | {summary_cells(late)} |")
-    lines += ["", "Each stage of the runs so far, all its training episodes:", "",
-              f"| run | stage | env steps | {HEADER} | in-training evaluation placed % (last) |",
-              "|---|---|---|" + "---|" * 9]
+    stages_lines = [f"| run | stage | env steps | {HEADER} | in-training evaluation placed % (last) |",
+                    "|---|---|---|" + "---|" * 9]
     for name, path in csvs.items():
         rows = read_rows(path)
         stages: dict[int, list[dict]] = {}  # every stage of the paper's runs is STAGE_STEPS long
@@ -119,9 +121,9 @@ def report(campaign_dir: Path) -> tuple[str, dict[str, Path]]:
             stage = srows[0]["stage"]
             evals = [float(r["eval_place_success"]) for r in srows if r.get("eval_place_success") not in (None, "")]
             start = (int(srows[0]["global_step"]) - 1) // STAGE_STEPS * STAGE_STEPS
-            lines.append(f"| {name} | {stage} | {start:,}-{int(srows[-1]['global_step']):,} | {summary_cells(srows)} | "
-                         f"{fmt(evals[-1], 100) if evals else '-'} |")
-    return "\n".join(lines), csvs
+            stages_lines.append(f"| {name} | {stage} | {start:,}-{int(srows[-1]['global_step']):,} | "
+                                f"{summary_cells(srows)} | {fmt(evals[-1], 100) if evals else '-'} |")
+    return "\n".join(lines), "\n".join(stages_lines), csvs
 
 
 @dataclass
@@ -274,26 +276,35 @@ def figures(csvs: dict[str, Path], images: Path) -> list[str]:
 
 
 def main(args: Args) -> str:
-    body, csvs = report(args.campaign_dir)
+    body, stages, csvs = report(args.campaign_dir)
     print(body)
+    print(stages)
     if args.write_results:
         update_section(args.readme, "headline", headline(args.campaign_dir, args.eval_dir), "ms_construction")
         commands = figures(csvs, args.images)
         pictures = [f"![{Path(c.split('--out ')[1].split()[0]).stem}]({Path(*Path(c.split('--out ')[1].split()[0]).parts[1:])})\n\n"
                     f"*Made by `{c}`.*" for c in commands]
+        page = Path(os.path.relpath(args.experiment_page, args.results.parent)).as_posix()
         update_section(args.results, "paper-experiment", "\n".join([
-            "## The paper's experiment: where the campaign stands", "",
-            "Command: `python -m experiments.paper_report --write-results` (from the runs' progress.csv in campaign/; "
-            "settings: experiments/paper.py). Training episodes: the policy's sampled actions; "
-            f"'lately' is the last {LAST:,} env steps; 'end' is where the element was when the episode ended "
-            "(its distance and angle to the goal, whether the plate held it), the mean over the episodes.", "",
-            body, "", *pictures, "",
+            "## The paper's experiment", "",
+            "Command: `python -m experiments.paper_report --write-results` (Table II from the evaluation JSONs named "
+            f"below; the training runs from their progress.csv in campaign/; settings: experiments/paper.py and [the "
+            f"experiment page]({page}#each-stage-and-the-settings), with each run's stages).", "",
             "### Table II", "",
             "The paper's protocol: 50,000 env steps per task at cp4, deterministic actions (the policy's mean), seeds "
             "1,000,000 on (never used in training); the paper's rows as it printed them.", "",
             table_ii(args.campaign_dir, args.eval_dir), "",
+            "### The training runs", "",
+            "Training episodes: the policy's sampled actions; "
+            f"'lately' is the last {LAST:,} env steps; 'end' is where the element was when the episode ended "
+            "(its distance and angle to the goal, whether the plate held it), the mean over the episodes.", "",
+            body, "", *pictures]), "Results")
+        update_section(args.experiment_page, "paper-stages", "\n".join([
+            "## Each stage, and the settings", "",
+            "Made by `python -m experiments.paper_report --write-results`. Each stage of the runs, all its training "
+            "episodes:", "", stages, "",
             "The settings, from experiments/paper.py (where the paper is silent: ML-Agents' documented "
-            "defaults where they carry over, ppo.py's otherwise):", "", settings_table()]), "Results")
+            "defaults where they carry over, ppo.py's otherwise):", "", settings_table()]), "The paper's experiment")
     return body
 
 

@@ -138,20 +138,26 @@ def test_the_campaign_report_summarizes_each_run_and_stage_and_draws_figure_3_an
     results = tmp_path / "RESULTS.md"
     res = subprocess.run([sys.executable, "-m", "experiments.paper_report", "--campaign-dir", str(tmp_path / "campaign"),
                           "--write-results", "--results", str(results), "--images", str(tmp_path / "images"),
-                          "--eval-dir", str(tmp_path / "evaluations"), "--readme", str(tmp_path / "README.md")],
+                          "--eval-dir", str(tmp_path / "evaluations"), "--readme", str(tmp_path / "README.md"),
+                          "--experiment-page", str(tmp_path / "experiments" / "paper.md")],
                          capture_output=True, text=True, cwd=ROOT, env={**os.environ, "PYTHONPATH": str(ROOT)})
     assert res.returncode == 0, res.stderr
     text = results.read_text()
+    page = (tmp_path / "experiments" / "paper.md").read_text()  # the stages and the settings: the experiment page's
+    assert "(experiments/paper.md#each-stage-and-the-settings)" in text and "## Each stage, and the settings" in page
+    assert "| curiosity |" in page and "| curiosity |" not in text
+    assert text.index("### Table II") < text.index("### The training runs")
     assert "| paper_general_agent | the paper setting" in text and "4,000,000 / 8,000,000 | cp2 | 200,000 | 800 |" in text
-    assert "| paper_general_agent | cp1 | 0-2,000,000 | 8,000 | 50.0 | 0.0 |" in text
-    assert "| paper_general_agent | cp2 | 2,000,000-4,000,000 | 8,000 | 50.0 | 25.0 |" in text
+    assert "| paper_general_agent | cp1 | 0-2,000,000 |" not in text
+    assert "| paper_general_agent | cp1 | 0-2,000,000 | 8,000 | 50.0 | 0.0 |" in page
+    assert "| paper_general_agent | cp2 | 2,000,000-4,000,000 | 8,000 | 50.0 | 25.0 |" in page
     assert "| control_ceiling | controlGroup4.1" in text and "not started" in text
     assert "| control_flooring | controlGroup4.3: Flooring-v1, cp4 from the first step | 2,100,000 / 8,000,000 | cp4 |" in text
-    assert "| control_flooring | cp4 | 2,000,000-2,100,000 | 400 | 100.0 | 0.0 |" in text
+    assert "| control_flooring | cp4 | 2,000,000-2,100,000 | 400 | 100.0 | 0.0 |" in page
     assert (tmp_path / "images" / "paper_fig4.png").stat().st_size > 0
     assert (tmp_path / "images" / "paper_fig3.png").stat().st_size > 0
     assert "| paper_cp1_no_curiosity | run 1's cp1 stage without curiosity" in text and "1,000,000 / 2,000,000 | cp1 |" in text
-    assert "| paper_cp1_no_curiosity | cp1 | 0-1,000,000 | 4,000 | 25.0 | 0.0 |" in text
+    assert "| paper_cp1_no_curiosity | cp1 | 0-1,000,000 | 4,000 | 25.0 | 0.0 |" in page
     # curiosity's effect: run 3 beside run 1's own cp1 stage only
     assert (tmp_path / "images" / "paper_curiosity.png").stat().st_size > 0
     assert "--max-steps 2000000 --out" in text and "paper_curiosity.png)" in text
