@@ -181,7 +181,7 @@ def main(args: Args) -> dict:
         if not args.evaluate:
             return transfer.train(run, args.dry_run)
         args.agents = {**args.agents, f"{run.what} (trained among obstacles)": str(checkpoint_of(run))}
-    command = "python -m experiments.obstacles " + " ".join(shlex.quote(a) for a in sys.argv[1:])
+    command = " ".join(["python -m experiments.obstacles", *map(shlex.quote, sys.argv[1:])])
     rows: dict[tuple[str, str], dict[str, dict]] = {}
     giving_way = []
     with mp.get_context("spawn").Pool(args.workers) as pool:

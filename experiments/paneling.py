@@ -142,7 +142,7 @@ def main(args: Args) -> dict:
     if args.episodes < 1 or args.workers < 1:
         raise SystemExit("--episodes and --workers must be positive")
     args.agents = with_more_agents(args.agents, args.more_agents)
-    command = "python -m experiments.paneling " + " ".join(shlex.quote(a) for a in sys.argv[1:])
+    command = " ".join(["python -m experiments.paneling", *map(shlex.quote, sys.argv[1:])])
     seeds = list(range(args.seed, args.seed + args.episodes))
     rows: dict[str, dict] = {}
     with mp.get_context("spawn").Pool(args.workers) as pool:

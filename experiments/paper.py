@@ -5,7 +5,7 @@
     python -m experiments.paper --runs paper_general_agent --num-envs 16
     python -m experiments.paper --control-groups             # the control groups, 2M steps each (Fig. 4's length)
     python -m experiments.paper --control-groups --total-timesteps 8000000   # continued to the general agent's 8M
-    python -m experiments.paper_report --write-results       # its sections of docs/RESULTS.md, Figures 3 and 4
+    python -m experiments.paper_report --write-results       # its sections of docs/RESULTS.md and docs/experiments/paper.md, Figures 3 and 4
 
 Ctrl-C or SIGTERM stops the run in progress after its iteration, with a checkpoint; the same command resumes it.
 

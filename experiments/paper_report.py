@@ -1,6 +1,6 @@
-"""Where the paper's experiment stands, from its runs' progress.csv in campaign/: a table per run and
-per curriculum stage in docs/RESULTS.md, and Figure 3 (and Figure 4 once the control groups have run)
-as PNGs drawn by scripts/plot_training.py.
+"""The paper's experiment, from its evaluation JSONs and its runs' progress.csv in campaign/: Table II and a table of
+the runs in docs/RESULTS.md, each run's curriculum stages and the settings on docs/experiments/paper.md, and Figure 3
+(and Figure 4 once the control groups have run) as PNGs drawn by scripts/plot_training.py.
 
     python -m experiments.paper_report                  # print the tables
     python -m experiments.paper_report --write-results  # and write them, with the figures, into docs/

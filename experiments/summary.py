@@ -65,7 +65,7 @@ def paper_tasks_table() -> list[str]:
         chosen = from_scratch.chosen_step(seed)
         if chosen is not None and from_scratch.seed_evaluation_json(seed, chosen).is_file():
             latest[seed] = (chosen, from_scratch.seed_evaluation_json(seed, chosen))
-        if seed in latest and str(latest[seed][1]) == shipped_from:
+        if seed in latest and shipped_from and latest[seed][1].resolve() == Path(shipped_from).resolve():
             continue  # the shipped reward-only agent's row above is this seed's choice, weight for weight
         if seed in latest:
             step, path = latest[seed]

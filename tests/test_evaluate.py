@@ -51,7 +51,8 @@ def test_single_task_json_has_the_fields_at_top_level(tmp_path):
                 "pick_success_ci95", "place_success_ci95"):
         assert key in data
     assert data["episodes"] == 2 and [e["seed"] for e in data["episode_results"]] == [1_000_000, 1_000_001]
-    assert data["command"] == f"python scripts/evaluate.py --env-id Flooring-v1 --episodes 2 --json {out} --workers 1"
+    assert data["command"] == (f"python scripts/evaluate.py --checkpoint {evaluation.DEFAULT_CHECKPOINT} --env-id "
+                               f"Flooring-v1 --episodes 2 --seed 1000000 --json {out} --workers 1")
 
 
 def test_the_command_written_down_builds_the_same_args():
@@ -66,7 +67,8 @@ def test_the_command_written_down_builds_the_same_args():
     argv = shlex.split(evaluation.command_of(args))
     assert argv[:2] == ["python", "scripts/evaluate.py"]
     assert tyro.cli(evaluation.Args, args=argv[2:]) == args
-    assert evaluation.command_of(evaluation.Args()) == "python scripts/evaluate.py"
+    assert evaluation.command_of(evaluation.Args()) == ("python scripts/evaluate.py --checkpoint "
+                                                         f"{evaluation.DEFAULT_CHECKPOINT} --seed 1000000")
 
 
 def test_training_and_scripts_evaluate_py_run_the_same_episode_loop(tmp_path):

@@ -190,7 +190,7 @@ def test_a_seed_is_evaluated_on_its_latest_snapshot_once_and_its_row_joins_the_s
     assert set(tasks) == {"CeilingInstallation-v1", "WindowInstallation-v1", "Flooring-v1"}
     assert all(t["steps"] >= 300 and t["episodes"] >= 1 for t in tasks.values())
     assert json.loads(out.read_text())["command"] == (f"python scripts/evaluate.py --checkpoint {tmp_path}/campaign/scratch_s1/"
-                                                      f"checkpoint.pt --all --steps 300 --json {out} --workers 1")
+                                                      f"checkpoint.pt --all --steps 300 --seed 1000000 --json {out} --workers 1")
     written = out.stat().st_mtime_ns
     assert fs.evaluate_seed(1) == out and out.stat().st_mtime_ns == written  # kept, not run again
     body = fs.seeds_report(tmp_path / "RESULTS.md", log_dir=tmp_path / "campaign")
@@ -306,5 +306,6 @@ def test_the_better_seed_on_validation_ships_only_if_it_places_what_the_shipped_
     assert f"at commit {fs.recipe_commit()}" in record["chosen"] and fs.recipe_commit() != "unknown"
     now = json.loads(fs.EVAL_JSON.read_text())
     assert now["tasks"] == tasks(0.9)["tasks"], "its evaluation is the shipped policy's now"
-    assert now["command"] == f"python scripts/evaluate.py --checkpoint {shipped} --all --steps 50000 --json {fs.EVAL_JSON}"
+    assert now["command"] == (f"python scripts/evaluate.py --checkpoint {shipped} --all --steps 50000 --seed 1000000 "
+                              f"--json {fs.EVAL_JSON}")
     assert now["evaluated_as"] == dict(checkpoint="runs/snapshot.pt", json=str(fs.seed_evaluation_json(2, 40)))

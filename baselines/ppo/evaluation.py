@@ -106,12 +106,14 @@ class Args:
 
 
 def command_of(args: Args) -> str:
-    """The `python scripts/evaluate.py` command that makes `args` (its flags that differ from the defaults), so that
-    an evaluation run from code (experiments/) writes down the command a reader can run, not its caller's argv."""
+    """The `python scripts/evaluate.py` command that makes `args` (the checkpoint and the first seed always, other
+    flags where they differ from the defaults, so that a later change of a default does not change what a recorded
+    command runs), so that an evaluation run from code (experiments/) writes down the command a reader can run, not
+    its caller's argv."""
     flags, default = [], Args()
     for field in fields(Args):
         value = getattr(args, field.name)
-        if value == getattr(default, field.name):
+        if field.name not in ("checkpoint", "seed") and value == getattr(default, field.name):
             continue
         flag = "--" + field.name.replace("_", "-")
         if isinstance(value, bool):
