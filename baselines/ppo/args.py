@@ -17,6 +17,7 @@ from typing import Annotated, Any, Iterator, Literal, Optional, get_args, get_or
 import torch
 import tyro
 
+from baselines import cli
 from ms_construction.curriculum import STAGE_NAMES
 from ms_construction.parameters import ELEMENT_KINDS
 from ms_construction.envs import ENV_IDS
@@ -475,17 +476,4 @@ def resolve_defaults(args: Args) -> None:
 def command_line(args: Args) -> list[str]:
     """ppo.py's flags that build `args` (those that differ from the defaults), so that a run configured in code
     (experiments/) can be written down as one `python baselines/ppo/ppo.py ...` command."""
-    flags, default = [], Args().flat()
-    for name, value in args.flat().items():
-        if value == default[name]:
-            continue
-        flag = "--" + name.replace("_", "-")
-        if isinstance(value, bool):
-            flags.append(flag if value else "--no-" + name.replace("_", "-"))
-        elif value is None:
-            flags += [flag, "None"]
-        elif isinstance(value, (tuple, list)):
-            flags += [flag, *map(str, value)]
-        else:
-            flags += [flag, str(value)]
-    return flags
+    return cli.flags(args.flat(), Args().flat())

@@ -32,6 +32,7 @@ import numpy as np
 import torch
 from tqdm import tqdm
 
+from baselines import cli
 from baselines.ppo.checkpoints import load_checkpoint, load_policy
 from baselines.ppo.start_states import GOAL_SLOTS
 from ms_construction.curriculum import FINAL_STAGE, STAGE_NAMES, stage_tolerances
@@ -110,19 +111,9 @@ def command_of(args: Args) -> str:
     flags where they differ from the defaults, so that a later change of a default does not change what a recorded
     command runs), so that an evaluation run from code (experiments/) writes down the command a reader can run, not
     its caller's argv."""
-    flags, default = [], Args()
-    for field in fields(Args):
-        value = getattr(args, field.name)
-        if field.name not in ("checkpoint", "seed") and value == getattr(default, field.name):
-            continue
-        flag = "--" + field.name.replace("_", "-")
-        if isinstance(value, bool):
-            flags.append(flag if value else "--no-" + field.name.replace("_", "-"))
-        elif isinstance(value, (tuple, list)):
-            flags += [flag, *map(str, value)]
-        else:
-            flags += [flag, str(value)]
-    return " ".join(["python scripts/evaluate.py", *map(shlex.quote, flags)])
+    values = {f.name: getattr(args, f.name) for f in fields(Args)}
+    defaults = {f.name: getattr(Args(), f.name) for f in fields(Args)}
+    return shlex.join(["python", "scripts/evaluate.py", *cli.flags(values, defaults, always=("checkpoint", "seed"))])
 
 
 def wilson(successes: int, n: int, z: float = 1.96) -> tuple[float, float]:
