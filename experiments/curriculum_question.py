@@ -154,9 +154,10 @@ def draw_curves(seeds: tuple[int, ...], out: Path, num_envs: Optional[int] = Non
         axes[1, col].set_xlabel("env steps (millions)")
     axes[0, 0].set_ylabel(f"snapshots placed at cp4, %\n({VALIDATION_EPISODES} validation episodes per task)")
     axes[1, 0].set_ylabel("training episodes placed, %\n(the stage's tolerance; ordinary resets)")
-    axes[0, 0].legend(fontsize=7, loc="upper left")
+    # one legend for the figure, below the panels, where it hides no curve
+    fig.legend(*axes[0, 0].get_legend_handles_labels(), loc="lower center", ncol=4, fontsize=8, handlelength=3)
     fig.suptitle("The recipe from reward alone with and without Table I's curriculum (shaded: the curriculum's stages)")
-    fig.tight_layout()
+    fig.tight_layout(rect=(0, 0.05, 1, 1))
     out.parent.mkdir(parents=True, exist_ok=True)
     fig.savefig(out, dpi=100)
     plt.close(fig)
