@@ -4,6 +4,7 @@ held out of training, evaluated with the paper's protocol on the openings it nev
     python -m experiments.unseen_openings --seed 1 --dry-run     # the plan, and where that seed's run stands
     python -m experiments.unseen_openings --seed 1               # train (or resume) to the recipe's budget
     python -m experiments.unseen_openings --seed 1 --evaluate    # the paper's protocol, unseen and seen openings
+    python -m experiments.unseen_openings --imitation --dry-run  # its plan, and how far it has come
     python -m experiments.unseen_openings --imitation            # the imitation twin: demonstrations -> clone ->
                                                                  # residual PPO on the trained openings, then evaluated
     python -m experiments.unseen_openings --report               # RESULTS' section from the evaluations
@@ -91,6 +92,23 @@ def imitation(run_dir: Path = IMITATION_DIR, clone: Optional[dict] = None, refin
                                    **{**IMITATION_REFINE, **(refine_args or {})}))
 
 
+def imitation_plan(run_dir: Path = IMITATION_DIR) -> str:
+    """What `imitation` would do, and how far it has come in `run_dir` (nothing is run)."""
+    lines = [f"the imitation twin on goal openings {', '.join(map(str, TRAINED))} "
+             f"(held out: {', '.join(map(str, HELD_OUT))}), in {run_dir}:"]
+    for stage, what, settings in (
+            ("clone", "the expert's demonstrations and their behaviour clone (experiments/general_agent.py)", IMITATION_CLONE),
+            ("refine", "residual PPO on the frozen clone, chosen on validation (experiments/refine.py)", IMITATION_REFINE)):
+        where = run_dir / stage
+        made = sum(p.is_file() for p in where.rglob("*")) if where.is_dir() else 0
+        lines.append(f"- {stage}: {what}, {settings}: " + (f"{made} file{'s' * (made != 1)} in {where} so far" if made else "not started"))
+    for seen in (False, True):
+        path = evaluation_json("imitation", seen)
+        lines.append(f"- the paper's protocol on the {'trained' if seen else 'held-out'} openings: "
+                     + (f"done ({path})" if path.is_file() else "not yet"))
+    return "\n".join(lines)
+
+
 def report(results: Path = Path("docs/RESULTS.md"), seeds: tuple[int, ...] = (1, 2)) -> str:
     """RESULTS' section: per run evaluated (the recipe's seeds, the imitation twin), place success on the unseen and
     the seen openings per task."""
@@ -139,6 +157,9 @@ def main(args: Args) -> None:
         print(report())
         return
     if args.imitation:
+        print(imitation_plan())
+        if args.dry_run:
+            return
         evaluate(imitation(), "imitation")
         print(report())
         return

@@ -52,6 +52,22 @@ def test_the_report_tables_unseen_and_seen_openings_per_seed(tmp_path, monkeypat
         uo.main(uo.Args())
 
 
+def test_the_imitation_twins_dry_run_runs_nothing_and_says_how_far_it_has_come(tmp_path, monkeypatch, capsys):
+    monkeypatch.setattr(uo, "IMITATION_DIR", tmp_path / "imitation")
+    monkeypatch.setattr(uo, "EVAL_DIR", tmp_path / "evaluations")
+    monkeypatch.setattr(uo, "imitation", lambda *a, **k: pytest.fail("a dry run trained"))
+    uo.main(uo.Args(imitation=True, dry_run=True))
+    plan = capsys.readouterr().out
+    assert "goal openings 0, 2 (held out: 1)" in plan and plan.count("not started") == 2 and plan.count("not yet") == 2
+    (tmp_path / "imitation" / "clone" / "bc0").mkdir(parents=True)
+    (tmp_path / "imitation" / "clone" / "bc0" / "checkpoint.pt").write_bytes(b"")
+    (tmp_path / "evaluations").mkdir()
+    uo.evaluation_json("imitation", False).write_text("{}")
+    plan = uo.imitation_plan(tmp_path / "imitation")
+    assert "- clone:" in plan and "1 file in" in plan and plan.count("not started") == 1
+    assert "held-out openings: done" in plan and plan.count("not yet") == 1
+
+
 def test_the_imitation_twin_demonstrates_clones_refines_and_validates_on_the_trained_openings_only(tmp_path, monkeypatch):
     """`--imitation` on a tiny budget, end to end: every stage that draws episodes (demonstrations, the clone's
     validation, the bank, PPO's training envs, the refinement's validations) is given the trained openings only,
