@@ -15,9 +15,10 @@ row is written to --out as it finishes and skipped when the file is there with t
 run goes on where it stopped.
 
 Training (`--train`): the from-scratch recipe on PanelInstallation-v1 with the task's own dense reward, from nothing
-or from the shipped reward-only agent's weights (experiments/transfer.py), TRAIN_BUDGET env steps each, in
-campaign/paneling_<start>_s<seed>/; the env steps to 90% placed are read from its training episodes
-(`transfer.steps_to`), then confirmed with the paper's protocol (`--evaluate`).
+or from the shipped reward-only agent's weights (experiments/transfer.py), in campaign/paneling_<start>_s<seed>/:
+TRAIN_BUDGET env steps at most, ending at the first 250,000-step mark by which its training episodes placed 90%
+(`transfer.steps_to`: the env steps to 90% placed, what the run measures), then confirmed with the paper's protocol
+(`--evaluate`).
 """
 
 from __future__ import annotations
@@ -52,7 +53,7 @@ AGENTS = {
 
 
 TRAIN_BUDGET = 3_000_000
-"""env steps of each training run on paneling."""
+"""env steps of a training run on paneling at most (it ends once its training episodes place 90%)."""
 TRAIN_EVAL_JSON = "docs/data/paneling/train_{start}_s{seed}_eval50k.json"
 
 
@@ -133,7 +134,7 @@ def train(args: Args) -> None:
         evaluation.main(evaluation.Args(checkpoint=checkpoint_of(run), env_id=ENV_ID, steps=50_000,
                                         workers=args.workers, json=out))
     else:
-        transfer.train(run, args.dry_run)
+        transfer.train(run, args.dry_run, stop_at_target=True)
 
 
 def main(args: Args) -> dict:

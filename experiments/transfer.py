@@ -16,13 +16,17 @@ import numpy as np
 
 from baselines.ppo.args import command_line
 from experiments.campaign import Run, checkpoint_of, describe, run_or_resume
-from experiments.from_scratch import METHOD, csv_column, moving_mean, scratch_args
+from experiments.from_scratch import METHOD, csv_column, moving_mean, scratch_args, train as train_in_parts
 
 STARTS = {"nothing": None, "shipped": "assets/checkpoints/scratch_general_agent.pt"}
 """where a run starts: fresh weights, or the shipped reward-only general agent's (whose network the recipe shares;
 the imitation agent's residual network is another)."""
 TARGET = 0.9
 """the place success whose first crossing `steps_to` reports."""
+STOP_EVERY = 250_000
+"""env steps between the checks of a run that stops at TARGET (`train`'s `stop_at_target`)."""
+SNAPSHOT_DIR = Path("runs/transfer_snapshots")
+"""where such a run's checkpoint at each check is kept (not committed)."""
 
 
 @dataclass
@@ -65,14 +69,22 @@ def steps_to(progress: Path, target: float = TARGET, window: int = 50) -> Option
     return int(csv_column(rows, "global_step")[hit[0]]) if len(hit) else None
 
 
-def train(run: Run, dry_run: bool = False) -> None:
+def train(run: Run, dry_run: bool = False, stop_at_target: bool = False) -> None:
     """Print the plan and where `run` stands; unless `dry_run`, train (or resume) it to its budget and say when its
-    training episodes first placed TARGET."""
+    training episodes first placed TARGET. With `stop_at_target` it trains in parts of STOP_EVERY env steps and ends
+    after the first part by whose end they have: what such an experiment measures (`steps_to`) is known then, and
+    the rest of the budget would only train past it."""
     print(describe(run))
     print("as one ppo.py command: python baselines/ppo/ppo.py " + " ".join(command_line(run.args)))
+    progress = checkpoint_of(run).parent / "progress.csv"
+    if stop_at_target:
+        print(f"it stops at the first {STOP_EVERY:,}-env-step mark by which its training episodes placed >= {TARGET:.0%}")
     if dry_run:
         return
-    run_or_resume(run)
-    reached = steps_to(checkpoint_of(run).parent / "progress.csv")
+    if not stop_at_target:
+        run_or_resume(run)
+    elif not (progress.is_file() and steps_to(progress) is not None):
+        train_in_parts(run, SNAPSHOT_DIR / run.name, every=STOP_EVERY, stop=lambda: steps_to(progress) is not None)
+    reached = steps_to(progress)
     print(f"{run.name}: training episodes placed >= {TARGET:.0%} "
           + (f"from {reached:,} env steps" if reached is not None else "not yet"))

@@ -238,3 +238,43 @@ def test_steps_to_reads_the_first_crossing_of_the_training_episodes_moving_mean(
     # a 10-iteration mean first reaches 0.9 nine iterations into the ones
     assert transfer.steps_to(progress, 0.9, window=10) == 2000 * 19
     assert transfer.steps_to(progress, 1.01, window=10) is None
+
+
+def test_a_paneling_run_ends_at_the_first_mark_by_which_its_training_episodes_placed_the_target(tmp_path, monkeypatch,
+                                                                                                capsys):
+    """`--train`: what the run measures is the env steps to 90% placed; it trains in parts and ends after the first
+    part by whose end its training episodes got there, and a resumed run that has got there trains no more. (ppo.py
+    is a stand-in that writes the checkpoint and the progress of each part: its training episodes place every time
+    from 302,000 env steps on.)"""
+    import dataclasses
+
+    from experiments import campaign, paneling, transfer
+    from experiments import from_scratch as fs
+
+    run = paneling.training_run("shipped")
+    run = dataclasses.replace(run, args=run.args.replace(log_dir=str(tmp_path / "campaign"), total_timesteps=1_000_000))
+    monkeypatch.setattr(transfer, "SNAPSHOT_DIR", tmp_path / "snapshots")
+    for module in (fs, campaign):
+        monkeypatch.setattr(module, "load_checkpoint", lambda path: torch.load(path, weights_only=False))
+    parts = []
+
+    def part_of_training(args):
+        ckpt = Path(args.log_dir) / args.exp_name / "checkpoint.pt"
+        assert (args.resume is not None) == ckpt.is_file(), "each part resumes the last"
+        done = torch.load(ckpt, weights_only=False)["progress"]["global_step"] if ckpt.is_file() else 0
+        ckpt.parent.mkdir(parents=True, exist_ok=True)
+        with open(ckpt.parent / "progress.csv", "a") as f:
+            f.write("" if done else "global_step,ordinary_place_success\n")
+            f.writelines(f"{s},{float(s >= 302_000)}\n" for s in range(done + 2000, args.total_timesteps + 1, 2000))
+        torch.save({"progress": {"global_step": args.total_timesteps}}, ckpt)
+        parts.append(args.total_timesteps)
+
+    monkeypatch.setattr(fs.ppo, "main", part_of_training)
+    transfer.train(run, stop_at_target=True)
+    # the 50-iteration mean first reaches 90% 45 iterations into the ones, at 390,000: the part that ends at 500,000
+    assert parts == [250_000, 500_000]
+    assert "placed >= 90% from 390,000 env steps" in capsys.readouterr().out
+    assert sorted(p.name for p in (tmp_path / "snapshots" / run.name).iterdir()) == ["checkpoint_250000.pt",
+                                                                                     "checkpoint_500000.pt"]
+    transfer.train(run, stop_at_target=True)
+    assert parts == [250_000, 500_000], "a run that has reached the target trains no more"
