@@ -50,15 +50,6 @@ def pose7(p, rot: np.ndarray) -> list[float]:
     return [round(float(v), 9) + 0.0 for v in (*p, *q)]
 
 
-def pose_matrix(pose: list[float]) -> np.ndarray:
-    from transforms3d.quaternions import quat2mat
-
-    T = np.eye(4)
-    T[:3, :3] = quat2mat(pose[3:])
-    T[:3, 3] = pose[:3]
-    return T
-
-
 GRASP_IN_ELEMENT_ROT = euler2mat(np.pi, 0, 0)
 """tcp orientation at grasp, in the element frame: tcp z = element -z (pointing into the +z face)."""
 
