@@ -6,6 +6,7 @@ from-scratch recipe learning it.
     python -m experiments.paneling --train nothing       # the recipe on paneling from nothing (or: shipped), resumable
                                                          # (--train-seed S: another seed)
     python -m experiments.paneling --train shipped --evaluate   # the paper's protocol on that run's policy
+    python -m experiments.paneling --training-report     # RESULTS' section on the training runs there are
 
 The shipped agents were trained on the paper's three task types; on paneling the task one-hot's new slot is the
 only thing that says which task it is, and they read it with zero weights (baselines/ppo/checkpoints.py,
@@ -23,8 +24,10 @@ TRAIN_BUDGET env steps at most, ending at the first 250,000-step mark by which i
 
 from __future__ import annotations
 
+import csv
 import json
 import multiprocessing as mp
+import os
 import shlex
 import sys
 from dataclasses import dataclass, field
@@ -38,7 +41,8 @@ import tyro
 from baselines.ppo import evaluation
 from baselines.ppo.evaluation import episode_job, pct, wilson
 from experiments import transfer
-from experiments.campaign import Run, checkpoint_of
+from experiments.campaign import Run, checkpoint_of, training_wall_s
+from experiments.from_scratch import csv_column, moving_mean
 from experiments.obstacles import RESULTS_PATH, row_name, run_row, with_more_agents
 from experiments.transfer import transfer_run
 from ms_construction.curriculum import FINAL_STAGE
@@ -55,6 +59,11 @@ AGENTS = {
 TRAIN_BUDGET = 3_000_000
 """env steps of a training run on paneling at most (it ends once its training episodes place 90%)."""
 TRAIN_EVAL_JSON = "docs/data/paneling/train_{start}_s{seed}_eval50k.json"
+TRAIN_SEEDS = (1,)
+"""the training runs' seeds that the training section reports."""
+TRAIN_CURVE = Path("docs/images/paneling_training.png")
+STEPS_WINDOW = 50
+"""iterations (of 2,000 env steps) over which the training episodes' place success is averaged: `transfer.steps_to`'s."""
 
 
 def training_run(start: str, seed: int = 1, num_envs: Optional[int] = None) -> Run:
@@ -79,7 +88,9 @@ class Args(transfer.TrainOptions):
     more_agents: tuple[str, ...] = ()
     """more agents to run after those, LABEL=CHECKPOINT each (a seed's candidate snapshot, say)."""
     write_results: bool = True
-    """write the table into docs/RESULTS.md (section `paneling-zero-shot`)."""
+    """write the table into docs/RESULTS.md (section `paneling-zero-shot`; with --train, `paneling-training`)."""
+    training_report: bool = False
+    """write RESULTS' section on training on paneling (`paneling-training`) from the runs there are, and exit."""
 
 
 _expert: dict = {}
@@ -135,9 +146,80 @@ def train(args: Args) -> None:
                                         workers=args.workers, json=out))
     else:
         transfer.train(run, args.dry_run, stop_at_target=True)
+    if not args.dry_run and args.write_results:
+        print(training_report())
+
+
+def training_report(results: Path = RESULTS_PATH, curve: Path = TRAIN_CURVE) -> str:
+    """RESULTS' section on the recipe trained on paneling, from each run's progress.csv and its evaluation (where
+    there is one): the env steps its training episodes took to place 90%, and its curve."""
+    head = ("| run | env steps trained | env steps to 90% placed (its training episodes) | training wall time (h) | "
+            "placed % [95% CI], the paper's protocol |\n|---|---|---|---|---|")
+    lines, curves = [head], {}
+    for start in transfer.STARTS:
+        for seed in TRAIN_SEEDS:
+            run = training_run(start, seed)
+            progress = checkpoint_of(run).parent / "progress.csv"
+            if not progress.is_file():
+                lines.append(f"| {run.what} | not run: `{run.command}` | | | |")
+                continue
+            with open(progress, newline="") as f:
+                rows = list(csv.DictReader(f))
+            steps = csv_column(rows, "global_step")
+            curves[run.what] = (steps, moving_mean(csv_column(rows, "ordinary_place_success"), STEPS_WINDOW))
+            reached = transfer.steps_to(progress, window=STEPS_WINDOW)
+            wall_h = training_wall_s(progress, run.args.num_envs * run.args.num_steps) / 3600
+            evaluated = Path(TRAIN_EVAL_JSON.format(start=start, seed=seed))
+            if evaluated.is_file():
+                task = json.loads(evaluated.read_text())["tasks"][ENV_ID]
+                placed = pct(task["place_success"], task["place_success_ci95"])
+            else:
+                placed = f"not yet: `{run.command} --evaluate`"
+            lines.append(f"| {run.what} | {int(steps[-1]):,} | {'not yet' if reached is None else format(reached, ',')} | "
+                         f"{wall_h:.1f} | {placed} |")
+    if curves:
+        plot_training(curves, curve)
+    body = ("## Paneling, trained\n\n"
+            "Commands: `python -m experiments.paneling --train nothing`, `--train shipped` (each resumable), then "
+            "`--evaluate` beside either; this section: `python -m experiments.paneling --training-report`. The "
+            "from-scratch recipe unchanged but for the env (PanelInstallation-v1, its dense reward from the same rule "
+            f"as the paper's tasks) and the budget ({TRAIN_BUDGET:,} env steps at most, ending at the first "
+            f"{transfer.STOP_EVERY:,}-step mark by which its training episodes placed {transfer.TARGET:.0%}), from "
+            "nothing or from the shipped reward-only agent's weights. Env steps to 90%: the first at which its "
+            f"training episodes from ordinary resets placed {transfer.TARGET:.0%} (their mean over the last "
+            f"{STEPS_WINDOW * 2_000:,} env steps); the paper's protocol: 50,000 env steps, cp4, test seeds, the "
+            "policy's mean.\n\n" + "\n".join(lines) + "\n"
+            + (f"\n![paneling, trained]({os.path.relpath(curve, results.parent)})\n" if curves else ""))
+    update_section(results, "paneling-training", title="Results", body=body)
+    return body
+
+
+def plot_training(curves: dict[str, tuple[np.ndarray, np.ndarray]], out: Path) -> None:
+    """Each run's training episodes placed (their moving mean) against env steps, and the 90% line."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, ax = plt.subplots(figsize=(7, 3.5))
+    for label, (steps, placed) in curves.items():
+        ax.plot(steps / 1e6, 100 * placed, label=label)
+    ax.axhline(100 * transfer.TARGET, color="gray", ls="--", lw=1)
+    ax.set_xlabel("env steps (millions)")
+    ax.set_ylabel("training episodes placed, %\n(ordinary resets, cp4)")
+    ax.set_ylim(0, 102)
+    ax.set_title("The from-scratch recipe learning paneling")
+    ax.legend(fontsize=7, loc="lower right")
+    fig.tight_layout()
+    out.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(out, dpi=100)
+    plt.close(fig)
 
 
 def main(args: Args) -> dict:
+    if args.training_report:
+        print(training_report())
+        return {}
     if args.train is not None:
         return train(args)
     if args.episodes < 1 or args.workers < 1:
@@ -169,7 +251,7 @@ def main(args: Args) -> dict:
             "for the paper's tasks (start paths from each bay to the staging table, a planned via where no path from "
             "the table's main side is wholly clear), with no code of its own; a straight joint move from the table "
             "toward any bay pays less than stepping along its paths (tests/test_near_goal_starts.py). Training on "
-            "paneling has not run yet.\n")
+            "paneling: [the next section](#paneling-trained).\n")
     print(body)
     args.out.mkdir(parents=True, exist_ok=True)
     (args.out / "summary.json").write_text(json.dumps({"command": command, "rows": rows}, indent=1) + "\n")

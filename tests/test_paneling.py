@@ -278,3 +278,28 @@ def test_a_paneling_run_ends_at_the_first_mark_by_which_its_training_episodes_pl
                                                                                      "checkpoint_500000.pt"]
     transfer.train(run, stop_at_target=True)
     assert parts == [250_000, 500_000], "a run that has reached the target trains no more"
+
+
+def test_the_training_section_reads_each_run_s_progress_and_evaluation(tmp_path, monkeypatch):
+    """`--training-report`: a row per run, from its progress.csv (env steps, the env steps its training episodes took
+    to place 90%, wall time) and its paper-protocol evaluation where there is one; a run not started says how to
+    start it; the curve is drawn and linked."""
+    from experiments import paneling
+    from experiments.campaign import checkpoint_of
+
+    monkeypatch.chdir(tmp_path)
+    progress = checkpoint_of(paneling.training_run("shipped")).parent / "progress.csv"
+    progress.parent.mkdir(parents=True)
+    placed = [0.0] * 100 + [1.0] * 100  # 2,000 env steps an iteration, each taking 2 s
+    progress.write_text("global_step,ordinary_place_success,sps\n"
+                        + "".join(f"{2000 * (i + 1)},{p},1000\n" for i, p in enumerate(placed)))
+    evaluated = Path(paneling.TRAIN_EVAL_JSON.format(start="shipped", seed=1))
+    evaluated.parent.mkdir(parents=True)
+    evaluated.write_text(json.dumps({"tasks": {paneling.ENV_ID: {"place_success": 0.95,
+                                                                 "place_success_ci95": [0.9, 0.97]}}}))
+    body = paneling.training_report(tmp_path / "RESULTS.md", tmp_path / "images" / "curve.png")
+    # the 50-iteration mean first reaches 90% 45 iterations into the ones: 290,000 env steps
+    assert "scratch_general_agent.pt, seed 1 | 400,000 | 290,000 | 0.1 | 95.0 [90.0, 97.0] |" in body
+    assert "| not run: `python -m experiments.paneling --train nothing --train-seed 1` |" in body
+    assert (tmp_path / "images" / "curve.png").stat().st_size > 0 and "](images/curve.png)" in body
+    assert "<!-- begin paneling-training (generated) -->" in (tmp_path / "RESULTS.md").read_text()
