@@ -62,8 +62,6 @@ TRAIN_EVAL_JSON = "docs/data/paneling/train_{start}_s{seed}_eval50k.json"
 TRAIN_SEEDS = (1,)
 """the training runs' seeds that the training section reports."""
 TRAIN_CURVE = Path("docs/images/paneling_training.png")
-STEPS_WINDOW = 50
-"""iterations (of 2,000 env steps) over which the training episodes' place success is averaged: `transfer.steps_to`'s."""
 
 
 def training_run(start: str, seed: int = 1, num_envs: Optional[int] = None) -> Run:
@@ -166,8 +164,8 @@ def training_report(results: Path = RESULTS_PATH, curve: Path = TRAIN_CURVE) -> 
             with open(progress, newline="") as f:
                 rows = list(csv.DictReader(f))
             steps = csv_column(rows, "global_step")
-            curves[run.what] = (steps, moving_mean(csv_column(rows, "ordinary_place_success"), STEPS_WINDOW))
-            reached = transfer.steps_to(progress, window=STEPS_WINDOW)
+            curves[run.what] = (steps, moving_mean(csv_column(rows, "ordinary_place_success"), transfer.STEPS_WINDOW))
+            reached = transfer.steps_to(progress)
             wall_h = training_wall_s(progress, run.args.num_envs * run.args.num_steps) / 3600
             evaluated = Path(TRAIN_EVAL_JSON.format(start=start, seed=seed))
             if evaluated.is_file():
@@ -187,7 +185,7 @@ def training_report(results: Path = RESULTS_PATH, curve: Path = TRAIN_CURVE) -> 
             f"{transfer.STOP_EVERY:,}-step mark by which its training episodes placed {transfer.TARGET:.0%}), from "
             "nothing or from the shipped reward-only agent's weights. Env steps to 90%: the first at which its "
             f"training episodes from ordinary resets placed {transfer.TARGET:.0%} (their mean over the last "
-            f"{STEPS_WINDOW * 2_000:,} env steps); the paper's protocol: 50,000 env steps, cp4, test seeds, the "
+            f"{transfer.STEPS_WINDOW} iterations); the paper's protocol: 50,000 env steps, cp4, test seeds, the "
             "policy's mean.\n\n" + "\n".join(lines) + "\n"
             + (f"\n![paneling, trained]({os.path.relpath(curve, results.parent)})\n" if curves else ""))
     update_section(results, "paneling-training", title="Results", body=body)

@@ -23,6 +23,9 @@ STARTS = {"nothing": None, "shipped": "assets/checkpoints/scratch_general_agent.
 the imitation agent's residual network is another)."""
 TARGET = 0.9
 """the place success whose first crossing `steps_to` reports."""
+STEPS_WINDOW = 50
+"""iterations over which `steps_to` averages the training episodes' place success (100,000 env steps at the
+recipe's 2,000 per iteration)."""
 STOP_EVERY = 250_000
 """env steps between the checks of a run that stops at TARGET (`train`'s `stop_at_target`)."""
 SNAPSHOT_DIR = Path("runs/transfer_snapshots")
@@ -59,7 +62,7 @@ def transfer_run(name: str, start: str, seed: int, num_envs: Optional[int], budg
                f"{command} --train {start} --train-seed {seed}", None, method=METHOD)
 
 
-def steps_to(progress: Path, target: float = TARGET, window: int = 50) -> Optional[int]:
+def steps_to(progress: Path, target: float = TARGET, window: int = STEPS_WINDOW) -> Optional[int]:
     """The first env step at which the training episodes from ordinary resets placed at least `target` (their mean
     over the last `window` iterations: 100,000 env steps at the recipe's 2,000 per iteration); None if never."""
     with open(progress, newline="") as f:
