@@ -634,3 +634,29 @@ def test_failure_task_weights_sample_more_of_what_fails_and_a_resumed_run_sets_t
     first = next(a for name, a in calls if name == "set_task_weights")
     raw = [FAILURE_WEIGHT_FLOOR, 1 + FAILURE_WEIGHT_FLOOR, 0.5 + FAILURE_WEIGHT_FLOOR]
     assert list(first[0].values()) == pytest.approx([w / sum(raw) for w in raw])
+
+
+def test_progress_csv_keeps_every_task_type_s_columns_paneling_s_too():
+    """A run on paneling logs its own start radii and ordinary-reset success: every per-task-type column
+    `episode_columns` writes is one of the CSV's (the CSV drops the rest), for each of ELEMENT_KINDS."""
+    from collections import defaultdict
+
+    from experiments.from_scratch import scratch_args
+    from ms_construction.parameters import ELEMENT_KINDS
+
+    args = scratch_args(2, env_id="PanelInstallation-v1")
+    kinds = len(ELEMENT_KINDS)
+    progress = checkpoints.Progress(near_goal_radius=[0.3] * kinds, near_goal_recent=[[] for _ in range(kinds)],
+                                    reach_start_radius=[0.2] * (3 * kinds),
+                                    reach_start_recent=[[] for _ in range(3 * kinds)])
+    paneling = ELEMENT_KINDS.index("paneling")
+    # one episode of each kind of start, none enough to widen a radius (so no env is called)
+    episodes = defaultdict(list, success=[1.0, 0.0, 1.0], picked=[1.0, 1.0, 1.0], near_goal=[False, True, False],
+                    reach_start=[False, False, True], reach_start_grasped=[0.0, 0.0, 1.0], task_id=[paneling] * 3,
+                    goal_slot=[0, 1, 2], **{key: [0.0] * 3 for key in ppo.EPISODE_STATS.values()
+                                            if key not in ("success", "picked")})
+    row = ppo.episode_columns(args, progress, episodes, envs=None)
+    per_kind = [k for k in row if any(kind in k for kind in ELEMENT_KINDS)]
+    assert {"ordinary_place_paneling", "near_goal_radius_paneling", "reach_start_radius_paneling2"} <= set(per_kind)
+    assert not set(per_kind) - set(checkpoints.CSV_FIELDS), set(per_kind) - set(checkpoints.CSV_FIELDS)
+    assert row["ordinary_place_paneling"] == 1.0 and row["reach_start_radius_paneling2"] == 0.2

@@ -403,6 +403,9 @@ CSV_FIELDS = [
     "reach_start_radius_window0", "reach_start_radius_window1", "reach_start_radius_window2",
     "reach_start_radius_flooring0", "reach_start_radius_flooring1", "reach_start_radius_flooring2",
     "ordinary_pick_ceiling", "ordinary_pick_window", "ordinary_pick_flooring",
+    # the fourth task type's, after the paper's three so that the columns of earlier runs keep their places
+    "ordinary_place_paneling", "ordinary_pick_paneling", "near_goal_radius_paneling", "task_weight_paneling",
+    "reach_start_radius_paneling0", "reach_start_radius_paneling1", "reach_start_radius_paneling2",
 ]
 """`end_*` and `held_at_end`: where the iteration's training episodes ended (mean place distance in m and
 angle error in degrees to the goal at the last step, share with the element held), what a run that
