@@ -152,14 +152,14 @@ def training_report(results: Path = RESULTS_PATH, curve: Path = TRAIN_CURVE) -> 
     """RESULTS' section on the recipe trained on paneling, from each run's progress.csv and its evaluation (where
     there is one): the env steps its training episodes took to place 90%, and its curve."""
     head = ("| run | env steps trained | env steps to 90% placed (its training episodes) | training wall time (h) | "
-            "placed % [95% CI], the paper's protocol |\n|---|---|---|---|---|")
+            "placed % [95% CI], the paper's protocol | placed % by bay (x = -0.68 / 0 / +0.68 m) |\n|---|---|---|---|---|---|")
     lines, curves = [head], {}
     for start in transfer.STARTS:
         for seed in TRAIN_SEEDS:
             run = training_run(start, seed)
             progress = checkpoint_of(run).parent / "progress.csv"
             if not progress.is_file():
-                lines.append(f"| {run.what} | not run: `{run.command}` | | | |")
+                lines.append(f"| {run.what} | not run: `{run.command}` | | | | |")
                 continue
             with open(progress, newline="") as f:
                 rows = list(csv.DictReader(f))
@@ -169,12 +169,16 @@ def training_report(results: Path = RESULTS_PATH, curve: Path = TRAIN_CURVE) -> 
             wall_h = training_wall_s(progress, run.args.num_envs * run.args.num_steps) / 3600
             evaluated = Path(TRAIN_EVAL_JSON.format(start=start, seed=seed))
             if evaluated.is_file():
-                task = json.loads(evaluated.read_text())["tasks"][ENV_ID]
+                task = evaluation.task_results(json.loads(evaluated.read_text()))[ENV_ID]
                 placed = pct(task["place_success"], task["place_success_ci95"])
+                bays = " / ".join(f"{100 * v:.0f}" for v in task.get("place_success_by_goal_slot", {}).values())
             else:
-                placed = f"not yet: `{run.command} --evaluate`"
-            lines.append(f"| {run.what} | {int(steps[-1]):,} | {'not yet' if reached is None else format(reached, ',')} | "
-                         f"{wall_h:.1f} | {placed} |")
+                placed, bays = f"not yet: `{run.command} --evaluate`", ""
+            if reached is not None:
+                to_target = f"{reached:,}"
+            else:  # a run that used its whole budget did not get there; one still going may yet
+                to_target = f"not within {TRAIN_BUDGET:,}" if steps[-1] >= TRAIN_BUDGET else "not yet"
+            lines.append(f"| {run.what} | {int(steps[-1]):,} | {to_target} | {wall_h:.1f} | {placed} | {bays} |")
     if curves:
         plot_training(curves, curve)
     body = ("## Paneling, trained\n\n"

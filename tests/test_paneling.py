@@ -295,11 +295,30 @@ def test_the_training_section_reads_each_run_s_progress_and_evaluation(tmp_path,
                         + "".join(f"{2000 * (i + 1)},{p},1000\n" for i, p in enumerate(placed)))
     evaluated = Path(paneling.TRAIN_EVAL_JSON.format(start="shipped", seed=1))
     evaluated.parent.mkdir(parents=True)
-    evaluated.write_text(json.dumps({"tasks": {paneling.ENV_ID: {"place_success": 0.95,
-                                                                 "place_success_ci95": [0.9, 0.97]}}}))
+    # as scripts/evaluate.py --json writes one task's results: at the top level, no "tasks" entry
+    evaluated.write_text(json.dumps({"env_id": paneling.ENV_ID, "place_success": 0.95, "place_success_ci95": [0.9, 0.97],
+                                     "place_success_by_goal_slot": {"0": 1.0, "1": 0.9, "2": 0.95}}))
     body = paneling.training_report(tmp_path / "RESULTS.md", tmp_path / "images" / "curve.png")
     # the 50-iteration mean first reaches 90% 45 iterations into the ones: 290,000 env steps
-    assert "scratch_general_agent.pt, seed 1 | 400,000 | 290,000 | 0.1 | 95.0 [90.0, 97.0] |" in body
+    assert "scratch_general_agent.pt, seed 1 | 400,000 | 290,000 | 0.1 | 95.0 [90.0, 97.0] | 100 / 90 / 95 |" in body
     assert "| not run: `python -m experiments.paneling --train nothing --train-seed 1` |" in body
     assert (tmp_path / "images" / "curve.png").stat().st_size > 0 and "](images/curve.png)" in body
     assert "<!-- begin paneling-training (generated) -->" in (tmp_path / "RESULTS.md").read_text()
+
+
+def test_a_run_that_used_its_whole_budget_short_of_the_target_says_so(tmp_path, monkeypatch):
+    """A run whose training episodes never placed 90% reads "not within <budget>" once it has trained its budget,
+    "not yet" before that; a run not evaluated yet says how to evaluate it."""
+    from experiments import paneling
+    from experiments.campaign import checkpoint_of
+
+    monkeypatch.chdir(tmp_path)
+    monkeypatch.setattr(paneling, "TRAIN_BUDGET", 20_000)
+    for start, iterations in (("shipped", 10), ("nothing", 5)):
+        progress = checkpoint_of(paneling.training_run(start)).parent / "progress.csv"
+        progress.parent.mkdir(parents=True)
+        progress.write_text("global_step,ordinary_place_success,sps\n"
+                            + "".join(f"{2000 * (i + 1)},0.5,1000\n" for i in range(iterations)))
+    body = paneling.training_report(tmp_path / "RESULTS.md", tmp_path / "images" / "curve.png")
+    assert "scratch_general_agent.pt, seed 1 | 20,000 | not within 20,000 | 0.0 | not yet: `" in body
+    assert "from nothing, seed 1 | 10,000 | not yet | 0.0 | not yet: `python -m experiments.paneling --train nothing" in body

@@ -416,8 +416,14 @@ def read_labelled(specs: tuple[str, ...], option: str) -> dict[str, dict]:
         data = json.loads(Path(path).read_text()) if label and path and Path(path).is_file() else {}
         if "tasks" not in data and "place_success" not in data:
             raise SystemExit(f"{option} {spec}: use LABEL=JSON, a file that scripts/evaluate.py --json wrote")
-        out[label] = dict(path=path, command=data.get("command", "?"), tasks=data.get("tasks", {data.get("env_id"): data}))
+        out[label] = dict(path=path, command=data.get("command", "?"), tasks=task_results(data))
     return out
+
+
+def task_results(data: dict) -> dict[str, dict]:
+    """Each task's results (by env id) in what `main` wrote with --json: {"tasks": ...} with --all, one task's
+    results at the top level otherwise."""
+    return data["tasks"] if "tasks" in data else {data["env_id"]: data}
 
 
 def read_beside(specs: tuple[str, ...]) -> dict[str, dict]:
