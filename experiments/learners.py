@@ -5,6 +5,7 @@ time on this CPU.
     python -m experiments.learners --arm sac --dry-run   # the plan, and where the arm's run stands
     python -m experiments.learners --arm sac             # SAC from nothing (baselines/sac/sac.py), to BUDGET, resumable
     python -m experiments.learners --arm icm             # the recipe with curiosity (ICM), to BUDGET, resumable
+    python -m experiments.learners --evaluate sac        # the paper's protocol on the arm's latest checkpoint
     python -m experiments.learners --report              # RESULTS' section and its curves, from the arms' progress.csv
 
 The PPO arm is the recipe's own run on seed 1 (campaign/scratch_s1/, experiments/from_scratch.py): its first BUDGET
@@ -23,6 +24,7 @@ machine it ran on; on a fresh machine it goes on with an empty buffer that its a
 from __future__ import annotations
 
 import csv
+import json
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Optional
@@ -31,7 +33,9 @@ import numpy as np
 import torch
 import tyro
 
+from baselines.ppo import evaluation
 from baselines.ppo.args import command_line
+from baselines.ppo.evaluation import pct
 from baselines.sac import sac
 from experiments.campaign import CAMPAIGN_DIR, Run, describe, run_or_resume
 from experiments.from_scratch import csv_column, moving_mean, scratch_args, seed_run
@@ -46,6 +50,8 @@ MOVING_WINDOW = 100_000
 """env steps over which the training episodes' place success is averaged."""
 CURVES = Path("docs/images/learners_curves.png")
 COMMAND = "python -m experiments.learners"
+EVAL_DIR = Path("docs/data/learners")
+"""each arm's evaluation with the paper's protocol (`--evaluate ARM`): <arm>_eval50k.json."""
 
 
 def sac_args(**overrides) -> sac.Args:
@@ -70,9 +76,46 @@ def progress_csv(arm: str, log_dir: Path = CAMPAIGN_DIR) -> Path:
     return log_dir / name / "progress.csv"
 
 
+def arm_checkpoint(arm: str, log_dir: Path = CAMPAIGN_DIR) -> Path:
+    return progress_csv(arm, log_dir).with_name("checkpoint.pt")
+
+
+def evaluate_arm(arm: str, workers: int = 2, log_dir: Path = CAMPAIGN_DIR) -> Path:
+    """The paper's protocol (test seeds, 50,000 env steps per task, cp4, the policy's mean) on the arm's latest
+    checkpoint, written to EVAL_DIR/<arm>_eval50k.json (the env steps it had trained are in its `checkpoint_step`)."""
+    if arm not in ARMS:
+        raise SystemExit(f"--evaluate {arm}: use one of {', '.join(ARMS)}")
+    ckpt = arm_checkpoint(arm, log_dir)
+    if not ckpt.is_file():
+        raise SystemExit(f"--evaluate {arm}: no checkpoint at {ckpt}; train it first: {COMMAND} --arm {arm}")
+    out = EVAL_DIR / f"{arm}_eval50k.json"
+    evaluation.main(evaluation.Args(checkpoint=ckpt, all=True, steps=50_000, workers=workers, json=out))
+    step = int(torch.load(ckpt, map_location="cpu", weights_only=False)["progress"]["global_step"])
+    out.write_text(json.dumps(dict(json.loads(out.read_text()), checkpoint_step=step), indent=1) + "\n")
+    return out
+
+
+def evaluations_table(eval_dir: Path = EVAL_DIR) -> list[str]:
+    """A row per arm evaluated with the paper's protocol (`evaluate_arm`); nothing where none is."""
+    rows = []
+    for arm, label in ARMS.items():
+        path = eval_dir / f"{arm}_eval50k.json"
+        if path.is_file():
+            data = json.loads(path.read_text())
+            tasks = evaluation.task_results(data)
+            rows.append(f"| {label} | {data['checkpoint_step']:,} | "
+                        + " | ".join(pct(r["place_success"], r["place_success_ci95"]) for r in tasks.values()) + " |")
+    if not rows:
+        return []
+    names = " | ".join(f"{env_id}: placed % [95% CI]" for env_id in tasks)
+    return ["", f"The paper's protocol (test seeds, 50,000 env steps per task, cp4, the policy's mean; `{COMMAND} "
+            "--evaluate ARM` on the arm's latest checkpoint):", "", f"| learner | its env steps | {names} |",
+            "|---|---|" + "---|" * len(tasks), *rows]
+
+
 def curve(path: Path) -> dict[str, np.ndarray]:
     """An arm's env steps, its training wall time so far (hours) and its worst task type's place success from ordinary
-    resets (mean over MOVING_WINDOW env steps), up to BUDGET."""
+    resets (mean over MOVING_WINDOW env steps), up to BUDGET; `last`: each task type's at the last of them."""
     with open(path, newline="") as f:
         rows = [r for r in csv.DictReader(f) if int(float(r["global_step"])) <= BUDGET]
     steps = csv_column(rows, "global_step")
@@ -83,7 +126,7 @@ def curve(path: Path) -> dict[str, np.ndarray]:
     window = max(1, int(round(MOVING_WINDOW / max(float(np.median(np.diff(steps, prepend=0.0))), 1.0))))
     per_kind = np.stack([moving_mean(csv_column(rows, f"ordinary_place_{k}"), window) for k in PAPER_KINDS])
     worst = np.where(np.isnan(per_kind).any(0), np.nan, np.nanmin(np.nan_to_num(per_kind, nan=np.inf), 0))
-    return dict(steps=steps, hours=wall / 3600, worst=worst)
+    return dict(steps=steps, hours=wall / 3600, worst=worst, last=dict(zip(PAPER_KINDS, per_kind[:, -1])))
 
 
 def value_at(c: dict, axis: str, at: float) -> Optional[float]:
@@ -100,7 +143,7 @@ def first_reaching(c: dict, axis: str, level: float) -> Optional[float]:
     return float(c[axis][hit[0]]) if len(hit) else None
 
 
-def report(results: Path = Path("docs/RESULTS.md"), log_dir: Path = CAMPAIGN_DIR) -> str:
+def report(results: Path = Path("docs/RESULTS.md"), log_dir: Path = CAMPAIGN_DIR, eval_dir: Path = EVAL_DIR) -> str:
     import matplotlib
 
     matplotlib.use("Agg")
@@ -110,18 +153,20 @@ def report(results: Path = Path("docs/RESULTS.md"), log_dir: Path = CAMPAIGN_DIR
     fmt = lambda v, f="{:.0%}": "-" if v is None else f.format(v)  # noqa: E731
     hours = min((c["hours"][-1] for c in curves.values()), default=0.0)
     lines = [f"| learner | env steps done (of {BUDGET:,}) | training wall time (h) | worst task placed at 1M / 2M env "
-             f"steps | at {hours:.1f} h of training (the shortest arm's) | env steps to 50% | wall time to 50% (h) |",
-             "|---|---|---|---|---|---|---|"]
+             f"steps | at {hours:.1f} h of training (the shortest arm's) | env steps to 50% | wall time to 50% (h) | "
+             f"each task placed at its last env step ({' / '.join(PAPER_KINDS)}) |",
+             "|---|---|---|---|---|---|---|---|"]
     fig, axes = plt.subplots(1, 2, figsize=(10, 3.8), sharey=True)
     for arm, label in ARMS.items():
         if arm not in curves:
-            lines.append(f"| {label} | not run: `{COMMAND} --arm {arm}` | | | | | |")
+            lines.append(f"| {label} | not run: `{COMMAND} --arm {arm}` | | | | | | |")
             continue
         c = curves[arm]
         lines.append(f"| {label} | {int(c['steps'][-1]):,} | {c['hours'][-1]:.1f} | "
                      f"{fmt(value_at(c, 'steps', 1e6))} / {fmt(value_at(c, 'steps', 2e6))} | "
                      f"{fmt(value_at(c, 'hours', hours))} | {fmt(first_reaching(c, 'steps', 0.5), '{:,.0f}')} | "
-                     f"{fmt(first_reaching(c, 'hours', 0.5), '{:.1f}')} |")
+                     f"{fmt(first_reaching(c, 'hours', 0.5), '{:.1f}')} | "
+                     + " / ".join(fmt(None if np.isnan(v) else float(v)) for v in c["last"].values()) + " |")
         for ax, axis, scale in ((axes[0], "steps", 1e6), (axes[1], "hours", 1.0)):
             ax.plot(c[axis] / scale, 100 * c["worst"], label=label)
     axes[0].set_xlabel("env steps (millions)")
@@ -144,7 +189,8 @@ def report(results: Path = Path("docs/RESULTS.md"), log_dir: Path = CAMPAIGN_DIR
         "## Which learner, and curiosity", "",
         f"Commands: `{COMMAND} --arm sac`, `{COMMAND} --arm icm` (the PPO arm is the recipe's seed {SEED}), "
         f"`{COMMAND} --report`. Each from nothing on the same envs, dense reward, near-goal starts and seed; the "
-        "training episodes from ordinary resets, the worst of the three task types placed.", "", *lines, "",
+        "training episodes from ordinary resets, the worst of the three task types placed.", "", *lines,
+        *evaluations_table(eval_dir), "",
         f"![learners]({Path(*CURVES.parts[1:])})"])
     update_section(results, "learners", body, "Results")
     return body
@@ -160,11 +206,16 @@ class Args:
     """print the plan and where the arm's run stands, and exit."""
     report: bool = False
     """write RESULTS' section and its curves from the arms' progress.csv, and exit."""
+    evaluate: Optional[str] = None
+    """evaluate this arm's latest checkpoint with the paper's protocol (EVAL_DIR), and exit."""
 
 
 def main(args: Args) -> None:
     if args.report:
         print(report())
+        return
+    if args.evaluate is not None:
+        print(f"wrote {evaluate_arm(args.evaluate)}")
         return
     if args.arm not in ("sac", "icm"):
         raise SystemExit(f"--arm {args.arm}: use sac or icm (the PPO arm is `python -m experiments.from_scratch "

@@ -2,6 +2,7 @@
 and equal wall time, read from each arm's progress.csv."""
 
 import csv
+import json
 
 import numpy as np
 import pytest
@@ -52,7 +53,10 @@ def test_the_report_rows_each_arm_and_says_how_to_run_those_not_run(tmp_path, mo
     row = next(line for line in body.splitlines() if line.startswith("| PPO (the recipe"))
     # its worst task's mean over the last 50 rows (100,000 env steps) first reaches 50% 28 rows after the jump: at
     # 176,000 env steps, 88 rows of 4 s
-    assert row.startswith("| PPO (the recipe, seed 1's run) | 200,000 | 0.1 |") and row.endswith("| 176,000 | 0.1 |")
+    assert row.startswith("| PPO (the recipe, seed 1's run) | 200,000 | 0.1 |")
+    # each task's mean over its last 50 rows (100,000 env steps), 40 of them after the jump: ceiling 0.9 x 40 / 50,
+    # window (0.1 x 10 + 1.0 x 40) / 50, flooring 1.0
+    assert row.endswith("| 176,000 | 0.1 | 72% / 82% / 100% |")
     assert f"not run: `{ln.COMMAND} --arm sac`" in body and f"not run: `{ln.COMMAND} --arm icm`" in body
     assert (tmp_path / "images" / "learners.png").stat().st_size > 0
     assert "refilled" not in body
@@ -75,3 +79,20 @@ def test_an_unknown_arm_is_refused_and_the_icm_arm_is_the_recipe_with_curiosity(
     ppo.main(tiny)
     trained = load_checkpoint(tmp_path / run.args.exp_name / "checkpoint.pt")
     assert trained["icm"] is not None and trained["progress"]["global_step"] == 40
+
+
+def test_an_arm_s_paper_protocol_evaluation_is_rowed_and_a_missing_checkpoint_is_refused(tmp_path):
+    """`--evaluate ARM` writes EVAL_DIR/<arm>_eval50k.json as scripts/evaluate.py --all does, with the env steps its
+    checkpoint had trained; the report rows each arm evaluated (nothing where none is)."""
+    assert ln.evaluations_table(tmp_path) == []
+    tasks = {env_id: {"place_success": p, "place_success_ci95": [p - 0.05, p]}
+             for env_id, p in (("CeilingInstallation-v1", 0.9), ("WindowInstallation-v1", 0.95), ("Flooring-v1", 1.0))}
+    (tmp_path / "sac_eval50k.json").write_text(json.dumps({"tasks": tasks, "checkpoint_step": 350_000}))
+    table = "\n".join(ln.evaluations_table(tmp_path))
+    assert "| CeilingInstallation-v1: placed % [95% CI] | WindowInstallation-v1: placed % [95% CI] |" in table
+    assert "| SAC (replay, twin Q, tanh Gaussian, auto entropy) | 350,000 | 90.0 [85.0, 90.0] | 95.0 [90.0, 95.0] | " \
+           "100.0 [95.0, 100.0] |" in table
+    with pytest.raises(SystemExit, match="no checkpoint at .*--arm icm"):
+        ln.evaluate_arm("icm", log_dir=tmp_path)
+    with pytest.raises(SystemExit, match="use one of ppo, icm, sac"):
+        ln.evaluate_arm("td3", log_dir=tmp_path)
