@@ -4,12 +4,13 @@ time on this CPU.
 
     python -m experiments.learners --arm sac --dry-run   # the plan, and where the arm's run stands
     python -m experiments.learners --arm sac             # SAC from nothing (baselines/sac/sac.py), to BUDGET, resumable
+    python -m experiments.learners --arm sac --seed 2    # the same on the recipe's second seed
     python -m experiments.learners --arm icm             # the recipe with curiosity (ICM), to BUDGET, resumable
-    python -m experiments.learners --evaluate sac        # the paper's protocol on the arm's latest checkpoint
+    python -m experiments.learners --evaluate sac        # the paper's protocol on the arm's latest checkpoint (--seed)
     python -m experiments.learners --report              # RESULTS' section and its curves, from the arms' progress.csv
 
-The PPO arm is the recipe's own run on seed 1 (campaign/scratch_s1/, experiments/from_scratch.py): its first BUDGET
-env steps, so no PPO run is repeated. What is compared is the training episodes from ordinary resets (neither
+The PPO arm on a seed is the recipe's own run on it (campaign/scratch_s<seed>/, experiments/from_scratch.py): its
+first BUDGET env steps, so no PPO run is repeated. What is compared is the training episodes from ordinary resets (neither
 near-goal nor reach starts), placed per task type, the worst of the three (a mean over MOVING_WINDOW env steps), at
 equal env steps and at equal wall time of training (rollouts and updates, from each progress.csv; start-ups,
 evaluations and the time between sessions not counted).
@@ -24,10 +25,11 @@ machine it ran on; on a fresh machine it goes on with an empty buffer that its a
 from __future__ import annotations
 
 import csv
+import dataclasses
 import json
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Optional
+from typing import Callable, Optional
 
 import numpy as np
 import torch
@@ -44,8 +46,12 @@ from ms_construction.reporting import update_section
 
 BUDGET = 2_000_000
 """env steps of each arm (the issue: at least 2M)."""
-SEED = 1
-"""every arm's seed: the recipe's first seed, whose run is the PPO arm."""
+SEEDS = (1, 2)
+"""the seeds each arm may run on: the recipe's (experiments/from_scratch.py SEEDS), whose runs are the PPO arm."""
+LEVELS = (0.5, 0.9)
+"""the worst task's place success whose first crossing each arm's row gives, in env steps and in wall time."""
+AT_HOURS = (0.5, 1.0, 1.5)
+"""training wall times (h) at which the arms' worst task placed is compared."""
 MOVING_WINDOW = 100_000
 """env steps over which the training episodes' place success is averaged."""
 CURVES = Path("docs/images/learners_curves.png")
@@ -54,70 +60,107 @@ EVAL_DIR = Path("docs/data/learners")
 """each arm's evaluation with the paper's protocol (`--evaluate ARM`): <arm>_eval50k.json."""
 
 
-def sac_args(**overrides) -> sac.Args:
-    """SAC's defaults (chosen for this CPU: baselines/sac/sac.py) on the recipe's seed, in campaign/."""
-    return sac.Args(**{**dict(exp_name=f"sac_s{SEED}", seed=SEED, total_timesteps=BUDGET, log_dir=str(CAMPAIGN_DIR)),
+def sac_args(seed: int = 1, **overrides) -> sac.Args:
+    """SAC's defaults (chosen for this CPU: baselines/sac/sac.py) on one of the recipe's seeds, in campaign/."""
+    return sac.Args(**{**dict(exp_name=f"sac_s{seed}", seed=seed, total_timesteps=BUDGET, log_dir=str(CAMPAIGN_DIR)),
                        **overrides})
 
 
-def icm_run(num_envs: Optional[int] = None) -> Run:
+def sac_checkpoint(a: sac.Args) -> Path:
+    return Path(a.log_dir) / a.exp_name / "checkpoint.pt"
+
+
+def run_sac(a: sac.Args, every: Optional[int] = None, stop: Optional[Callable[[], bool]] = None) -> None:
+    """Run (or resume) the SAC run `a` to its total_timesteps, from its checkpoint where there is one (a lost replay
+    buffer refilled: `--refill-lost-buffer`, recorded in the checkpoint). With `every`, in parts ending at multiples
+    of it (checkpoint marks, so a part's end is a resume point), and with `stop`, ending after the first part at
+    whose end `stop()` is true. SIGTERM or Ctrl-C stops it with a checkpoint (sac.py raises SystemExit)."""
+    ckpt = sac_checkpoint(a)
+    while (done := checkpoint_step(ckpt) if ckpt.is_file() else 0) < a.total_timesteps:
+        if done and stop is not None and stop():
+            return
+        end = a.total_timesteps if every is None else min((done // every + 1) * every, a.total_timesteps)
+        part = dataclasses.replace(a, total_timesteps=end)
+        sac.main(dataclasses.replace(part, resume=str(ckpt), extend=True, refill_lost_buffer=True)
+                 if ckpt.is_file() else part)
+        if every is None:
+            return
+
+
+def checkpoint_step(ckpt: Path) -> int:
+    return int(torch.load(ckpt, map_location="cpu", weights_only=False)["progress"]["global_step"])
+
+
+def icm_run(num_envs: Optional[int] = None, seed: int = 1) -> Run:
     """The recipe, unchanged but for ICM's curiosity bonus (its defaults) and the budget."""
-    name = f"scratch_icm_s{SEED}"
-    return Run(name, scratch_args(num_envs, seed=SEED, exp_name=name, curiosity="icm", total_timesteps=BUDGET),
-               f"the from-scratch recipe with ICM's curiosity bonus, seed {SEED}", f"{COMMAND} --arm icm", None)
+    name = f"scratch_icm_s{seed}"
+    return Run(name, scratch_args(num_envs, seed=seed, exp_name=name, curiosity="icm", total_timesteps=BUDGET),
+               f"the from-scratch recipe with ICM's curiosity bonus, seed {seed}",
+               f"{COMMAND} --arm icm --seed {seed}", None)
 
 
-ARMS = {"ppo": "PPO (the recipe, seed 1's run)", "icm": "PPO + ICM (the recipe with curiosity)",
+ARMS = {"ppo": "PPO (the recipe's run)", "icm": "PPO + ICM (the recipe with curiosity)",
         "sac": "SAC (replay, twin Q, tanh Gaussian, auto entropy)"}
+PLANNED = {"ppo": SEEDS, "icm": (1,), "sac": SEEDS}
+"""the seeds each arm runs on: curiosity is one probe (the issue), SAC and PPO both seeds."""
 
 
-def progress_csv(arm: str, log_dir: Path = CAMPAIGN_DIR) -> Path:
-    name = {"ppo": seed_run(SEED).args.exp_name, "icm": icm_run().args.exp_name, "sac": sac_args().exp_name}[arm]
+def progress_csv(arm: str, log_dir: Path = CAMPAIGN_DIR, seed: int = 1) -> Path:
+    name = {"ppo": seed_run(seed).args.exp_name, "icm": icm_run(seed=seed).args.exp_name,
+            "sac": sac_args(seed).exp_name}[arm]
     return log_dir / name / "progress.csv"
 
 
-def arm_checkpoint(arm: str, log_dir: Path = CAMPAIGN_DIR) -> Path:
-    return progress_csv(arm, log_dir).with_name("checkpoint.pt")
+def arm_checkpoint(arm: str, log_dir: Path = CAMPAIGN_DIR, seed: int = 1) -> Path:
+    return progress_csv(arm, log_dir, seed).with_name("checkpoint.pt")
 
 
-def evaluate_arm(arm: str, workers: int = 2, log_dir: Path = CAMPAIGN_DIR) -> Path:
+def eval_json(arm: str, seed: int, eval_dir: Path = EVAL_DIR) -> Path:
+    return eval_dir / f"{arm}_s{seed}_eval50k.json"
+
+
+def evaluate_arm(arm: str, workers: int = 2, log_dir: Path = CAMPAIGN_DIR, seed: int = 1) -> Path:
     """The paper's protocol (test seeds, 50,000 env steps per task, cp4, the policy's mean) on the arm's latest
-    checkpoint, written to EVAL_DIR/<arm>_eval50k.json (the env steps it had trained are in its `checkpoint_step`)."""
+    checkpoint on `seed`, written to `eval_json` (the env steps it had trained are in its `checkpoint_step`)."""
     if arm not in ARMS:
         raise SystemExit(f"--evaluate {arm}: use one of {', '.join(ARMS)}")
-    ckpt = arm_checkpoint(arm, log_dir)
+    ckpt = arm_checkpoint(arm, log_dir, seed)
     if not ckpt.is_file():
-        raise SystemExit(f"--evaluate {arm}: no checkpoint at {ckpt}; train it first: {COMMAND} --arm {arm}")
-    out = EVAL_DIR / f"{arm}_eval50k.json"
+        raise SystemExit(f"--evaluate {arm}: no checkpoint at {ckpt}; train it first: "
+                         f"{COMMAND} --arm {arm} --seed {seed}")
+    step = checkpoint_step(ckpt)
+    out = eval_json(arm, seed)
     evaluation.main(evaluation.Args(checkpoint=ckpt, all=True, steps=50_000, workers=workers, json=out))
-    step = int(torch.load(ckpt, map_location="cpu", weights_only=False)["progress"]["global_step"])
     out.write_text(json.dumps(dict(json.loads(out.read_text()), checkpoint_step=step), indent=1) + "\n")
     return out
 
 
 def evaluations_table(eval_dir: Path = EVAL_DIR) -> list[str]:
-    """A row per arm evaluated with the paper's protocol (`evaluate_arm`); nothing where none is."""
+    """A row per arm and seed evaluated with the paper's protocol (`evaluate_arm`); nothing where none is."""
     rows = []
     for arm, label in ARMS.items():
-        path = eval_dir / f"{arm}_eval50k.json"
-        if path.is_file():
+        for seed in SEEDS:
+            path = eval_json(arm, seed, eval_dir)
+            if not path.is_file():
+                continue
             data = json.loads(path.read_text())
             tasks = evaluation.task_results(data)
-            rows.append(f"| {label} | {data['checkpoint_step']:,} | "
+            rows.append(f"| {label} | {seed} | {data['checkpoint_step']:,} | "
                         + " | ".join(pct(r["place_success"], r["place_success_ci95"]) for r in tasks.values()) + " |")
     if not rows:
         return []
     names = " | ".join(f"{env_id}: placed % [95% CI]" for env_id in tasks)
     return ["", f"The paper's protocol (test seeds, 50,000 env steps per task, cp4, the policy's mean; `{COMMAND} "
-            "--evaluate ARM` on the arm's latest checkpoint):", "", f"| learner | its env steps | {names} |",
-            "|---|---|" + "---|" * len(tasks), *rows]
+            "--evaluate ARM --seed S` on the arm's latest checkpoint):", "", f"| learner | seed | its env steps | {names} |",
+            "|---|---|---|" + "---|" * len(tasks), *rows]
 
 
-def curve(path: Path) -> dict[str, np.ndarray]:
+def curve(path: Path, until: Optional[int] = BUDGET) -> dict[str, np.ndarray]:
     """An arm's env steps, its training wall time so far (hours) and its worst task type's place success from ordinary
-    resets (mean over MOVING_WINDOW env steps), up to BUDGET; `last`: each task type's at the last of them."""
+    resets (mean over MOVING_WINDOW env steps), up to `until` env steps (None: the whole run); `last`: each task
+    type's at the last of them."""
     with open(path, newline="") as f:
-        rows = [r for r in csv.DictReader(f) if int(float(r["global_step"])) <= BUDGET]
+        rows = [r for r in csv.DictReader(f) if until is None or int(float(r["global_step"])) <= until]
     steps = csv_column(rows, "global_step")
     if rows and "wall_s" in rows[0]:  # SAC writes its wall time
         wall = csv_column(rows, "wall_s")
@@ -149,47 +192,51 @@ def report(results: Path = Path("docs/RESULTS.md"), log_dir: Path = CAMPAIGN_DIR
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    curves = {arm: curve(p) for arm in ARMS if (p := progress_csv(arm, log_dir)).is_file()}
+    curves = {(arm, seed): curve(p) for arm in ARMS for seed in SEEDS
+              if (p := progress_csv(arm, log_dir, seed)).is_file()}
     fmt = lambda v, f="{:.0%}": "-" if v is None else f.format(v)  # noqa: E731
-    hours = min((c["hours"][-1] for c in curves.values()), default=0.0)
-    lines = [f"| learner | env steps done (of {BUDGET:,}) | training wall time (h) | worst task placed at 1M / 2M env "
-             f"steps | at {hours:.1f} h of training (the shortest arm's) | env steps to 50% | wall time to 50% (h) | "
-             f"each task placed at its last env step ({' / '.join(PAPER_KINDS)}) |",
-             "|---|---|---|---|---|---|---|---|"]
+    lines = [f"| learner | seed | env steps done (of {BUDGET:,}) | training wall time (h) | worst task placed at 1M / "
+             f"2M env steps | at {' / '.join(map(str, AT_HOURS))} h of training | env steps to 50% / 90% (its whole run) | "
+             f"wall time to 50% / 90% (h) | each task placed at its last env step ({' / '.join(PAPER_KINDS)}) |",
+             "|---|---|---|---|---|---|---|---|---|"]
     fig, axes = plt.subplots(1, 2, figsize=(10, 3.8), sharey=True)
-    for arm, label in ARMS.items():
-        if arm not in curves:
-            lines.append(f"| {label} | not run: `{COMMAND} --arm {arm}` | | | | | | |")
-            continue
-        c = curves[arm]
-        lines.append(f"| {label} | {int(c['steps'][-1]):,} | {c['hours'][-1]:.1f} | "
-                     f"{fmt(value_at(c, 'steps', 1e6))} / {fmt(value_at(c, 'steps', 2e6))} | "
-                     f"{fmt(value_at(c, 'hours', hours))} | {fmt(first_reaching(c, 'steps', 0.5), '{:,.0f}')} | "
-                     f"{fmt(first_reaching(c, 'hours', 0.5), '{:.1f}')} | "
-                     + " / ".join(fmt(None if np.isnan(v) else float(v)) for v in c["last"].values()) + " |")
-        for ax, axis, scale in ((axes[0], "steps", 1e6), (axes[1], "hours", 1.0)):
-            ax.plot(c[axis] / scale, 100 * c["worst"], label=label)
+    for colour, (arm, label) in enumerate(ARMS.items()):
+        for seed in PLANNED[arm]:
+            if (arm, seed) not in curves:
+                lines.append(f"| {label} | {seed} | not run: `{COMMAND} --arm {arm} --seed {seed}` | | | | | | |")
+                continue
+            c, whole = curves[arm, seed], curve(progress_csv(arm, log_dir, seed), until=None)
+            lines.append(f"| {label} | {seed} | {int(c['steps'][-1]):,} | {c['hours'][-1]:.1f} | "
+                         f"{fmt(value_at(c, 'steps', 1e6))} / {fmt(value_at(c, 'steps', 2e6))} | "
+                         + " / ".join(fmt(value_at(c, "hours", h)) for h in AT_HOURS)
+                         + " | " + " / ".join(fmt(first_reaching(whole, "steps", v), "{:,.0f}") for v in LEVELS)
+                         + " | " + " / ".join(fmt(first_reaching(whole, "hours", v), "{:.1f}") for v in LEVELS) + " | "
+                         + " / ".join(fmt(None if np.isnan(v) else float(v)) for v in c["last"].values()) + " |")
+            for ax, axis, scale in ((axes[0], "steps", 1e6), (axes[1], "hours", 1.0)):
+                ax.plot(c[axis] / scale, 100 * c["worst"], color=f"C{colour}", linestyle=("-", "--")[seed != 1],
+                        label=f"{label}, seed {seed}")
     axes[0].set_xlabel("env steps (millions)")
     axes[1].set_xlabel("training wall time (h), this 2-core CPU")
     axes[0].set_ylabel("worst task placed, ordinary resets (%)")
     axes[0].set_ylim(0, 102)
-    axes[0].legend(fontsize=7, loc="upper left")
-    fig.suptitle(f"Learners from nothing, seed {SEED}: training episodes (mean over {MOVING_WINDOW:,} env steps)")
+    axes[0].legend(fontsize=7, loc="lower right")
+    fig.suptitle(f"Learners from nothing: training episodes (mean over {MOVING_WINDOW:,} env steps)")
     fig.tight_layout()
     CURVES.parent.mkdir(parents=True, exist_ok=True)
     fig.savefig(CURVES, dpi=100)
     plt.close(fig)
-    sac_ckpt = log_dir / sac_args().exp_name / "checkpoint.pt"
-    refilled = (torch.load(sac_ckpt, map_location="cpu", weights_only=False)["clock"].get("refilled_at", [])
-                if sac_ckpt.is_file() else [])
-    if refilled:  # an inexact resume: the reader should know where
-        lines += ["", "SAC's replay buffer was lost between sessions and refilled by its actor at "
-                  + ", ".join(f"{step:,}" for step in refilled) + " env steps (`--refill-lost-buffer`)."]
+    for seed in SEEDS:
+        sac_ckpt = arm_checkpoint("sac", log_dir, seed)
+        refilled = (torch.load(sac_ckpt, map_location="cpu", weights_only=False)["clock"].get("refilled_at", [])
+                    if sac_ckpt.is_file() else [])
+        if refilled:  # an inexact resume: the reader should know where
+            lines += ["", f"SAC seed {seed}'s replay buffer was lost between sessions and refilled by its actor at "
+                      + ", ".join(f"{step:,}" for step in refilled) + " env steps (`--refill-lost-buffer`)."]
     body = "\n".join([
         "## Which learner, and curiosity", "",
-        f"Commands: `{COMMAND} --arm sac`, `{COMMAND} --arm icm` (the PPO arm is the recipe's seed {SEED}), "
-        f"`{COMMAND} --report`. Each from nothing on the same envs, dense reward, near-goal starts and seed; the "
-        "training episodes from ordinary resets, the worst of the three task types placed.", "", *lines,
+        f"Commands: `{COMMAND} --arm sac --seed S`, `{COMMAND} --arm icm` (the PPO arm on a seed is the recipe's run "
+        f"on it), `{COMMAND} --report`. Each from nothing on the same envs, dense reward, near-goal starts and seeds; "
+        "the training episodes from ordinary resets, the worst of the three task types placed.", "", *lines,
         *evaluations_table(eval_dir), "",
         f"![learners]({Path(*CURVES.parts[1:])})"])
     update_section(results, "learners", body, "Results")
@@ -200,6 +247,8 @@ def report(results: Path = Path("docs/RESULTS.md"), log_dir: Path = CAMPAIGN_DIR
 class Args:
     arm: Optional[str] = None
     """train (or resume) this arm to BUDGET: `sac` or `icm` (the PPO arm is the recipe's run)."""
+    seed: int = 1
+    """the recipe's seed the arm runs (or is evaluated) on: one of SEEDS."""
     num_envs: Optional[int] = None
     """--arm icm: env processes (default: one per CPU core); a resumed run keeps its own."""
     dry_run: bool = False
@@ -207,32 +256,34 @@ class Args:
     report: bool = False
     """write RESULTS' section and its curves from the arms' progress.csv, and exit."""
     evaluate: Optional[str] = None
-    """evaluate this arm's latest checkpoint with the paper's protocol (EVAL_DIR), and exit."""
+    """evaluate this arm's latest checkpoint on --seed with the paper's protocol (EVAL_DIR), and exit."""
 
 
 def main(args: Args) -> None:
     if args.report:
         print(report())
         return
+    if args.seed not in SEEDS:
+        raise SystemExit(f"--seed {args.seed}: use one of {', '.join(map(str, SEEDS))} (the recipe's seeds)")
     if args.evaluate is not None:
-        print(f"wrote {evaluate_arm(args.evaluate)}")
+        print(f"wrote {evaluate_arm(args.evaluate, seed=args.seed)}")
         return
     if args.arm not in ("sac", "icm"):
         raise SystemExit(f"--arm {args.arm}: use sac or icm (the PPO arm is `python -m experiments.from_scratch "
-                         f"--seed {SEED}`), or --report")
+                         f"--seed {args.seed}`), or --report")
     if args.arm == "icm":
-        run = icm_run(args.num_envs)
+        run = icm_run(args.num_envs, args.seed)
         print(describe(run))
         print("as one ppo.py command: python baselines/ppo/ppo.py " + " ".join(command_line(run.args)))
         if not args.dry_run:
             run_or_resume(run)
         return
-    a = sac_args()
-    ckpt = Path(a.log_dir) / a.exp_name / "checkpoint.pt"
-    print(f"SAC from nothing, seed {SEED}, to {BUDGET:,} env steps in {ckpt.parent}: "
+    a = sac_args(args.seed)
+    ckpt = sac_checkpoint(a)
+    print(f"SAC from nothing, seed {args.seed}, to {BUDGET:,} env steps in {ckpt.parent}: "
           + ("resumes" if ckpt.is_file() else "starts fresh"))
     if not args.dry_run:
-        sac.main(sac_args(resume=str(ckpt), extend=True, refill_lost_buffer=True) if ckpt.is_file() else a)
+        run_sac(a)
 
 
 if __name__ == "__main__":

@@ -55,12 +55,12 @@ TRAIN_BUDGET = 3_000_000
 """env steps of each training run among obstacles."""
 
 
-def training_run(start: str, seed: int = 1, num_envs: Optional[int] = None) -> Run:
-    """The recipe among obstacles (TRAIN_SCENE) from `start` (experiments/transfer.py's STARTS), unchanged but for
-    the tasks' `obstacles` and the budget."""
+def training_run(start: str, seed: int = 1, num_envs: Optional[int] = None, learner: str = "ppo") -> Run:
+    """The recipe among obstacles (TRAIN_SCENE) from `start` (experiments/transfer.py's STARTS) with `learner`,
+    unchanged but for the tasks' `obstacles` and the budget."""
     return transfer.transfer_run(f"obstacles_{TRAIN_SCENE}", start, seed, num_envs, TRAIN_BUDGET,
                                  "python -m experiments.obstacles", f"a site with obstacles ({TRAIN_SCENE})",
-                                 obstacles=TRAIN_SCENE)
+                                 learner, obstacles=TRAIN_SCENE)
 
 
 def row_name(checkpoint: str) -> str:
@@ -177,7 +177,7 @@ def main(args: Args) -> dict:
         raise SystemExit("--episodes and --workers must be positive")
     args.agents = with_more_agents(args.agents, args.more_agents)
     if args.train is not None:
-        run = training_run(args.train, args.train_seed, args.num_envs)
+        run = training_run(args.train, args.train_seed, args.num_envs, args.learner)
         if not args.evaluate:
             return transfer.train(run, args.dry_run)
         args.agents = {**args.agents, f"{run.what} (trained among obstacles)": str(checkpoint_of(run))}

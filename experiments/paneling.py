@@ -4,7 +4,7 @@ from-scratch recipe learning it.
     python -m experiments.paneling                       # every zero-shot row; then the RESULTS section and its JSON
     python -m experiments.paneling --episodes 20 --workers 1
     python -m experiments.paneling --train nothing       # the recipe on paneling from nothing (or: shipped), resumable
-                                                         # (--train-seed S: another seed)
+                                                         # (--train-seed S: another seed; --learner sac: SAC's)
     python -m experiments.paneling --train shipped --evaluate   # the paper's protocol on that run's policy
     python -m experiments.paneling --training-report     # RESULTS' section on the training runs there are
 
@@ -58,17 +58,24 @@ AGENTS = {
 
 TRAIN_BUDGET = 3_000_000
 """env steps of a training run on paneling at most (it ends once its training episodes place 90%)."""
-TRAIN_EVAL_JSON = "docs/data/paneling/train_{start}_s{seed}_eval50k.json"
 TRAIN_SEEDS = (1,)
 """the training runs' seeds that the training section reports."""
+TRAIN_PLAN = (("ppo", "nothing"), ("ppo", "shipped"), ("sac", "nothing"))
+"""the (learner, start) of the training runs that the training section reports."""
 TRAIN_CURVE = Path("docs/images/paneling_training.png")
 
 
-def training_run(start: str, seed: int = 1, num_envs: Optional[int] = None) -> Run:
-    """The recipe on PanelInstallation-v1 from `start` (experiments/transfer.py's STARTS), unchanged but for the env
-    and the budget."""
+def training_run(start: str, seed: int = 1, num_envs: Optional[int] = None, learner: str = "ppo") -> Run:
+    """The recipe on PanelInstallation-v1 from `start` (experiments/transfer.py's STARTS) with `learner`, unchanged
+    but for the env and the budget."""
     return transfer_run("paneling", start, seed, num_envs, TRAIN_BUDGET, "python -m experiments.paneling", "paneling",
-                        env_id=ENV_ID)
+                        learner, env_id=ENV_ID)
+
+
+def train_eval_json(run: Run) -> Path:
+    """Where a training run's evaluation with the paper's protocol goes (docs/data/paneling/train_<start>_s<seed>
+    or train_sac_s<seed>, _eval50k.json)."""
+    return Path(f"docs/data/paneling/train_{run.name.removeprefix('paneling_')}_eval50k.json")
 
 
 @dataclass
@@ -137,9 +144,9 @@ def table(rows: dict[str, dict]) -> str:
 
 
 def train(args: Args) -> None:
-    run = training_run(args.train, args.train_seed, args.num_envs)
+    run = training_run(args.train, args.train_seed, args.num_envs, args.learner)
     if args.evaluate:
-        out = Path(TRAIN_EVAL_JSON.format(start=args.train, seed=args.train_seed))
+        out = train_eval_json(run)
         evaluation.main(evaluation.Args(checkpoint=checkpoint_of(run), env_id=ENV_ID, steps=50_000,
                                         workers=args.workers, json=out))
     else:
@@ -154,9 +161,9 @@ def training_report(results: Path = RESULTS_PATH, curve: Path = TRAIN_CURVE) -> 
     head = ("| run | env steps trained | env steps to 90% placed (its training episodes) | training wall time (h) | "
             "placed % [95% CI], the paper's protocol | placed % by bay (x = -0.68 / 0 / +0.68 m) |\n|---|---|---|---|---|---|")
     lines, curves = [head], {}
-    for start in transfer.STARTS:
+    for learner, start in TRAIN_PLAN:
         for seed in TRAIN_SEEDS:
-            run = training_run(start, seed)
+            run = training_run(start, seed, learner=learner)
             progress = checkpoint_of(run).parent / "progress.csv"
             if not progress.is_file():
                 lines.append(f"| {run.what} | not run: `{run.command}` | | | | |")
@@ -166,8 +173,8 @@ def training_report(results: Path = RESULTS_PATH, curve: Path = TRAIN_CURVE) -> 
             steps = csv_column(rows, "global_step")
             curves[run.what] = (steps, moving_mean(csv_column(rows, "ordinary_place_success"), transfer.STEPS_WINDOW))
             reached = transfer.steps_to(progress)
-            wall_h = training_wall_s(progress, run.args.num_envs * run.args.num_steps) / 3600
-            evaluated = Path(TRAIN_EVAL_JSON.format(start=start, seed=seed))
+            wall_h = training_wall_s(progress, transfer.samples_per_row(run)) / 3600
+            evaluated = train_eval_json(run)
             if evaluated.is_file():
                 task = evaluation.task_results(json.loads(evaluated.read_text()))[ENV_ID]
                 placed = pct(task["place_success"], task["place_success_ci95"])
@@ -182,12 +189,13 @@ def training_report(results: Path = RESULTS_PATH, curve: Path = TRAIN_CURVE) -> 
     if curves:
         plot_training(curves, curve)
     body = ("## Paneling, trained\n\n"
-            "Commands: `python -m experiments.paneling --train nothing`, `--train shipped` (each resumable), then "
-            "`--evaluate` beside either; this section: `python -m experiments.paneling --training-report`. The "
-            "from-scratch recipe unchanged but for the env (PanelInstallation-v1, its dense reward from the same rule "
-            f"as the paper's tasks) and the budget ({TRAIN_BUDGET:,} env steps at most, ending at the first "
-            f"{transfer.STOP_EVERY:,}-step mark by which its training episodes placed {transfer.TARGET:.0%}), from "
-            "nothing or from the shipped reward-only agent's weights. Env steps to 90%: the first at which its "
+            "Commands: `python -m experiments.paneling --train nothing`, `--train shipped`, `--train nothing "
+            "--learner sac` (each resumable), then `--evaluate` beside any; this section: `python -m "
+            "experiments.paneling --training-report`. The from-scratch recipe unchanged but for the env "
+            "(PanelInstallation-v1, its dense reward from the same rule as the paper's tasks) and the budget "
+            f"({TRAIN_BUDGET:,} env steps at most, ending at the first {transfer.STOP_EVERY:,}-step mark by which its "
+            f"training episodes placed {transfer.TARGET:.0%}), from nothing or from the shipped reward-only agent's "
+            "weights; SAC on the same envs, reward and near-goal starts, from nothing. Env steps to 90%: the first at which its "
             f"training episodes from ordinary resets placed {transfer.TARGET:.0%} (their mean over the last "
             f"{transfer.STEPS_WINDOW} iterations); the paper's protocol: 50,000 env steps, cp4, test seeds, the "
             "policy's mean.\n\n" + "\n".join(lines) + "\n"

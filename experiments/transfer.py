@@ -1,9 +1,10 @@
 """The from-scratch recipe on a setting it was not made for (a fourth task, a site with obstacles), from nothing or
 from the weights of the shipped general agent learnt from reward alone, with no reward code of the setting's own:
 the test of the dense reward's rule and of what the recipe's policy carries over. experiments/paneling.py and
-experiments/obstacles.py run it (`--train nothing|shipped`); each run is resumable in campaign/<name>/ (commit its
-checkpoint and CSV to go on in another session), and `steps_to` reads from its training episodes the env steps it
-took to place TARGET of them."""
+experiments/obstacles.py run it (`--train nothing|shipped`); `--learner sac` runs SAC instead of PPO on the same
+envs, reward and near-goal starts (experiments/learners.py `sac_args`; from nothing only: SAC's critics have no
+shipped weights). Each run is resumable in campaign/<name>/ (commit its checkpoint and CSV to go on in another
+session), and `steps_to` reads from its training episodes the env steps it took to place TARGET of them."""
 
 from __future__ import annotations
 
@@ -15,9 +16,13 @@ from typing import Optional
 import numpy as np
 
 from baselines.ppo.args import command_line
+from baselines.sac import sac
 from experiments.campaign import Run, checkpoint_of, describe, run_or_resume
 from experiments.from_scratch import METHOD, csv_column, moving_mean, scratch_args, train as train_in_parts
+from experiments.learners import run_sac, sac_args
 
+LEARNERS = ("ppo", "sac")
+"""the learners a run may take: PPO (the from-scratch recipe) or SAC (experiments/learners.py)."""
 STARTS = {"nothing": None, "shipped": "assets/checkpoints/scratch_general_agent.pt"}
 """where a run starts: fresh weights, or the shipped reward-only general agent's (whose network the recipe shares;
 the imitation agent's residual network is another)."""
@@ -41,6 +46,9 @@ class TrainOptions:
     TRAIN_BUDGET, resuming its checkpoint; then exit."""
     train_seed: int = 1
     """with --train: the training run's seed (--seed is the first evaluation seed)."""
+    learner: str = "ppo"
+    """with --train: `ppo` (the from-scratch recipe) or `sac` (SAC on the same envs, reward and starts; from
+    nothing only)."""
     num_envs: Optional[int] = None
     """with --train: env processes (default: one per CPU core); a resumed run keeps its own."""
     evaluate: bool = False
@@ -50,11 +58,26 @@ class TrainOptions:
 
 
 def transfer_run(name: str, start: str, seed: int, num_envs: Optional[int], budget: int, command: str, what: str,
-                 **setting) -> Run:
+                 learner: str = "ppo", **setting) -> Run:
     """The recipe (experiments/from_scratch.py's `scratch_args`) from `start` (STARTS) to `budget` env steps on
-    seed `seed`, unchanged but for the `setting` (ppo.py Args fields: an env, a scene), in campaign/<name>_<start>_s<seed>/."""
+    seed `seed`, unchanged but for the `setting` (Args fields of both learners: an env, a scene), in
+    campaign/<name>_<start>_s<seed>/; with `learner` "sac", SAC's (experiments/learners.py `sac_args`) from nothing,
+    in campaign/<name>_sac_s<seed>/."""
     if start not in STARTS:
         raise SystemExit(f"--train {start}: use one of {', '.join(STARTS)}")
+    if learner not in LEARNERS:
+        raise SystemExit(f"--learner {learner}: use one of {', '.join(LEARNERS)}")
+    if learner == "sac":
+        if STARTS[start] is not None:
+            raise SystemExit(f"--learner sac --train {start}: SAC trains from nothing only (the shipped agent is PPO's "
+                             "policy and value network; SAC's critics would start from nothing)")
+        exp_name = f"{name}_sac_s{seed}"
+        args = sac_args(seed, exp_name=exp_name, total_timesteps=budget, **({"num_envs": num_envs} if num_envs else {}),
+                        **setting)
+        return Run(exp_name, args, f"SAC on {what} from nothing, seed {seed}",
+                   f"{command} --train nothing --learner sac --train-seed {seed}", None,
+                   method="SAC from nothing on the tasks' default dense reward and near-goal starts "
+                          "(experiments/learners.py); demonstrations: none")
     exp_name = f"{name}_{start}_s{seed}"
     args = scratch_args(num_envs, seed=seed, exp_name=exp_name, total_timesteps=budget, checkpoint=STARTS[start], **setting)
     how = "from nothing" if STARTS[start] is None else f"from the weights of {STARTS[start]}"
@@ -72,22 +95,34 @@ def steps_to(progress: Path, target: float = TARGET, window: int = STEPS_WINDOW)
     return int(csv_column(rows, "global_step")[hit[0]]) if len(hit) else None
 
 
+def samples_per_row(run: Run) -> int:
+    """env steps between two rows of the run's progress.csv (what `campaign.training_wall_s` divides by each sps)."""
+    return run.args.log_freq if isinstance(run.args, sac.Args) else run.args.num_envs * run.args.num_steps
+
+
 def train(run: Run, dry_run: bool = False, stop_at_target: bool = False) -> None:
     """Print the plan and where `run` stands; unless `dry_run`, train (or resume) it to its budget and say when its
     training episodes first placed TARGET. With `stop_at_target` it trains in parts of STOP_EVERY env steps and ends
     after the first part by whose end they have: what such an experiment measures (`steps_to`) is known then, and
     the rest of the budget would only train past it."""
-    print(describe(run))
-    print("as one ppo.py command: python baselines/ppo/ppo.py " + " ".join(command_line(run.args)))
     progress = checkpoint_of(run).parent / "progress.csv"
+    if isinstance(run.args, sac.Args):
+        print(f"{run.name}: {run.what}; {run.args.env_id}, {run.args.total_timesteps:,} env steps, "
+              + (f"resumes ({checkpoint_of(run)})" if checkpoint_of(run).is_file() else "starts fresh"))
+    else:
+        print(describe(run))
+        print("as one ppo.py command: python baselines/ppo/ppo.py " + " ".join(command_line(run.args)))
     if stop_at_target:
         print(f"it stops at the first {STOP_EVERY:,}-env-step mark by which its training episodes placed >= {TARGET:.0%}")
     if dry_run:
         return
-    if not stop_at_target:
+    reached = lambda: progress.is_file() and steps_to(progress) is not None  # noqa: E731
+    if isinstance(run.args, sac.Args):
+        run_sac(run.args, every=STOP_EVERY if stop_at_target else None, stop=reached if stop_at_target else None)
+    elif not stop_at_target:
         run_or_resume(run)
-    elif not (progress.is_file() and steps_to(progress) is not None):
-        train_in_parts(run, SNAPSHOT_DIR / run.name, every=STOP_EVERY, stop=lambda: steps_to(progress) is not None)
+    elif not reached():
+        train_in_parts(run, SNAPSHOT_DIR / run.name, every=STOP_EVERY, stop=reached)
     reached = steps_to(progress)
     print(f"{run.name}: training episodes placed >= {TARGET:.0%} "
           + (f"from {reached:,} env steps" if reached is not None else "not yet"))

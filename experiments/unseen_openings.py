@@ -4,6 +4,7 @@ held out of training, evaluated with the paper's protocol on the openings it nev
     python -m experiments.unseen_openings --seed 1 --dry-run     # the plan, and where that seed's run stands
     python -m experiments.unseen_openings --seed 1               # train (or resume) to the recipe's budget
     python -m experiments.unseen_openings --seed 1 --evaluate    # the paper's protocol, unseen and seen openings
+    python -m experiments.unseen_openings --seed 1 --learner sac # SAC instead (experiments/learners.py), to 90% placed
     python -m experiments.unseen_openings --imitation --dry-run  # its plan, and how far it has come
     python -m experiments.unseen_openings --imitation            # the imitation twin: demonstrations -> clone ->
                                                                  # residual PPO on the trained openings, then evaluated
@@ -13,6 +14,11 @@ The recipe is experiments/from_scratch.py's, unchanged, but for the goal opening
 (`--starts.goal-slot-weights`: HELD_OUT never); its evaluations during training draw every opening. Held out: the
 middle opening of every task type. The window openings at y = -0.85 and +0.85 are each other's mirror image, which
 the recipe's policy meets as one (`mirror_twins`): only the middle one is unseen in every form.
+
+With `--learner sac`, SAC on the same envs, reward and near-goal starts (experiments/learners.py `sac_args`, its
+training envs drawing TRAINED only: `goal_slots`), in parts of 250,000 env steps to at most learners.BUDGET, ending
+at the first mark by which its training episodes placed 90% (experiments/transfer.py `steps_to`), as the runs on
+paneling do.
 
 The imitation twin (`--imitation`) is the shipped imitation agent's recipe, its two commands as their records name
 them (IMITATION_CLONE: experiments/general_agent.py's direct-path demonstrations and behaviour clone;
@@ -36,6 +42,7 @@ from baselines.ppo import evaluation
 from baselines.ppo.args import command_line
 from baselines.ppo.evaluation import pct, training_slot_weights
 from baselines.ppo.start_states import GOAL_SLOTS
+from experiments import learners, transfer
 from experiments.campaign import Run, checkpoint_of, describe, run_or_resume
 from experiments.from_scratch import METHOD, scratch_args
 from ms_construction.envs import PAPER_TASK_ENV_IDS
@@ -58,6 +65,14 @@ def seed_run(seed: int, num_envs: Optional[int] = None) -> Run:
                f"{COMMAND} --seed {seed}", None, method=METHOD)
 
 
+def sac_run(seed: int) -> Run:
+    """SAC from nothing on `seed` (experiments/learners.py), its training envs never drawing the HELD_OUT openings."""
+    name = f"unseen_sac_s{seed}"
+    return Run(name, learners.sac_args(seed, exp_name=name, goal_slots=TRAINED),
+               f"SAC from nothing, seed {seed}, goal openings {', '.join(map(str, HELD_OUT))} held out",
+               f"{COMMAND} --seed {seed} --learner sac", None)
+
+
 IMITATION_DIR = Path("runs/unseen_imitation")
 IMITATION_CLONE = dict(branch_preference="fixed", demo_pace="fast", direct_paths=True, window_takeovers=(),
                        flooring_takeovers=(), ceiling_takeovers=())
@@ -69,7 +84,8 @@ IMITATION_REFINE = dict(reward_mode="sparse", reward_scale=1.0, gamma=0.999, boo
 
 
 def evaluation_json(seed, seen: bool) -> Path:
-    """A run's evaluation on the unseen or the seen openings: `seed` is the recipe's seed, or "imitation"."""
+    """A run's evaluation on the unseen or the seen openings: `seed` is the recipe's seed, "sac_s<seed>" or
+    "imitation"."""
     return EVAL_DIR / f"unseen_{'s' if isinstance(seed, int) else ''}{seed}_{'seen' if seen else 'unseen'}.json"
 
 
@@ -114,7 +130,7 @@ def report(results: Path = Path("docs/RESULTS.md"), seeds: tuple[int, ...] = (1,
     the seen openings per task."""
     lines = ["| run | openings | " + " | ".join(f"{k}: placed % [95% CI]" for k in PAPER_TASK_ENV_IDS) + " |",
              "|---|---|" + "---|" * len(PAPER_TASK_ENV_IDS)]
-    for seed in (*seeds, "imitation"):
+    for seed in (*seeds, *(f"sac_s{s}" for s in seeds), "imitation"):
         for seen in (False, True):
             path = evaluation_json(seed, seen)
             if not path.is_file():
@@ -123,13 +139,15 @@ def report(results: Path = Path("docs/RESULTS.md"), seeds: tuple[int, ...] = (1,
             cells = [pct(tasks[e]["place_success"], tasks[e]["place_success_ci95"]) for e in PAPER_TASK_ENV_IDS.values()]
             slots = ", ".join(map(str, TRAINED if seen else HELD_OUT))
             which = f"{'trained on' if seen else 'never trained on'} ({slots})"
-            name = f"the recipe from nothing, seed {seed}" if isinstance(seed, int) else "imitation (clone + residual PPO)"
+            name = (f"the recipe from nothing, seed {seed}" if isinstance(seed, int) else
+                    f"SAC from nothing, seed {seed.removeprefix('sac_s')}" if seed.startswith("sac_s") else
+                    "imitation (clone + residual PPO)")
             lines.append(f"| {name} | {which} | " + " | ".join(cells) + " |")
     table = "\n".join(lines) if len(lines) > 2 else "No run has been evaluated yet."
     body = ("## Openings no agent trained on\n\n"
             f"Commands: `{COMMAND} --seed S` (training), `{COMMAND} --seed S --evaluate`, `{COMMAND} --imitation`, "
-            f"`{COMMAND} --report`. The from-scratch recipe and the imitation recipe, their training never drawing the "
-            "held-out goal opening of any task type; the "
+            f"`{COMMAND} --report` (`--learner sac`: SAC's run). The from-scratch recipe, SAC and the imitation recipe, "
+            "their training never drawing the held-out goal opening of any task type; the "
             f"paper's protocol ({EVAL_STEPS:,} env steps per task, cp4, test seeds) on each set of openings.\n\n"
             f"{table}\n")
     update_section(results, "unseen-openings", title="Results", body=body)
@@ -150,6 +168,8 @@ class Args:
     """write RESULTS' section from the evaluations there are, and exit."""
     imitation: bool = False
     """run (or resume) the imitation twin (`imitation`) and evaluate its policy, then exit."""
+    learner: str = "ppo"
+    """with --seed: `ppo` (the from-scratch recipe) or `sac` (`sac_run`)."""
 
 
 def main(args: Args) -> None:
@@ -165,6 +185,15 @@ def main(args: Args) -> None:
         return
     if args.seed is None:
         raise SystemExit("give --seed S (to train, or --evaluate its run), --imitation or --report")
+    if args.learner == "sac":
+        run = sac_run(args.seed)
+        if args.evaluate:
+            evaluate(checkpoint_of(run), f"sac_s{args.seed}")
+        else:
+            transfer.train(run, args.dry_run, stop_at_target=True)
+        return
+    if args.learner != "ppo":
+        raise SystemExit(f"--learner {args.learner}: use ppo or sac")
     run = seed_run(args.seed, args.num_envs)
     print(describe(run))
     print("as one ppo.py command: python baselines/ppo/ppo.py " + shlex.join(command_line(run.args)))

@@ -52,26 +52,31 @@ def test_the_report_rows_each_arm_and_says_how_to_run_those_not_run(tmp_path, mo
     body = ln.report(tmp_path / "RESULTS.md", log_dir=log_dir)
     row = next(line for line in body.splitlines() if line.startswith("| PPO (the recipe"))
     # its worst task's mean over the last 50 rows (100,000 env steps) first reaches 50% 28 rows after the jump: at
-    # 176,000 env steps, 88 rows of 4 s
-    assert row.startswith("| PPO (the recipe, seed 1's run) | 200,000 | 0.1 |")
+    # 176,000 env steps, 88 rows of 4 s; 90% it would reach only 50 rows after the jump, beyond the run
+    assert row.startswith("| PPO (the recipe's run) | 1 | 200,000 | 0.1 | - / - | - / - / - |")  # 0.1 h: short of 0.5
     # each task's mean over its last 50 rows (100,000 env steps), 40 of them after the jump: ceiling 0.9 x 40 / 50,
     # window (0.1 x 10 + 1.0 x 40) / 50, flooring 1.0
-    assert row.endswith("| 176,000 | 0.1 | 72% / 82% / 100% |")
-    assert f"not run: `{ln.COMMAND} --arm sac`" in body and f"not run: `{ln.COMMAND} --arm icm`" in body
+    assert row.endswith("| 176,000 / - | 0.1 / - | 72% / 82% / 100% |")
+    for arm, seed in (("ppo", 2), ("sac", 1), ("sac", 2), ("icm", 1)):  # each planned run not yet run says how
+        assert f"| {seed} | not run: `{ln.COMMAND} --arm {arm} --seed {seed}` |" in body
+    assert "--arm icm --seed 2" not in body, "curiosity is one probe, on seed 1"
     assert (tmp_path / "images" / "learners.png").stat().st_size > 0
     assert "refilled" not in body
-    sac_checkpoint = log_dir / ln.sac_args().exp_name / "checkpoint.pt"
+    sac_checkpoint = ln.arm_checkpoint("sac", log_dir, seed=2)
     sac_checkpoint.parent.mkdir(parents=True)
     torch.save({"clock": {"refilled_at": [1_250_000]}}, sac_checkpoint)  # the part of a SAC checkpoint read here
     body = ln.report(tmp_path / "RESULTS.md", log_dir=log_dir)
-    assert "refilled by its actor at 1,250,000 env steps" in body, "an inexact resume is said"
+    assert "SAC seed 2's replay buffer was lost between sessions and refilled by its actor at 1,250,000 env steps" \
+        in body, "an inexact resume is said"
 
 
 def test_an_unknown_arm_is_refused_and_the_icm_arm_is_the_recipe_with_curiosity(tmp_path):
     with pytest.raises(SystemExit, match="use sac or icm"):
         ln.main(ln.Args(arm="ppo"))
+    with pytest.raises(SystemExit, match="--seed 3: use one of 1, 2"):
+        ln.main(ln.Args(arm="sac", seed=3))
     run = ln.icm_run(num_envs=2)
-    recipe = from_scratch.scratch_args(2, seed=ln.SEED)
+    recipe = from_scratch.scratch_args(2, seed=1)
     changed = {k for k, v in vars(run.args).items() if v != vars(recipe)[k]}
     assert changed == {"icm", "total_timesteps", "exp_name"} and run.args.icm.curiosity == "icm"
     tiny = run.args.replace(total_timesteps=40, num_steps=20, num_minibatches=2, update_epochs=1, num_eval_envs=1,
@@ -87,12 +92,12 @@ def test_an_arm_s_paper_protocol_evaluation_is_rowed_and_a_missing_checkpoint_is
     assert ln.evaluations_table(tmp_path) == []
     tasks = {env_id: {"place_success": p, "place_success_ci95": [p - 0.05, p]}
              for env_id, p in (("CeilingInstallation-v1", 0.9), ("WindowInstallation-v1", 0.95), ("Flooring-v1", 1.0))}
-    (tmp_path / "sac_eval50k.json").write_text(json.dumps({"tasks": tasks, "checkpoint_step": 350_000}))
+    ln.eval_json("sac", 2, tmp_path).write_text(json.dumps({"tasks": tasks, "checkpoint_step": 350_000}))
     table = "\n".join(ln.evaluations_table(tmp_path))
-    assert "| CeilingInstallation-v1: placed % [95% CI] | WindowInstallation-v1: placed % [95% CI] |" in table
-    assert "| SAC (replay, twin Q, tanh Gaussian, auto entropy) | 350,000 | 90.0 [85.0, 90.0] | 95.0 [90.0, 95.0] | " \
+    assert "| learner | seed | its env steps | CeilingInstallation-v1: placed % [95% CI] | WindowInstallation-v1: placed % [95% CI] |" in table
+    assert "| SAC (replay, twin Q, tanh Gaussian, auto entropy) | 2 | 350,000 | 90.0 [85.0, 90.0] | 95.0 [90.0, 95.0] | " \
            "100.0 [95.0, 100.0] |" in table
-    with pytest.raises(SystemExit, match="no checkpoint at .*--arm icm"):
+    with pytest.raises(SystemExit, match="no checkpoint at .*--arm icm --seed 1"):
         ln.evaluate_arm("icm", log_dir=tmp_path)
     with pytest.raises(SystemExit, match="use one of ppo, icm, sac"):
         ln.evaluate_arm("td3", log_dir=tmp_path)

@@ -3,6 +3,7 @@ start paths, the expert, and the shipped checkpoints acting unchanged on the obs
 
 from __future__ import annotations
 
+import dataclasses
 import json
 from pathlib import Path
 
@@ -246,7 +247,6 @@ def test_a_paneling_run_ends_at_the_first_mark_by_which_its_training_episodes_pl
     part by whose end its training episodes got there, and a resumed run that has got there trains no more. (ppo.py
     is a stand-in that writes the checkpoint and the progress of each part: its training episodes place every time
     from 302,000 env steps on.)"""
-    import dataclasses
 
     from experiments import campaign, paneling, transfer
     from experiments import from_scratch as fs
@@ -293,7 +293,8 @@ def test_the_training_section_reads_each_run_s_progress_and_evaluation(tmp_path,
     placed = [0.0] * 100 + [1.0] * 100  # 2,000 env steps an iteration, each taking 2 s
     progress.write_text("global_step,ordinary_place_success,sps\n"
                         + "".join(f"{2000 * (i + 1)},{p},1000\n" for i, p in enumerate(placed)))
-    evaluated = Path(paneling.TRAIN_EVAL_JSON.format(start="shipped", seed=1))
+    evaluated = paneling.train_eval_json(paneling.training_run("shipped"))
+    assert evaluated == Path("docs/data/paneling/train_shipped_s1_eval50k.json"), "the evaluation JSON's committed name"
     evaluated.parent.mkdir(parents=True)
     # as scripts/evaluate.py --json writes one task's results: at the top level, no "tasks" entry
     evaluated.write_text(json.dumps({"env_id": paneling.ENV_ID, "place_success": 0.95, "place_success_ci95": [0.9, 0.97],
@@ -302,6 +303,8 @@ def test_the_training_section_reads_each_run_s_progress_and_evaluation(tmp_path,
     # the 50-iteration mean first reaches 90% 45 iterations into the ones: 290,000 env steps
     assert "scratch_general_agent.pt, seed 1 | 400,000 | 290,000 | 0.1 | 95.0 [90.0, 97.0] | 100 / 90 / 95 |" in body
     assert "| not run: `python -m experiments.paneling --train nothing --train-seed 1` |" in body
+    assert "| SAC on paneling from nothing, seed 1 | not run: `python -m experiments.paneling --train nothing " \
+           "--learner sac --train-seed 1` |" in body
     assert (tmp_path / "images" / "curve.png").stat().st_size > 0 and "](images/curve.png)" in body
     assert "<!-- begin paneling-training (generated) -->" in (tmp_path / "RESULTS.md").read_text()
 
@@ -322,3 +325,35 @@ def test_a_run_that_used_its_whole_budget_short_of_the_target_says_so(tmp_path, 
     body = paneling.training_report(tmp_path / "RESULTS.md", tmp_path / "images" / "curve.png")
     assert "scratch_general_agent.pt, seed 1 | 20,000 | not within 20,000 | 0.0 | not yet: `" in body
     assert "from nothing, seed 1 | 10,000 | not yet | 0.0 | not yet: `python -m experiments.paneling --train nothing" in body
+
+
+def test_sac_on_paneling_is_the_learners_sac_but_for_the_env_and_budget_from_nothing_only_and_trains_there(tmp_path):
+    """`--learner sac`: experiments/learners.py's SAC arguments, but for the env, the budget and the run's name; it
+    starts from nothing only (SAC has no shipped critics); a tiny run on PanelInstallation-v1 trains its actor."""
+    from baselines.sac import sac
+    from experiments import learners, paneling
+
+    with pytest.raises(SystemExit, match="SAC trains from nothing only"):
+        paneling.training_run("shipped", learner="sac")
+    with pytest.raises(SystemExit, match="--learner td3: use one of ppo, sac"):
+        paneling.training_run("nothing", learner="td3")
+    run = paneling.training_run("nothing", seed=2, learner="sac")
+    assert run.command == "python -m experiments.paneling --train nothing --learner sac --train-seed 2"
+    assert paneling.train_eval_json(run) == Path("docs/data/paneling/train_sac_s2_eval50k.json")
+    changed = {k for k, v in vars(run.args).items() if v != vars(learners.sac_args(2))[k]}
+    assert changed == {"env_id", "total_timesteps", "exp_name"} and run.args.env_id == paneling.ENV_ID
+    tiny = dataclasses.replace(run.args, num_envs=1, hidden_size=32, num_layers=1, batch_size=32, learning_starts=100,
+                               buffer_size=1000, utd=1.0, log_freq=50, eval_freq=0, total_timesteps=300,
+                               checkpoint_freq=150, log_dir=str(tmp_path))
+    ckpt_path, actors = tmp_path / run.args.exp_name / "checkpoint.pt", []
+
+    def after_part():  # `stop`, asked at the end of each part but the last: go on
+        actors.append(torch.load(ckpt_path, weights_only=False)["sac"]["actor"])
+        return False
+
+    learners.run_sac(tiny, every=150, stop=after_part)
+    ckpt = torch.load(ckpt_path, weights_only=False)
+    assert ckpt["progress"]["global_step"] == 300 and ckpt["args"]["env_id"] == paneling.ENV_ID
+    assert len(actors) == 1, "two parts, the second resumed from the first's checkpoint"
+    assert any(not torch.equal(v, actors[0][k]) for k, v in ckpt["sac"]["actor"].items() if v.is_floating_point()), \
+        "the actor trained on in the second part"

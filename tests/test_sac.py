@@ -121,11 +121,24 @@ def test_resume_refuses_a_checkpoint_without_its_buffer_and_a_ppo_checkpoint(tmp
     (dict(evaluate=True), "--evaluate evaluates --checkpoint"),
     (dict(extend=True), "--extend"),
     (dict(log_std_min=2.0), "--log-std-min"),
+    (dict(goal_slots=(0, 3)), "--goal-slots 0 3: give distinct indices in 0..2"),
+    (dict(goal_slots=(1, 1)), "--goal-slots 1 1"),
 ])
 def test_bad_args_are_refused_with_a_message(change, message):
     with pytest.raises(SystemExit, match=message):
         sac.validate(dataclasses.replace(sac.Args(), **change))
     sac.validate(sac.Args())  # the defaults pass
+
+
+def test_held_out_goal_slots_are_never_drawn_in_training_and_obstacles_are_met_in_training_and_evaluation():
+    args = sac.Args(goal_slots=(0, 2), obstacles="moving")
+    train, evaluate = sac.env_kwargs(args), sac.env_kwargs(args, train=False)
+    assert all(w == [1.0, 0.0, 1.0] for w in train["goal_slot_weights"].values())
+    assert "goal_slot_weights" not in evaluate, "evaluation during training draws every slot"
+    assert train["obstacles"] == evaluate["obstacles"] == "moving"
+    assert train["obs_obstacles"] and evaluate["obs_obstacles"], "the policy observes the obstacles it trains among"
+    plain = sac.env_kwargs(sac.Args())
+    assert not {"goal_slot_weights", "obstacles", "obs_obstacles"} & set(plain)
 
 
 def test_success_is_absorbing_in_the_critics_target_and_truncations_bootstrap():

@@ -35,6 +35,19 @@ def test_the_run_is_the_recipe_with_the_held_out_openings_never_drawn_in_trainin
     assert training == set(uo.TRAINED) and evaluating == set(uo.TRAINED) | set(uo.HELD_OUT)
 
 
+def test_sac_s_run_is_the_learners_sac_with_the_held_out_openings_never_drawn_in_training():
+    """`--learner sac`: experiments/learners.py's SAC but for its name and the goal slots its training envs draw (its
+    evaluations during training draw every slot: tests/test_sac.py)."""
+    from experiments import learners
+
+    run = uo.sac_run(2)
+    changed = {k for k, v in vars(run.args).items() if v != vars(learners.sac_args(2))[k]}
+    assert changed == {"exp_name", "goal_slots"} and run.args.goal_slots == uo.TRAINED
+    assert run.command == "python -m experiments.unseen_openings --seed 2 --learner sac"
+    with pytest.raises(SystemExit, match="--learner td3: use ppo or sac"):
+        uo.main(uo.Args(seed=1, learner="td3", dry_run=True))
+
+
 def test_the_report_tables_unseen_and_seen_openings_per_seed(tmp_path, monkeypatch):
     monkeypatch.setattr(uo, "EVAL_DIR", tmp_path)
     for seen, placed in ((False, 0.5), (True, 0.9)):
@@ -47,6 +60,9 @@ def test_the_report_tables_unseen_and_seen_openings_per_seed(tmp_path, monkeypat
     assert uo.evaluation_json("imitation", False).name == "unseen_imitation_unseen.json"
     body = uo.report(tmp_path / "RESULTS.md", seeds=(1, 2))
     assert "| imitation (clone + residual PPO) | never trained on (1) | 90.0" in body
+    uo.evaluation_json("sac_s2", True).write_text(json.dumps({"tasks": tasks}))
+    assert uo.evaluation_json("sac_s2", True).name == "unseen_sac_s2_seen.json"
+    assert "| SAC from nothing, seed 2 | trained on (0, 2) | 90.0" in uo.report(tmp_path / "RESULTS.md", seeds=(1, 2))
     assert "unseen-openings" in (tmp_path / "RESULTS.md").read_text()
     with pytest.raises(SystemExit, match="--seed S"):
         uo.main(uo.Args())

@@ -67,10 +67,10 @@ from tqdm import tqdm
 
 from baselines.ppo.checkpoints import (CSVLog, Progress, check_fit, load_checkpoint, make_agent, policy_env_kwargs,
                                        restore_rng, save_checkpoint)
-from baselines.ppo.evaluation import evaluate_envs, finished_episodes, reset, run_episodes, summarize
+from baselines.ppo.evaluation import evaluate_envs, finished_episodes, reset, run_episodes, slot_weights, summarize
 from baselines.ppo.networks import RunningMeanStd, layer_init, mlp, rotation_features
 from baselines.ppo.ppo import EPISODE_STATS
-from baselines.ppo.start_states import widen_near_goal
+from baselines.ppo.start_states import GOAL_SLOTS, widen_near_goal
 from baselines.ppo.update import adam
 from ms_construction.curriculum import FINAL_STAGE
 from ms_construction.envs import ENV_IDS
@@ -126,6 +126,12 @@ class Args:
     """append the joint move to the installation configuration to the observation (the tasks' `obs_install_offset`)."""
     obs_path_offset: bool = True
     """append the joint move a little ahead along the start path (the tasks' `obs_path_offset`)."""
+    goal_slots: tuple[int, ...] = ()
+    """the goal slots (indices, every task type) the training envs draw, the others held out (empty: all); evaluation
+    during training draws every slot."""
+    obstacles: Optional[Literal["static", "moving"]] = None
+    """the tasks' `obstacles` option (a site that changes), in training and evaluation; the policy observes them
+    (`obs_obstacles`)."""
     num_envs: int = 2
     """training envs, one per process (physx_cpu): one per core of the 2-core machine."""
     total_timesteps: int = 2_000_000
@@ -248,6 +254,9 @@ def validate(args: Args) -> None:
     """Refuse, before anything starts, what the run would otherwise fail on (or silently do wrong) later."""
     if args.env_id not in ENV_IDS:
         raise SystemExit(f"--env-id {args.env_id}: use one of {', '.join(ENV_IDS)}")
+    if any(not 0 <= s < GOAL_SLOTS for s in args.goal_slots) or len(set(args.goal_slots)) != len(args.goal_slots):
+        raise SystemExit(f"--goal-slots {' '.join(map(str, args.goal_slots))}: give distinct indices in "
+                         f"0..{GOAL_SLOTS - 1}")
     if args.evaluate:
         if not args.checkpoint:
             raise SystemExit("--evaluate evaluates --checkpoint: give one")
@@ -300,17 +309,23 @@ def validate(args: Args) -> None:
 # ------------------------------------------------------------------------------------------------- #
 # Environments
 # ------------------------------------------------------------------------------------------------- #
-def env_kwargs(args: Args) -> dict:
-    """gym.make's kwargs of the training and evaluation envs: PPO's from-scratch recipe's observation, reward and
-    controller (checkpoints.policy_env_kwargs reads the same fields off a checkpoint's args)."""
-    return dict(obs_mode="state", reward_mode=args.reward_mode, **policy_env_kwargs(args.flat()))
+def env_kwargs(args: Args, train: bool = True) -> dict:
+    """gym.make's kwargs of the training (or evaluation) envs: PPO's from-scratch recipe's observation, reward and
+    controller (checkpoints.policy_env_kwargs reads the same fields off a checkpoint's args), the site's obstacles,
+    and in training the goal slots drawn."""
+    kwargs = dict(obs_mode="state", reward_mode=args.reward_mode, **policy_env_kwargs(args.flat()))
+    if args.obstacles is not None:
+        kwargs["obstacles"] = args.obstacles
+    if train and args.goal_slots:
+        kwargs["goal_slot_weights"] = slot_weights(args.goal_slots)
+    return kwargs
 
 
 def make_envs(args: Args, num_envs: int, train: bool = True) -> CPUVectorEnv:
     """`num_envs` envs on physx_cpu, one per process; training envs cut near-goal episodes after
     --near-goal-max-steps (NearGoalTimeLimit; the starts themselves are set by `set_near_goal_starts`)."""
     wrappers = (NearGoalTimeLimit,) if train and args.near_goal_share > 0 and args.near_goal_max_steps else ()
-    return CPUVectorEnv(args.env_id, num_envs, env_kwargs(args), device="cpu", wrappers=wrappers)
+    return CPUVectorEnv(args.env_id, num_envs, env_kwargs(args, train), device="cpu", wrappers=wrappers)
 
 
 def set_near_goal_starts(args: Args, envs: CPUVectorEnv, progress: Progress) -> None:
