@@ -36,6 +36,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Optional
 
+import torch
 import tyro
 
 from baselines.ppo import evaluation
@@ -90,10 +91,15 @@ def evaluation_json(seed, seen: bool) -> Path:
 
 
 def evaluate(checkpoint: Path, seed, steps: int = EVAL_STEPS, workers: int = 2) -> None:
-    """The paper's protocol (test seeds, `steps` per task, cp4) on the held-out openings, then on the trained ones."""
+    """The paper's protocol (test seeds, `steps` per task, cp4) on the held-out openings, then on the trained ones;
+    each JSON records the env steps the checkpoint had trained (`checkpoint_step`) where the checkpoint says."""
+    step = torch.load(checkpoint, map_location="cpu", weights_only=False).get("progress", {}).get("global_step")
     for seen, slots in ((False, HELD_OUT), (True, TRAINED)):
+        out = evaluation_json(seed, seen)
         evaluation.main(evaluation.Args(checkpoint=checkpoint, all=True, steps=steps, goal_slots=slots,
-                                        workers=workers, json=evaluation_json(seed, seen)))
+                                        workers=workers, json=out))
+        if step is not None:
+            out.write_text(json.dumps(dict(json.loads(out.read_text()), checkpoint_step=int(step)), indent=1) + "\n")
 
 
 def imitation(run_dir: Path = IMITATION_DIR, clone: Optional[dict] = None, refine_args: Optional[dict] = None) -> Path:
@@ -128,21 +134,23 @@ def imitation_plan(run_dir: Path = IMITATION_DIR) -> str:
 def report(results: Path = Path("docs/RESULTS.md"), seeds: tuple[int, ...] = (1, 2)) -> str:
     """RESULTS' section: per run evaluated (the recipe's seeds, the imitation twin), place success on the unseen and
     the seen openings per task."""
-    lines = ["| run | openings | " + " | ".join(f"{k}: placed % [95% CI]" for k in PAPER_TASK_ENV_IDS) + " |",
-             "|---|---|" + "---|" * len(PAPER_TASK_ENV_IDS)]
+    lines = ["| run | its env steps | openings | " + " | ".join(f"{k}: placed % [95% CI]" for k in PAPER_TASK_ENV_IDS)
+             + " |", "|---|---|---|" + "---|" * len(PAPER_TASK_ENV_IDS)]
     for seed in (*seeds, *(f"sac_s{s}" for s in seeds), "imitation"):
         for seen in (False, True):
             path = evaluation_json(seed, seen)
             if not path.is_file():
                 continue
-            tasks = json.loads(path.read_text())["tasks"]
+            data = json.loads(path.read_text())
+            tasks = data["tasks"]
             cells = [pct(tasks[e]["place_success"], tasks[e]["place_success_ci95"]) for e in PAPER_TASK_ENV_IDS.values()]
             slots = ", ".join(map(str, TRAINED if seen else HELD_OUT))
             which = f"{'trained on' if seen else 'never trained on'} ({slots})"
             name = (f"the recipe from nothing, seed {seed}" if isinstance(seed, int) else
                     f"SAC from nothing, seed {seed.removeprefix('sac_s')}" if seed.startswith("sac_s") else
                     "imitation (clone + residual PPO)")
-            lines.append(f"| {name} | {which} | " + " | ".join(cells) + " |")
+            trained = f"{data['checkpoint_step']:,}" if "checkpoint_step" in data else "-"
+            lines.append(f"| {name} | {trained} | {which} | " + " | ".join(cells) + " |")
     table = "\n".join(lines) if len(lines) > 2 else "No run has been evaluated yet."
     body = ("## Openings no agent trained on\n\n"
             f"Commands: `{COMMAND} --seed S` (training), `{COMMAND} --seed S --evaluate`, `{COMMAND} --imitation`, "

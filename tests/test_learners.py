@@ -86,17 +86,34 @@ def test_an_unknown_arm_is_refused_and_the_icm_arm_is_the_recipe_with_curiosity(
     assert trained["icm"] is not None and trained["progress"]["global_step"] == 40
 
 
-def test_an_arm_s_paper_protocol_evaluation_is_rowed_and_a_missing_checkpoint_is_refused(tmp_path):
-    """`--evaluate ARM` writes EVAL_DIR/<arm>_eval50k.json as scripts/evaluate.py --all does, with the env steps its
-    checkpoint had trained; the report rows each arm evaluated (nothing where none is)."""
-    assert ln.evaluations_table(tmp_path) == []
-    tasks = {env_id: {"place_success": p, "place_success_ci95": [p - 0.05, p]}
-             for env_id, p in (("CeilingInstallation-v1", 0.9), ("WindowInstallation-v1", 0.95), ("Flooring-v1", 1.0))}
-    ln.eval_json("sac", 2, tmp_path).write_text(json.dumps({"tasks": tasks, "checkpoint_step": 350_000}))
-    table = "\n".join(ln.evaluations_table(tmp_path))
-    assert "| learner | seed | its env steps | CeilingInstallation-v1: placed % [95% CI] | WindowInstallation-v1: placed % [95% CI] |" in table
-    assert "| SAC (replay, twin Q, tanh Gaussian, auto entropy) | 2 | 350,000 | 90.0 [85.0, 90.0] | 95.0 [90.0, 95.0] | " \
-           "100.0 [95.0, 100.0] |" in table
+def test_each_paper_protocol_evaluation_is_rowed_with_its_wall_time_and_whether_it_meets_the_target(tmp_path,
+                                                                                                   monkeypatch):
+    """The evaluations table: `--evaluate ARM --seed S` writes EVAL_DIR/<arm>_s<seed>_eval50k.json as
+    scripts/evaluate.py --all does, with the env steps its checkpoint had trained; the PPO arm's are the recipe's
+    snapshot evaluations (experiments/from_scratch.py). Each row has the training wall time its run had taken by
+    then and whether every task met the target (placed >= 90%, picked >= 95%); nothing where none is."""
+    monkeypatch.setattr(ln, "SEED_EVAL_DIR", tmp_path / "from_scratch")
+    log_dir = tmp_path / "campaign"
+    assert ln.evaluations_table(tmp_path, log_dir) == []
+
+    def tasks(placed, picked=1.0):
+        return {env_id: {"place_success": p, "place_success_ci95": [p - 0.05, p], "pick_success": picked}
+                for env_id, p in zip(("CeilingInstallation-v1", "WindowInstallation-v1", "Flooring-v1"), placed)}
+
+    ln.eval_json("sac", 2, tmp_path).write_text(json.dumps({"tasks": tasks((0.9, 0.95, 1.0)),
+                                                             "checkpoint_step": 350_000}))
+    _write(ln.progress_csv("sac", log_dir, seed=2), _rows(200, lambda i: 0.5, wall=36.0))  # 2,000 env steps a row
+    ppo_snapshot = tmp_path / "from_scratch" / "scratch_s1_eval50k_3000000.json"
+    ppo_snapshot.parent.mkdir()
+    ppo_snapshot.write_text(json.dumps({"tasks": tasks((0.99, 0.95, 0.99), picked=0.9)}))
+    table = "\n".join(ln.evaluations_table(tmp_path, log_dir))
+    assert "| learner | seed | its env steps | its training wall time (h) | CeilingInstallation-v1: placed % [95% CI] |" \
+        in table
+    # its row at 350,000 env steps: the 175th of 36 s each
+    assert "| SAC (replay, twin Q, tanh Gaussian, auto entropy) | 2 | 350,000 | 1.8 | 90.0 [85.0, 90.0] | " \
+           "95.0 [90.0, 95.0] | 100.0 [95.0, 100.0] | yes |" in table
+    assert "| PPO (the recipe's run) | 1 | 3,000,000 | - | 99.0 [94.0, 99.0] | 95.0 [90.0, 95.0] | 99.0 [94.0, 99.0] | " \
+           "no |" in table, "picked 90%: short of the target; no progress.csv: no wall time"
     with pytest.raises(SystemExit, match="no checkpoint at .*--arm icm --seed 1"):
         ln.evaluate_arm("icm", log_dir=tmp_path)
     with pytest.raises(SystemExit, match="use one of ppo, icm, sac"):
