@@ -118,8 +118,9 @@ def arm_checkpoint(arm: str, log_dir: Path = CAMPAIGN_DIR, seed: int = 1) -> Pat
     return progress_csv(arm, log_dir, seed).with_name("checkpoint.pt")
 
 
-def eval_json(arm: str, seed: int, eval_dir: Path = EVAL_DIR) -> Path:
-    return eval_dir / f"{arm}_s{seed}_eval50k.json"
+def eval_json(arm: str, seed: int, eval_dir: Optional[Path] = None) -> Path:
+    """Where `evaluate_arm` writes the arm's evaluation on `seed` (in EVAL_DIR unless `eval_dir`)."""
+    return (eval_dir or EVAL_DIR) / f"{arm}_s{seed}_eval50k.json"
 
 
 def evaluate_arm(arm: str, workers: int = 2, log_dir: Path = CAMPAIGN_DIR, seed: int = 1) -> Path:

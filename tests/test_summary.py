@@ -38,6 +38,17 @@ def test_each_row_reads_its_file_and_a_seed_shows_its_latest_evaluation(tmp_path
     assert "the recipe from nothing, seed 1" not in body and "the recipe from nothing, seed 2" in body
 
 
+def test_a_sac_seed_s_evaluation_is_a_row_with_its_env_steps(tmp_path, monkeypatch):
+    """SAC's seeds (experiments/learners.py `--evaluate sac --seed S`): a row each where its evaluation is there."""
+    from experiments import learners
+
+    monkeypatch.setattr(learners, "EVAL_DIR", tmp_path)
+    assert "SAC from nothing" not in sm.summary()
+    learners.eval_json("sac", 2).write_text(json.dumps({"tasks": _tasks(0.975), "checkpoint_step": 300_368}))
+    row = next(line for line in sm.summary().splitlines() if line.startswith("| SAC from nothing"))
+    assert row.startswith("| SAC from nothing, seed 2, at 300,368 env steps (not shipped) |") and row.count("| 97.5 ") == 3
+
+
 def test_a_file_not_there_yet_shows_a_dash_and_the_section_lands_between_its_markers(tmp_path, monkeypatch):
     monkeypatch.setattr(sm, "OBSTACLES", tmp_path / "none.json")
     monkeypatch.setattr(sm, "PANELING", tmp_path / "none.json")
