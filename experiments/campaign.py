@@ -18,6 +18,7 @@ import torch
 from baselines.ppo import ppo
 from baselines.ppo.args import Args
 from baselines.ppo.checkpoints import load_checkpoint
+from baselines.sac import sac
 
 CAMPAIGN_DIR = Path("campaign")
 """where the campaign's runs live; their latest checkpoint and progress CSV are committed."""
@@ -27,11 +28,11 @@ SHIPPED_DIR = Path("assets/checkpoints")
 
 @dataclass
 class Run:
-    """One run of the campaign: its name, its ppo.py Args, what it is, the command that runs it, and where
-    its final policy is shipped when it has run to the end of its plan (None: not shipped)."""
+    """One run of the campaign: its name, its ppo.py (or sac.py) Args, what it is, the command that runs it, and
+    where its final policy is shipped when it has run to the end of its plan (None: not shipped)."""
 
     name: str
-    args: Args
+    args: Args | sac.Args
     what: str
     command: str
     shipped: Optional[Path] = None
@@ -53,9 +54,12 @@ def checkpoint_of(run: Run) -> Path:
 
 
 def describe(run: Run) -> str:
-    """One line: the run, its budget and stages, and where it stands."""
+    """One line: the run, its budget and stages (PPO's), and where it stands."""
     a, ckpt = run.args, checkpoint_of(run)
     done = load_checkpoint(ckpt)["progress"]["global_step"] if ckpt.is_file() else 0
+    if isinstance(a, sac.Args):
+        return (f"{run.name}: {run.what}; {a.env_id}, {a.total_timesteps:,} env steps, seed {a.seed}, {a.num_envs} envs; "
+                f"{'resumes at step ' + format(done, ',') if done else 'starts fresh'} ({ckpt})")
     return (f"{run.name}: {run.what}; {a.env_id}, stages {' '.join(a.stages.curriculum)} ({a.stages.stage_timesteps:,} steps each), "
             f"{a.total_timesteps:,} steps, curiosity {a.icm.curiosity}, seed {a.seed}, {a.num_envs} envs x {a.num_steps} steps "
             f"per update; {'resumes at step ' + format(done, ',') if done else 'starts fresh'} ({ckpt})"
@@ -73,11 +77,14 @@ def run_or_resume(run: Run) -> None:
 
 
 def training_wall_s(progress_csv: Path, samples_per_iteration: int, until_step: Optional[int] = None) -> float:
-    """The wall time of a run's training iterations (rollouts and updates), summed from its progress.csv (up to
-    `until_step` when given): evaluations, start-ups and the time between sessions are not in it."""
+    """The wall time of a run's training iterations (rollouts and updates) from its progress.csv (up to `until_step`
+    when given): evaluations, start-ups and the time between sessions are not in it. A PPO row is an iteration of
+    `samples_per_iteration` env steps at its sps; a SAC row carries its run's env and update seconds so far."""
     with open(progress_csv, newline="") as f:
-        return sum(samples_per_iteration / float(row["sps"]) for row in csv.DictReader(f)
-                   if row["sps"] and (until_step is None or int(row["global_step"]) <= until_step))
+        rows = [row for row in csv.DictReader(f) if until_step is None or int(row["global_step"]) <= until_step]
+    if rows and "update_s" in rows[0]:
+        return float(rows[-1]["env_s"]) + float(rows[-1]["update_s"])
+    return sum(samples_per_iteration / float(row["sps"]) for row in rows if row["sps"])
 
 
 def ship(run: Run, snapshot: Optional[Path] = None, chosen: Optional[str] = None) -> Path:
@@ -92,7 +99,7 @@ def ship(run: Run, snapshot: Optional[Path] = None, chosen: Optional[str] = None
     if progress["global_step"] < run.args.total_timesteps and snapshot is None:
         raise SystemExit(f"{run.name}: at step {progress['global_step']:,} of {run.args.total_timesteps:,}; "
                          f"ship it when it has run to the end ({run.command})")
-    wall = training_wall_s(checkpoint_of(run).with_name("progress.csv"), a["num_envs"] * a["num_steps"],
+    wall = training_wall_s(checkpoint_of(run).with_name("progress.csv"), a["num_envs"] * a.get("num_steps", 0),
                            progress["global_step"])
     return ship_checkpoint(path, run.shipped, run.command, {
         "method": run.method or f"{run.what} (PPO, sparse reward, curiosity {a['curiosity']}; experiments/paper.py)",
@@ -112,8 +119,12 @@ def hardware(how: str = "physx_cpu") -> str:
 
 
 def policy_only(ckpt: dict) -> dict:
-    """A checkpoint's policy (weights, Args, progress) without what only resumes its run (optimizers, RNG states)."""
-    return {k: v for k, v in ckpt.items() if k not in ("optimizer", "icm_optimizer", "rng")}
+    """A checkpoint's policy (weights, Args, progress) without what only resumes its run (optimizers, RNG states; a
+    SAC run's critics and the name of its replay buffer's file: its actor stays)."""
+    policy = {k: v for k, v in ckpt.items() if k not in ("optimizer", "icm_optimizer", "rng", "replay_buffer")}
+    if ckpt.get("sac") is not None:
+        policy["sac"] = {"actor": ckpt["sac"]["actor"]}
+    return policy
 
 
 def ship_checkpoint(checkpoint: Path, out: Path, command: str, record: dict, progress_csv: Optional[Path] = None,

@@ -9,7 +9,7 @@ steps each, judged at cp4 as Table II was:
 
 | arm | curriculum | the run |
 |---|---|---|
-| `cp4` | cp4 from the first step | the seed's run of the recipe itself (`from_scratch --seed S`), its first BUDGET env steps |
+| `cp4` | cp4 from the first step | the seed's run of the PPO recipe (`from_scratch --seed S --learner ppo`), its first BUDGET env steps |
 | `curriculum` | cp1, cp2, cp3 (Table I) for STAGE_STEPS each, then cp4 | campaign/question_curriculum_s<seed>/ |
 
 The cp4 arm is the recipe's own run on the same seed, so only the curriculum arm trains here. The curriculum moves on
@@ -75,19 +75,19 @@ def curriculum_run(seed: int, num_envs: Optional[int] = None) -> Run:
 
 def question_runs(seed: int, num_envs: Optional[int] = None) -> dict[str, Run]:
     """The seed's two arms: the recipe's own run at cp4 from the first step, and the curriculum arm."""
-    return {"cp4": from_scratch.seed_run(seed, num_envs), "curriculum": curriculum_run(seed, num_envs)}
+    return {"cp4": from_scratch.seed_run(seed, num_envs, learner="ppo"), "curriculum": curriculum_run(seed, num_envs)}
 
 
 def validation_json(arm: str, seed: int, step: int) -> Path:
     if arm == "cp4":
-        return from_scratch.seed_validation_json(seed, step)
+        return from_scratch.seed_validation_json(seed, step, learner="ppo")
     return DATA / f"question_curriculum_s{seed}_val{VALIDATION_EPISODES}_{step}.json"
 
 
 def evaluation_json(arm: str, seed: int) -> Path:
     """The arm's snapshot at BUDGET with the paper's protocol."""
     if arm == "cp4":
-        return from_scratch.seed_evaluation_json(seed, BUDGET)
+        return from_scratch.seed_evaluation_json(seed, BUDGET, "ppo")
     return DATA / f"question_curriculum_s{seed}_eval50k_{BUDGET}.json"
 
 
@@ -214,7 +214,7 @@ def report(seeds: tuple[int, ...] = from_scratch.SEEDS, results: Path = Path("do
 @dataclass
 class Args:
     seed: Optional[int] = None
-    """the seed whose arms to run (its curriculum arm trains; its cp4 arm is `from_scratch --seed S`)."""
+    """the seed whose arms to run (its curriculum arm trains; its cp4 arm is `from_scratch --seed S --learner ppo`)."""
     num_envs: Optional[int] = None
     """env processes (default: one per CPU core); a run resumed from a checkpoint keeps its own."""
     dry_run: bool = False

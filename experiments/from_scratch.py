@@ -1,23 +1,30 @@
 """The general agent learnt from reward alone: no demonstrations, no expert states, no cloned weights.
 
     python -m experiments.from_scratch --seed 1 --dry-run   # the plan, and where that seed's run stands
-    python -m experiments.from_scratch --seed 1             # run (or resume) the recipe from nothing on seed 1, a snapshot
-                                                            # every 250,000 env steps, screened on validation seeds as it
-                                                            # is made; at the budget the snapshot rule chooses one and the
-                                                            # paper's protocol evaluates it (commit campaign/scratch_s1/
-                                                            # and docs/data/from_scratch/)
+    python -m experiments.from_scratch --seed 1             # run (or resume) the recipe from nothing on seed 1 with its
+                                                            # learner, SAC, a snapshot every 250,000 env steps, screened
+                                                            # on validation seeds as it is made; at the budget the
+                                                            # snapshot rule chooses one and the paper's protocol
+                                                            # evaluates it (commit campaign/sac_s1/ but its replay
+                                                            # buffer, and docs/data/from_scratch/)
+    python -m experiments.from_scratch --seed 1 --learner ppo   # the same with PPO (campaign/scratch_s1/)
     python -m experiments.from_scratch --seed 1 --evaluate  # the paper's protocol on that seed's latest snapshot, or
                                                             # --at-step N
     python -m experiments.from_scratch --report             # the seeds' and the shipped agent's sections of
                                                             # docs/RESULTS.md, and the seeds' curves
     python -m experiments.from_scratch --ship-seeds         # ship the better seed's chosen snapshot once both have run
 
-The recipe (`scratch_args`) runs unchanged from step 0 to its budget, one PPO run (baselines/ppo/ppo.py) on
-ConstructionPickPlace-v1 per seed, in campaign/scratch_s<seed>/ (resumed from its checkpoint there); the better seed's
-chosen snapshot ships as assets/checkpoints/scratch_general_agent.pt. The first campaign from reward alone changed its
-recipe seven times on the way to its target (docs/experiments/from_scratch.md is its history); the recipe is where it
-ended, with the task's one dense reward and without its sampling weights on one task type and one opening. What each
-part is for:
+The recipe runs unchanged from step 0 to its budget, one run per seed on ConstructionPickPlace-v1 (resumed from its
+checkpoint in campaign/<run_name>/), with one of two learners on the same envs, reward, observation and near-goal
+starts: SAC (LEARNER, the default: experiments/sac_recipe.py `sac_args`, baselines/sac/sac.py's defaults, 2M env
+steps), which met the recipe's target in about a fifth of PPO's training wall time on this CPU on both seeds
+(experiments/learners.py), or PPO (`scratch_args`, baselines/ppo/ppo.py, 10M env steps), whose runs made the agent
+shipped now. The better seed's chosen snapshot ships as assets/checkpoints/scratch_general_agent.pt if it places at
+least what that one does. The first campaign from reward alone changed its recipe seven times on the way to its
+target (docs/experiments/from_scratch.md is its history); the PPO recipe is where it ended, with the task's one dense
+reward and without its sampling weights on one task type and one opening. What each part of PPO's recipe is for (SAC
+shares the reward, success, the near-goal starts, observation, discount, curriculum and task sampling; not the reach
+starts, the mirror of the twin openings or PPO's updates):
 
 | setting | value | why |
 |---|---|---|
@@ -55,6 +62,8 @@ from baselines.ppo.args import command_line
 from baselines.ppo.checkpoints import load_checkpoint
 from baselines.ppo.evaluation import PAPER_TABLE_II, failures, kinds, pct
 from baselines.ppo.start_states import GOAL_SLOTS
+from baselines.sac import sac
+from experiments import sac_recipe
 from experiments.campaign import (CAMPAIGN_DIR, SHIPPED_DIR, Run, checkpoint_of, describe, policy_only, ship,
                                  training_wall_s)
 from experiments.expert_modes import placed_per_slot
@@ -92,12 +101,32 @@ def scratch_args(num_envs: Optional[int] = None, **overrides) -> ppo.Args:
 
 METHOD = "PPO from nothing on the tasks' default dense reward, near-goal and reach start states (experiments/from_scratch.py); demonstrations: none"
 
+LEARNERS = ("sac", "ppo")
+"""the learners the recipe runs with: SAC (experiments/sac_recipe.py, to its BUDGET) or PPO (`scratch_args`, to
+BUDGET)."""
+LEARNER = "sac"
+"""the recipe's learner, the one of LEARNERS that met its target sooner in training wall time on this CPU: SAC at
+1.0-1.2 h on the two seeds, PPO at 5.1-7.3 h (experiments/learners.py, docs/RESULTS.md#which-learner-and-curiosity)."""
 
-def seed_run(seed: int, num_envs: Optional[int] = None) -> Run:
-    """The recipe from nothing on `seed`, to BUDGET; `ship_seeds` ships the better seed once both have run."""
-    name = f"scratch_s{seed}"
-    return Run(name, scratch_args(num_envs, seed=seed, exp_name=name), f"the recipe from nothing, seed {seed}",
-               f"{COMMAND} --seed {seed}", None, method=METHOD)
+
+def run_name(seed: int, learner: str = LEARNER) -> str:
+    """The name of the recipe's run from nothing on `seed` with `learner`: its folder in campaign/ and its files'
+    prefix in SEED_EVAL_DIR."""
+    if learner not in LEARNERS:
+        raise SystemExit(f"--learner {learner}: use one of {', '.join(LEARNERS)}")
+    return {"sac": sac_recipe.sac_args(seed).exp_name, "ppo": f"scratch_s{seed}"}[learner]
+
+
+def seed_run(seed: int, num_envs: Optional[int] = None, learner: str = LEARNER) -> Run:
+    """The recipe from nothing on `seed` with `learner`, to its budget; `ship_seeds` ships the better seed once both
+    have run."""
+    name = run_name(seed, learner)
+    command = f"{COMMAND} --seed {seed}" + ("" if learner == LEARNER else f" --learner {learner}")
+    if learner == "sac":
+        return Run(name, sac_recipe.sac_args(seed, **({"num_envs": num_envs} if num_envs else {})),
+                   f"SAC from nothing, seed {seed}", command, None, method=sac_recipe.METHOD)
+    return Run(name, scratch_args(num_envs, seed=seed, exp_name=name), f"the PPO recipe from nothing, seed {seed}",
+               command, None, method=METHOD)
 
 
 EVAL_JSON = Path("docs/data/paper/scratch_general_agent_eval_50k.json")
@@ -133,7 +162,7 @@ def standing(run: Run, progress: Path) -> tuple[list[dict], list[str]]:
         x = csv_column(late, key)
         return f"{100 * np.nanmean(x):.1f}" if np.isfinite(x).any() else "-"
 
-    wall = training_wall_s(progress, run.args.num_envs * run.args.num_steps)
+    wall = training_wall_s(progress, run.args.num_envs * getattr(run.args, "num_steps", 0))
     return rows, [f"{done:,} / {run.args.total_timesteps:,}", f"{wall / 3600:.1f} h",
                   " / ".join(f"{float(rows[-1].get(f'near_goal_radius_{k}') or 0):.1f}" for k in PAPER_KINDS),
                   " / ".join(pct_of(f"ordinary_place_{k}") for k in PAPER_KINDS), pct_of("near_goal_place_success")]
@@ -147,12 +176,13 @@ def shipped_how(shipped: Path = SHIPPED) -> str:
     recipe ran from nothing) the first campaign's."""
     if not shipped.is_file():
         return "not shipped yet"
-    record = load_checkpoint(shipped)["campaign"]["record"]
+    ckpt = load_checkpoint(shipped)
+    record, learner = ckpt["campaign"]["record"], ckpt["args"].get("algorithm", "ppo").upper()
     steps = record["env steps"].split(" ")[0]
     if record.get("chosen", "").startswith("seed "):
-        return (f"PPO on the dense reward, no demonstrations; the recipe unchanged from step 0, "
+        return (f"{learner} on the dense reward, no demonstrations; the recipe unchanged from step 0, "
                 f"{record['chosen'].split(' (')[0]}, {steps} env steps")
-    return f"PPO on the dense reward, no demonstrations; one hand-steered campaign, {steps} env steps"
+    return f"{learner} on the dense reward, no demonstrations; one hand-steered campaign, {steps} env steps"
 
 
 def shipped_report(results: Path = Path("docs/RESULTS.md"), shipped: Path = SHIPPED) -> str:
@@ -199,57 +229,64 @@ EVAL_STEPS = 50_000
 """env steps per task of the paper's protocol."""
 
 
-def seed_snapshots(seed: int) -> Path:
-    return SNAPSHOT_DIR.with_name(f"{SNAPSHOT_DIR.name}_s{seed}")
+def seed_snapshots(seed: int, learner: str = LEARNER) -> Path:
+    return SNAPSHOT_DIR / run_name(seed, learner)
 
 
-def seed_evaluation_json(seed: int, step: int) -> Path:
-    return SEED_EVAL_DIR / f"scratch_s{seed}_eval50k_{step}.json"
+def seed_evaluation_json(seed: int, step: int, learner: str = LEARNER) -> Path:
+    return SEED_EVAL_DIR / f"{run_name(seed, learner)}_eval50k_{step}.json"
 
 
-def evaluate_seed(seed: int, step: Optional[int] = None, workers: int = 2) -> Path:
+def seed_evaluations(seed: int, learner: str = LEARNER) -> dict[int, Path]:
+    """env steps -> `seed_evaluation_json` of each evaluation of the seed's run with the paper's protocol."""
+    prefix = f"{run_name(seed, learner)}_eval50k_"
+    return dict(sorted((int(p.stem[len(prefix):]), p) for p in SEED_EVAL_DIR.glob(f"{prefix}*.json")))
+
+
+def evaluate_seed(seed: int, step: Optional[int] = None, workers: int = 2, learner: str = LEARNER) -> Path:
     """The paper's protocol (test seeds from 1,000,000, EVAL_STEPS per task, cp4, the policy's mean) on the seed's
     snapshot at `step` env steps (default: its latest), written to `seed_evaluation_json`; kept where it is there.
     The run's own checkpoint counts as its snapshot at its step (a fresh machine has that one only)."""
-    snapshots = seed_snapshots(seed)
+    snapshots = seed_snapshots(seed, learner)
     found = {int(p.stem.split("_")[1]): p for p in snapshots.glob("checkpoint_*.pt")}
-    found.update({int(p.stem.split("_")[1]): p for p in seed_candidates(seed).glob("candidate_*.pt")
+    found.update({int(p.stem.split("_")[1]): p for p in seed_candidates(seed, learner).glob("candidate_*.pt")
                   if int(p.stem.split("_")[1]) not in found})
-    if (ckpt := checkpoint_of(seed_run(seed))).is_file():
+    if (ckpt := checkpoint_of(seed_run(seed, learner=learner))).is_file():
         found.setdefault(load_checkpoint(ckpt)["progress"]["global_step"], ckpt)
     if not found:
-        raise SystemExit(f"no snapshots of seed {seed} in {snapshots}: `{COMMAND} --seed {seed}` keeps one every "
-                         f"{SNAPSHOT_EVERY:,} env steps")
+        raise SystemExit(f"no snapshots of seed {seed} in {snapshots}: `{seed_run(seed, learner=learner).command}` "
+                         f"keeps one every {SNAPSHOT_EVERY:,} env steps")
     step = max(found) if step is None else step
     if step not in found:
         raise SystemExit(f"no snapshot of seed {seed} at {step:,} env steps; there are: "
                          + ", ".join(f"{s:,}" for s in sorted(found)))
-    out = seed_evaluation_json(seed, step)
+    out = seed_evaluation_json(seed, step, learner)
     if not out.is_file():
         evaluation.main(evaluation.Args(checkpoint=found[step], all=True, steps=EVAL_STEPS, workers=workers, json=out))
     return out
 
 
 def seed_evaluations_table() -> list[str]:
-    """Every seed evaluation there is, a row each (seed, then env steps), beside the paper's Table II."""
-    found = sorted((int(m[0]), int(m[1]), p) for p in SEED_EVAL_DIR.glob("scratch_s*_eval50k_*.json")
-                   for m in [p.stem[len("scratch_s"):].split("_eval50k_")])
+    """Every seed evaluation there is, a row each (learner, seed, then env steps), beside the paper's Table II."""
+    found = [(learner, seed, step, path) for learner in LEARNERS for seed in SEEDS
+             for step, path in seed_evaluations(seed, learner).items()]
     if not found:
         return ["No seed has been evaluated with the paper's protocol yet "
                 f"(`{COMMAND} --seed S --evaluate`, at the end of its run)."]
     envs = list(PAPER_TABLE_II)
-    lines = [f"With the paper's protocol (`{COMMAND} --seed S --evaluate [--at-step N]`: test seeds from 1,000,000, "
-             f"{EVAL_STEPS:,} env steps per task, cp4, the policy's mean; the seed's snapshot at N env steps):", "",
-             "| seed | env steps | " + " | ".join(f"{e}: picked / placed % [95% CI]" for e in envs)
+    lines = [f"With the paper's protocol (`{COMMAND} --seed S [--learner L] --evaluate [--at-step N]`: test seeds from "
+             f"1,000,000, {EVAL_STEPS:,} env steps per task, cp4, the policy's mean; the seed's snapshot at N env "
+             "steps):", "",
+             "| learner | seed | env steps | " + " | ".join(f"{e}: picked / placed % [95% CI]" for e in envs)
              + " | the snapshot rule's choice |",
-             "|---|---|" + "---|" * len(envs) + "---|",
-             "| paper's general agent (Table II, cp4) | 8,000,000 | "
+             "|---|---|---|" + "---|" * len(envs) + "---|",
+             "| paper's general agent (Table II, cp4) | | 8,000,000 | "
              + " | ".join(f"{PAPER_TABLE_II[e][0]:.2f} / {PAPER_TABLE_II[e][1]:.2f}" for e in envs) + " | |"]
-    for seed, step, path in found:
+    for learner, seed, step, path in found:
         tasks = json.loads(path.read_text())["tasks"]
-        lines.append(f"| {seed} | {step:,} | " + " | ".join(
+        lines.append(f"| {learner.upper()} | {seed} | {step:,} | " + " | ".join(
             f"{100 * tasks[e]['pick_success']:.1f} / {pct(tasks[e]['place_success'], tasks[e]['place_success_ci95'])}"
-            for e in envs) + f" | {'**yes**' if step == chosen_step(seed) else ''} |")
+            for e in envs) + f" | {'**yes**' if step == chosen_step(seed, learner) else ''} |")
     return lines
 
 
@@ -259,15 +296,15 @@ def rule_table() -> list[str]:
              f"validation episodes per task as the run makes it, the {CONFIRM_TOP} best of them validated again on "
              f"{CONFIRM_EPISODES} fresh episodes per task, the one that places most there on its worst task chosen "
              "(validation seeds only; the test seeds judge the choice above):", "",
-             "| seed | snapshots screened | candidates: env steps (placed on confirmation, ceiling / window / flooring %) "
-             "| chosen |", "|---|---|---|---|"]
-    for seed in SEEDS:
-        screened = seed_screening(seed)
-        if not chosen_json(seed).is_file():
-            lines.append(f"| {seed} | {len(screened)} | (chosen at the end of its run) | - |")
+             "| learner | seed | snapshots screened | candidates: env steps (placed on confirmation, ceiling / window "
+             "/ flooring %) | chosen |", "|---|---|---|---|---|"]
+    for learner, seed in ((learner, seed) for learner in LEARNERS for seed in SEEDS):
+        screened = seed_screening(seed, learner)
+        if not chosen_json(seed, learner).is_file():
+            lines.append(f"| {learner.upper()} | {seed} | {len(screened)} | (chosen at the end of its run) | - |")
             continue
-        chosen = json.loads(chosen_json(seed).read_text())
-        lines.append(f"| {seed} | {chosen['screened']} | " + "; ".join(
+        chosen = json.loads(chosen_json(seed, learner).read_text())
+        lines.append(f"| {learner.upper()} | {seed} | {chosen['screened']} | " + "; ".join(
             f"{int(step):,} ({' / '.join(f'{100 * v:.0f}' for v in placed.values())})"
             for step, placed in chosen["confirmed"].items()) + f" | {chosen['step']:,} |")
     return lines
@@ -288,73 +325,75 @@ def reach_radii_now(rows: list[dict]) -> str:
     return " / ".join(of(kind) for kind in PAPER_KINDS)
 
 
-def latest_screening_per_slot(seed: int) -> str:
+def latest_screening_per_slot(seed: int, learner: str = LEARNER) -> str:
     """Placed / episodes per goal slot, per task, on the screening of the seed's latest snapshot: "0/12, 9/9, 9/9 /
     ..." with its env steps ("-" before the first). A slot the policy has not learnt fails in all its episodes."""
-    screened = seed_screening(seed)
+    screened = seed_screening(seed, learner)
     if not screened:
         return "-"
     step = max(screened)
-    tasks = json.loads(seed_validation_json(seed, step).read_text())["tasks"]
+    tasks = json.loads(seed_validation_json(seed, step, learner=learner).read_text())["tasks"]
     return (" / ".join(placed_per_slot(env_id, r["episode_results"]) for env_id, r in tasks.items())
             + f" (at {step:,})")
 
 
 def seeds_report(results: Path = Path("docs/RESULTS.md"), log_dir: Path = CAMPAIGN_DIR) -> str:
     """The section `from-scratch-seeds` of docs/RESULTS.md: where the recipe's run from nothing stands on each seed
-    (its progress.csv in `log_dir`/scratch_s<seed>/), a row per seed, and their curves side by side."""
+    with each learner (its progress.csv in `log_dir`/<run_name>/), a row each, and their curves side by side."""
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    lines = [f"Command: `{COMMAND} --report` (from campaign/scratch_s<seed>/progress.csv; the recipe: `scratch_args` in "
-             "experiments/from_scratch.py, unchanged from step 0). Demonstrations: none.", "",
-             "| seed | env steps done / budget | training wall time | near-goal start radius now: ceiling / window / "
+    lines = [f"Command: `{COMMAND} --report` (from campaign/<run>/progress.csv; the recipe: experiments/sac_recipe.py's "
+             "`sac_args` with SAC, `scratch_args` in experiments/from_scratch.py with PPO, each unchanged from step 0). "
+             "Demonstrations: none.", "",
+             "| learner | seed | env steps done / budget | training wall time | near-goal start radius now: ceiling / window / "
              "flooring | reach-start radius now, per goal slot: ceiling / window / flooring | training episodes of the "
              "last 200,000 steps placed, ordinary resets: ceiling / window / flooring % | placed, near-goal starts % | "
              "the latest snapshot's screening, placed per goal slot: ceiling / window / flooring |",
-             "|---|---|---|---|---|---|---|---|"]
-    fig, axes = plt.subplots(1, len(SEEDS), figsize=(10, 4.6), sharey=True, squeeze=False)
-    for ax, seed in zip(axes[0], SEEDS):
-        run = seed_run(seed)
+             "|---|---|---|---|---|---|---|---|---|"]
+    fig, axes = plt.subplots(len(LEARNERS), len(SEEDS), figsize=(10, 3.4 * len(LEARNERS) + 1.2), sharey=True,
+                             squeeze=False)
+    for (i, learner), (j, seed) in ((a, b) for a in enumerate(LEARNERS) for b in enumerate(SEEDS)):
+        ax, run = axes[i][j], seed_run(seed, learner=learner)
         progress = log_dir / run.args.exp_name / "progress.csv"
-        ax.set_title(f"seed {seed}")
+        ax.set_title(f"{learner.upper()}, seed {seed}")
         ax.set_xlabel("env steps (millions)")
+        ax.set_xlim(0, run.args.total_timesteps / 1e6)  # the same scale per learner: where each seed stands
         if not progress.is_file():
-            lines.append(f"| {seed} | not started: `{run.command}` | | | | | | |")
+            lines.append(f"| {learner.upper()} | {seed} | not started: `{run.command}` | | | | | | |")
             continue
         rows, cells = standing(run, progress)
-        lines.append(f"| {seed} | " + " | ".join([*cells[:3], reach_radii_now(rows), *cells[3:],
-                                                   latest_screening_per_slot(seed)]) + " |")
+        lines.append(f"| {learner.upper()} | {seed} | " + " | ".join([*cells[:3], reach_radii_now(rows), *cells[3:],
+                                                                      latest_screening_per_slot(seed, learner)]) + " |")
         steps = csv_column(rows, "global_step") / 1e6
         for kind, color in zip(PAPER_KINDS, ("tab:blue", "tab:orange", "tab:green")):
             ax.plot(steps, 100 * moving_mean(csv_column(rows, f"ordinary_place_{kind}"), WINDOW), color=color,
                     label=f"placed, ordinary resets: {kind}")
             ax.plot(steps, 100 * reach_radius(rows, kind), color=color, lw=0.8, ls=":",
                     label=f"reach-start radius x 100: {kind}")
-        screened = seed_screening(seed)
-        for i, (kind, color) in enumerate(zip(PAPER_KINDS, ("tab:blue", "tab:orange", "tab:green"))):
-            ax.scatter([s / 1e6 for s in screened], [100 * v[list(PAPER_TABLE_II)[i]] for v in screened.values()], s=9,
+        screened = seed_screening(seed, learner)
+        for k, (kind, color) in enumerate(zip(PAPER_KINDS, ("tab:blue", "tab:orange", "tab:green"))):
+            ax.scatter([s / 1e6 for s in screened], [100 * v[list(PAPER_TABLE_II)[k]] for v in screened.values()], s=9,
                        color=color, marker="o", label=f"snapshot placed on validation: {kind}")
-        if (chosen := chosen_step(seed)) is not None:
+        if (chosen := chosen_step(seed, learner)) is not None:
             ax.axvline(chosen / 1e6, color="black", lw=0.8, ls="--", label="the snapshot rule's choice")
-    axes[0][0].set_ylabel(f"% (training episodes: mean of {WINDOW} iterations)")
-    axes[0][0].set_ylim(0, 102)
-    for ax in axes[0]:
-        ax.set_xlim(0, BUDGET / 1e6)  # the same scale: where each seed stands in its budget
-    handles = [h for ax in axes[0] for h in [ax.get_legend_handles_labels()] if h[0]]
+    for row in axes:
+        row[0].set_ylabel(f"% (training episodes: mean of {WINDOW} rows)")
+        row[0].set_ylim(0, 102)
+    handles = [h for row in axes for ax in row for h in [ax.get_legend_handles_labels()] if h[0]]
     if handles:
         fig.legend(*max(handles, key=lambda h: len(h[0])), loc="lower center", ncol=4, fontsize=7)
-    fig.suptitle("The recipe from nothing, per seed (cp4)")
-    fig.tight_layout(rect=(0, 0.14, 1, 1))
+    fig.suptitle("The recipe from nothing, per learner and seed (cp4)")
+    fig.tight_layout(rect=(0, 1.0 / (3.4 * len(LEARNERS) + 1.2), 1, 1))
     SEEDS_CURVE.parent.mkdir(parents=True, exist_ok=True)
     fig.savefig(SEEDS_CURVE, dpi=100)
     plt.close(fig)
     lines += ["", *seed_evaluations_table(), "", *rule_table(), "", f"![the recipe from nothing, per seed]({Path(*SEEDS_CURVE.parts[1:])})", "",
               f"*Made by `{COMMAND} --report`: each seed's training episodes placed from ordinary resets per task (solid), "
-              f"its reach-start radius per task, the mean of its goal slots' (dotted, x 100: how far out the reach and "
-              f"grasp are trained from), each snapshot placed on {VALIDATION_EPISODES} "
+              f"with PPO its reach-start radius per task, the mean of its goal slots' (dotted, x 100: how far out the "
+              f"reach and grasp are trained from; SAC has no reach starts), each snapshot placed on {VALIDATION_EPISODES} "
               "validation episodes per task (dots) and the snapshot the rule chose (dashed).*"]
     body = "\n".join(lines)
     update_section(results, "from-scratch-seeds", body, "Results")
@@ -364,8 +403,8 @@ SNAPSHOT_EVERY = 250_000
 """env steps between the run's snapshots. The policy's deterministic success swings from one checkpoint to the next
 (window placements 22% and 8% on the same 50 test seeds at 6,782,000 and 7,168,000 env steps, ceiling panels 2% and
 18%: docs/experiments/from_scratch.md), so the run keeps snapshots and ships the one that validates best."""
-SNAPSHOT_DIR = Path("runs/scratch_snapshots")
-"""a seed's snapshots go to <SNAPSHOT_DIR>_s<seed>/ (checkpoint_<env steps>.pt): not committed; the snapshot rule's
+SNAPSHOT_DIR = Path("runs/recipe_snapshots")
+"""a seed's snapshots go to <SNAPSHOT_DIR>/<run_name>/ (checkpoint_<env steps>.pt): not committed; the snapshot rule's
 candidates among them are (`seed_candidates`)."""
 VALIDATION_EPISODES = 30
 """episodes per task (validation seeds, VALIDATION_SEED on: never the test seeds) that screen each snapshot."""
@@ -394,23 +433,25 @@ def train(run: Run, snapshots: Path, every: int = SNAPSHOT_EVERY,
             return
 
 
-def seed_validation_json(seed: int, step: int, confirm: bool = False) -> Path:
+def seed_validation_json(seed: int, step: int, confirm: bool = False, learner: str = LEARNER) -> Path:
     """A seed's snapshot validated: on VALIDATION_EPISODES per task from VALIDATION_SEED (the screening), or on
     CONFIRM_EPISODES from CONFIRMATION_SEED (`confirm`). Committed: they are the rule's record on any machine."""
     n = CONFIRM_EPISODES if confirm else VALIDATION_EPISODES
-    return SEED_EVAL_DIR / "validation" / f"scratch_s{seed}_val{n}_{step}{'_confirm' if confirm else ''}.json"
+    return (SEED_EVAL_DIR / "validation"
+            / f"{run_name(seed, learner)}_val{n}_{step}{'_confirm' if confirm else ''}.json")
 
 
-def seed_candidates(seed: int) -> Path:
+def seed_candidates(seed: int, learner: str = LEARNER) -> Path:
     """The committed policies of a seed's CONFIRM_TOP best-screened snapshots (candidate_<env steps>.pt): the rule
     chooses among them at the end of the run, on a fresh machine too, where runs/ is gone."""
-    return CAMPAIGN_DIR / f"scratch_s{seed}" / "candidates"
+    return CAMPAIGN_DIR / run_name(seed, learner) / "candidates"
 
 
-def seed_screening(seed: int) -> dict[int, dict]:
+def seed_screening(seed: int, learner: str = LEARNER) -> dict[int, dict]:
     """env steps -> placed per task on the screening, for each of the seed's snapshots screened so far."""
     found = {}
-    for path in seed_validation_json(seed, 0).parent.glob(f"scratch_s{seed}_val{VALIDATION_EPISODES}_*.json"):
+    folder = seed_validation_json(seed, 0, learner=learner).parent
+    for path in folder.glob(f"{run_name(seed, learner)}_val{VALIDATION_EPISODES}_*.json"):
         if not path.stem.endswith("_confirm"):
             found[int(path.stem.rsplit("_", 1)[1])] = {k: v["place_success"]
                                                        for k, v in json.loads(path.read_text())["tasks"].items()}
@@ -422,24 +463,33 @@ EVALUATE_AT = (3_000_000,)
 experiments compare with the recipe's run (the curriculum question's BUDGET), on any machine."""
 
 
-def snapshot_made(seed: int, step: int, snapshot: Path) -> None:
+def snapshot_made(seed: int, step: int, snapshot: Path, learner: str = LEARNER) -> None:
     """What a seed's run does with each snapshot as it makes it: screen it (`screen_snapshot`), and at EVALUATE_AT
     evaluate it with the paper's protocol (`evaluate_seed`)."""
-    screen_snapshot(seed, step, snapshot)
+    screen_snapshot(seed, step, snapshot, learner)
     if step in EVALUATE_AT:
-        evaluate_seed(seed, step)
+        evaluate_seed(seed, step, learner=learner)
 
 
-def screen_snapshot(seed: int, step: int, snapshot: Path) -> dict:
+def keep_snapshot(seed: int, learner: str, step: int, ckpt: Path) -> None:
+    """A SAC run's part has ended at `step` (sac_recipe.run_sac's `after_part`): its checkpoint copied to the seed's
+    snapshots (PPO's `train` copies its own) and given to `snapshot_made`."""
+    snapshot = seed_snapshots(seed, learner) / f"checkpoint_{step}.pt"
+    snapshot.parent.mkdir(parents=True, exist_ok=True)
+    shutil.copyfile(ckpt, snapshot)
+    snapshot_made(seed, step, snapshot, learner)
+
+
+def screen_snapshot(seed: int, step: int, snapshot: Path, learner: str = LEARNER) -> dict:
     """The snapshot rule's first half, run on each snapshot as the run makes it: validate it (the policy's mean,
     VALIDATION_EPISODES per task from VALIDATION_SEED, never the test seeds), and keep its policy among the seed's
     committed candidates while it ranks among the CONFIRM_TOP best (`refine.ranked_snapshots`: most placed on the
     worst task, then on average); a candidate that drops out is deleted. Its placed per task."""
-    out = seed_validation_json(seed, step)
+    out = seed_validation_json(seed, step, learner=learner)
     out.parent.mkdir(parents=True, exist_ok=True)
     placed = validate(snapshot, out, VALIDATION_EPISODES)
-    top = set(ranked_snapshots(seed_screening(seed))[:CONFIRM_TOP])
-    folder = seed_candidates(seed)
+    top = set(ranked_snapshots(seed_screening(seed, learner))[:CONFIRM_TOP])
+    folder = seed_candidates(seed, learner)
     folder.mkdir(parents=True, exist_ok=True)
     if step in top and not (folder / f"candidate_{step}.pt").is_file():
         torch.save(policy_only(load_checkpoint(snapshot)), folder / f"candidate_{step}.pt")
@@ -449,61 +499,68 @@ def screen_snapshot(seed: int, step: int, snapshot: Path) -> dict:
     return placed
 
 
-def choose_snapshot(seed: int) -> int:
+def choose_snapshot(seed: int, learner: str = LEARNER) -> int:
     """The snapshot rule's second half, at the end of the seed's run: screen any snapshot on this machine not
     screened yet (a run from before the rule), validate the CONFIRM_TOP candidates again on CONFIRM_EPISODES fresh
     episodes per task from CONFIRMATION_SEED, and choose the one that places most there on its worst task, then
     on average (`refine.best_snapshot`), written to the seed's chosen.json. Its env steps."""
-    for path in sorted(seed_snapshots(seed).glob("checkpoint_*.pt"), key=lambda p: int(p.stem.split("_")[1])):
-        if int(path.stem.split("_")[1]) not in seed_screening(seed):
-            screen_snapshot(seed, int(path.stem.split("_")[1]), path)
-    top = ranked_snapshots(seed_screening(seed))[:CONFIRM_TOP]
+    for path in sorted(seed_snapshots(seed, learner).glob("checkpoint_*.pt"), key=lambda p: int(p.stem.split("_")[1])):
+        if int(path.stem.split("_")[1]) not in seed_screening(seed, learner):
+            screen_snapshot(seed, int(path.stem.split("_")[1]), path, learner)
+    top = ranked_snapshots(seed_screening(seed, learner))[:CONFIRM_TOP]
     if not top:
-        raise SystemExit(f"seed {seed} has no screened snapshots: `{COMMAND} --seed {seed}` screens each as it is made")
-    confirmed = {step: validate(seed_candidates(seed) / f"candidate_{step}.pt",
-                                seed_validation_json(seed, step, confirm=True), CONFIRM_EPISODES, seed=CONFIRMATION_SEED)
+        raise SystemExit(f"seed {seed} has no screened snapshots: `{seed_run(seed, learner=learner).command}` "
+                         "screens each as it is made")
+    confirmed = {step: validate(seed_candidates(seed, learner) / f"candidate_{step}.pt",
+                                seed_validation_json(seed, step, confirm=True, learner=learner), CONFIRM_EPISODES,
+                                seed=CONFIRMATION_SEED)
                  for step in top}
     best = best_snapshot(confirmed)
-    chosen_json(seed).write_text(json.dumps(dict(
-        step=best, screened=len(seed_screening(seed)), confirmed={str(k): confirmed[k] for k in sorted(confirmed)},
+    chosen_json(seed, learner).write_text(json.dumps(dict(
+        step=best, screened=len(seed_screening(seed, learner)),
+        confirmed={str(k): confirmed[k] for k in sorted(confirmed)},
         rule=f"screened on {VALIDATION_EPISODES} episodes per task (seeds {VALIDATION_SEED:,} on) as made; the "
              f"{CONFIRM_TOP} best confirmed on {CONFIRM_EPISODES} (seeds {CONFIRMATION_SEED:,} on); most placed on "
              "the worst task, then on average"), indent=1))
     return best
 
 
-def chosen_json(seed: int) -> Path:
-    return SEED_EVAL_DIR / "validation" / f"scratch_s{seed}_chosen.json"
+def chosen_json(seed: int, learner: str = LEARNER) -> Path:
+    return SEED_EVAL_DIR / "validation" / f"{run_name(seed, learner)}_chosen.json"
 
 
-def chosen_step(seed: int) -> Optional[int]:
+def chosen_step(seed: int, learner: str = LEARNER) -> Optional[int]:
     """The env steps of the seed's snapshot the rule chose, or None before its run has ended."""
-    return json.loads(chosen_json(seed).read_text())["step"] if chosen_json(seed).is_file() else None
+    return json.loads(chosen_json(seed, learner).read_text())["step"] if chosen_json(seed, learner).is_file() else None
 
 
-def recipe_commit() -> str:
-    """The last commit that changed the recipe (`scratch_args`): the seeds' runs name it in their record."""
+def recipe_commit(learner: str = LEARNER) -> str:
+    """The last commit that changed the recipe with `learner` (PPO: `scratch_args`; SAC: experiments/sac_recipe.py or
+    baselines/sac/sac.py, whose Args defaults it takes): the seeds' runs name it in their record."""
     import subprocess
 
-    log = subprocess.run(["git", "log", "--format=%h", "-L", "/^def scratch_args/,/^    return args/:" + __file__],
-                         capture_output=True, text=True).stdout
+    where = (["-L", "/^def scratch_args/,/^    return args/:" + __file__] if learner == "ppo"
+             else ["--", sac_recipe.__file__, sac.__file__])
+    log = subprocess.run(["git", "log", "--format=%h", *where], capture_output=True, text=True).stdout
     return next((line for line in log.splitlines() if line and all(c in "0123456789abcdef" for c in line)), "unknown")
 
 
-def ship_seeds(shipped: Path = SHIPPED) -> Optional[Path]:
-    """Ship the better seed's chosen snapshot as the general agent learnt from reward alone, once every seed of
-    SEEDS has run to its end (its snapshot chosen and evaluated with the paper's protocol). The better seed is the
+def ship_seeds(shipped: Path = SHIPPED, learner: str = LEARNER) -> Optional[Path]:
+    """Ship the better seed's chosen snapshot of the recipe with `learner` as the general agent learnt from reward
+    alone, once every seed of SEEDS has run to its end (its snapshot chosen and evaluated with the paper's protocol). The better seed is the
     one whose choice confirmed best on the validation seeds (most placed on its worst task, then on average); it
     ships only if it places at least what the policy shipped now does on every task on the test seeds (EVAL_JSON),
     and its evaluation then becomes EVAL_JSON. The path shipped, or None."""
-    waiting = [seed for seed in SEEDS if chosen_step(seed) is None
-               or not seed_evaluation_json(seed, chosen_step(seed)).is_file()]
+    waiting = [seed for seed in SEEDS if chosen_step(seed, learner) is None
+               or not seed_evaluation_json(seed, chosen_step(seed, learner), learner).is_file()]
     if waiting:
-        raise SystemExit("not every seed has run to its end: " + ", ".join(f"`{COMMAND} --seed {s}`" for s in waiting))
-    confirmed = {seed: json.loads(chosen_json(seed).read_text())["confirmed"][str(chosen_step(seed))] for seed in SEEDS}
+        raise SystemExit("not every seed has run to its end: "
+                         + ", ".join(f"`{seed_run(s, learner=learner).command}`" for s in waiting))
+    confirmed = {seed: json.loads(chosen_json(seed, learner).read_text())["confirmed"][str(chosen_step(seed, learner))]
+                 for seed in SEEDS}
     seed = best_snapshot(confirmed)
-    step = chosen_step(seed)
-    tested = json.loads(seed_evaluation_json(seed, step).read_text())["tasks"]
+    step = chosen_step(seed, learner)
+    tested = json.loads(seed_evaluation_json(seed, step, learner).read_text())["tasks"]
     now = json.loads(EVAL_JSON.read_text())["tasks"] if EVAL_JSON.is_file() else {}
     short = [env for env, r in now.items() if tested[env]["place_success"] < r["place_success"]]
     if short:
@@ -511,17 +568,19 @@ def ship_seeds(shipped: Path = SHIPPED) -> Optional[Path]:
               "(" + ", ".join(f"{env} {tested[env]['place_success']:.3f} < {now[env]['place_success']:.3f}" for env in short)
               + f"): {shipped} stays")
         return None
-    run = dataclasses.replace(seed_run(seed), shipped=shipped)
+    run = dataclasses.replace(seed_run(seed, learner=learner), shipped=shipped)
+    recipe = ("sac_args of experiments/sac_recipe.py" if learner == "sac" else "scratch_args of experiments/from_scratch.py")
     chosen = (f"seed {seed} of {len(SEEDS)} (the better on validation: placed on its worst task "
               + ", ".join(f"seed {s} {min(c.values()):.2f}" for s, c in confirmed.items())
-              + f"), its snapshot at {step:,} env steps chosen by the snapshot rule; the recipe: scratch_args of "
-              f"experiments/from_scratch.py at commit {recipe_commit()}, unchanged from step 0; demonstrations: none")
-    out = ship(run, snapshot=seed_candidates(seed) / f"candidate_{step}.pt", chosen=chosen)
+              + f"), its snapshot at {step:,} env steps chosen by the snapshot rule; the recipe: {learner.upper()}, "
+              f"{recipe} at commit {recipe_commit(learner)}, unchanged from step 0; demonstrations: none")
+    out = ship(run, snapshot=seed_candidates(seed, learner) / f"candidate_{step}.pt", chosen=chosen)
     # the shipped policy is the snapshot's, weight for weight: its evaluation is the snapshot's, written down as the
     # command that repeats it on the shipped file
-    data = json.loads(seed_evaluation_json(seed, step).read_text())
+    evaluated_as = seed_evaluation_json(seed, step, learner)
+    data = json.loads(evaluated_as.read_text())
     data.update(command=evaluation.command_of(evaluation.Args(checkpoint=out, all=True, steps=EVAL_STEPS, json=EVAL_JSON)),
-                checkpoint=str(out), evaluated_as=dict(checkpoint=data["checkpoint"], json=str(seed_evaluation_json(seed, step))))
+                checkpoint=str(out), evaluated_as=dict(checkpoint=data["checkpoint"], json=str(evaluated_as)))
     EVAL_JSON.write_text(json.dumps(data, indent=1) + "\n")
     return out
 
@@ -529,7 +588,11 @@ def ship_seeds(shipped: Path = SHIPPED) -> Optional[Path]:
 @dataclass
 class Args:
     seed: Optional[int] = None
-    """run (or resume) the recipe from nothing on this seed (campaign/scratch_s<seed>/)."""
+    """run (or resume) the recipe from nothing on this seed (campaign/<run_name>/: sac_s<seed> with SAC, scratch_s<seed>
+    with PPO)."""
+    learner: str = LEARNER
+    """the recipe's learner (LEARNERS): `sac` (the recipe's, to experiments/sac_recipe.py's BUDGET) or `ppo` (to
+    BUDGET); with --seed, --ship-seeds and --evaluate."""
     num_envs: Optional[int] = None
     """env processes (default: one per CPU core); a run resumed from a checkpoint keeps its own."""
     dry_run: bool = False
@@ -548,16 +611,23 @@ class Args:
 
 def main(args: Args) -> None:
     if args.seed is not None:
-        run = seed_run(args.seed, args.num_envs)
+        seed, learner = args.seed, args.learner
+        run = seed_run(seed, args.num_envs, learner)
         print(describe(run))
-        print("as one ppo.py command: python baselines/ppo/ppo.py " + shlex.join(command_line(run.args)))
+        if learner == "ppo":
+            print("as one ppo.py command: python baselines/ppo/ppo.py " + shlex.join(command_line(run.args)))
         if args.evaluate:
-            print(f"wrote {evaluate_seed(args.seed, args.at_step)}")
+            print(f"wrote {evaluate_seed(seed, args.at_step, learner=learner)}")
         elif not args.dry_run:
-            train(run, snapshots=seed_snapshots(args.seed), after_snapshot=partial(snapshot_made, args.seed))
-            print(f"wrote {evaluate_seed(args.seed, choose_snapshot(args.seed))}")  # the paper's protocol on the rule's choice
+            if learner == "sac":
+                sac_recipe.run_sac(run.args, every=SNAPSHOT_EVERY, after_part=partial(keep_snapshot, seed, learner))
+            else:
+                train(run, snapshots=seed_snapshots(seed, learner),
+                      after_snapshot=partial(snapshot_made, seed, learner=learner))
+            # the paper's protocol on the rule's choice
+            print(f"wrote {evaluate_seed(seed, choose_snapshot(seed, learner), learner=learner)}")
     elif args.ship_seeds:
-        ship_seeds()
+        ship_seeds(learner=args.learner)
     elif args.report:
         print(seeds_report())
         print(shipped_report())

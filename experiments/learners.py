@@ -2,10 +2,9 @@
 nothing on the same envs, reward, start states and seed as the recipe, compared at equal env steps and equal wall
 time on this CPU.
 
-    python -m experiments.learners --arm sac --dry-run   # the plan, and where the arm's run stands
-    python -m experiments.learners --arm sac             # SAC from nothing (baselines/sac/sac.py), to BUDGET, resumable
-    python -m experiments.learners --arm sac --seed 2    # the same on the recipe's second seed
-    python -m experiments.learners --arm icm             # the recipe with curiosity (ICM), to BUDGET, resumable
+    python -m experiments.from_scratch --seed 1          # the SAC arm: the recipe's run with SAC, to BUDGET, resumable
+    python -m experiments.learners --arm icm --dry-run   # the plan, and where the curiosity arm's run stands
+    python -m experiments.learners --arm icm             # PPO's recipe with curiosity (ICM), to BUDGET, resumable
     python -m experiments.learners --evaluate sac        # the paper's protocol on the arm's latest checkpoint (--seed)
     python -m experiments.learners --report              # RESULTS' section and its curves, from the arms' progress.csv
 
@@ -15,21 +14,20 @@ near-goal nor reach starts), placed per task type, the worst of the three (a mea
 equal env steps and at equal wall time of training (rollouts and updates, from each progress.csv; start-ups,
 evaluations and the time between sessions not counted).
 
-What SAC shares with the recipe: the envs, the reward, the observation, the near-goal starts (baselines/sac/sac.py's
-docstring). What it does not: the reach starts and the mirror of the twin openings (PPO's network options). SAC's
-replay buffer (about 140 MB) is written beside its checkpoint and is not committed: its run resumes exactly on the
-machine it ran on; on a fresh machine it goes on with an empty buffer that its actor refills first
-(`--refill-lost-buffer`, recorded in its checkpoint's clock as `refilled_at`).
+The SAC arm on a seed is the recipe's run with SAC (experiments/sac_recipe.py; `python -m experiments.from_scratch
+--seed S` runs it with its snapshots), and its evaluations are the recipe's
+(docs/data/from_scratch/sac_s<seed>_eval50k_<env steps>.json). What SAC shares with PPO's recipe: the envs, the
+reward, the observation, the near-goal starts. What it does not: the reach starts and the mirror of the twin openings
+(PPO's network options).
 """
 
 from __future__ import annotations
 
 import csv
-import dataclasses
 import json
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Callable, Optional
+from typing import Optional
 
 import numpy as np
 import torch
@@ -38,14 +36,13 @@ import tyro
 from baselines.ppo import evaluation
 from baselines.ppo.args import command_line
 from baselines.ppo.evaluation import pct
-from baselines.sac import sac
+from experiments import from_scratch
 from experiments.campaign import CAMPAIGN_DIR, Run, describe, run_or_resume
-from experiments.from_scratch import SEED_EVAL_DIR, csv_column, moving_mean, scratch_args, seed_run
+from experiments.from_scratch import csv_column, moving_mean, scratch_args, seed_evaluations, seed_run
+from experiments.sac_recipe import BUDGET, checkpoint_step, sac_args
 from ms_construction.parameters import PAPER_KINDS
 from ms_construction.reporting import update_section
 
-BUDGET = 2_000_000
-"""env steps of each arm (the issue: at least 2M)."""
 SEEDS = (1, 2)
 """the seeds each arm may run on: the recipe's (experiments/from_scratch.py SEEDS), whose runs are the PPO arm."""
 TARGET = 0.9
@@ -60,38 +57,8 @@ MOVING_WINDOW = 100_000
 CURVES = Path("docs/images/learners_curves.png")
 COMMAND = "python -m experiments.learners"
 EVAL_DIR = Path("docs/data/learners")
-"""each arm's evaluation with the paper's protocol (`--evaluate ARM`): <arm>_eval50k.json."""
-
-
-def sac_args(seed: int = 1, **overrides) -> sac.Args:
-    """SAC's defaults (chosen for this CPU: baselines/sac/sac.py) on one of the recipe's seeds, in campaign/."""
-    return sac.Args(**{**dict(exp_name=f"sac_s{seed}", seed=seed, total_timesteps=BUDGET, log_dir=str(CAMPAIGN_DIR)),
-                       **overrides})
-
-
-def sac_checkpoint(a: sac.Args) -> Path:
-    return Path(a.log_dir) / a.exp_name / "checkpoint.pt"
-
-
-def run_sac(a: sac.Args, every: Optional[int] = None, stop: Optional[Callable[[], bool]] = None) -> None:
-    """Run (or resume) the SAC run `a` to its total_timesteps, from its checkpoint where there is one (a lost replay
-    buffer refilled: `--refill-lost-buffer`, recorded in the checkpoint). With `every`, in parts ending at multiples
-    of it (checkpoint marks, so a part's end is a resume point), and with `stop`, ending after the first part at
-    whose end `stop()` is true. SIGTERM or Ctrl-C stops it with a checkpoint (sac.py raises SystemExit)."""
-    ckpt = sac_checkpoint(a)
-    while (done := checkpoint_step(ckpt) if ckpt.is_file() else 0) < a.total_timesteps:
-        if done and stop is not None and stop():
-            return
-        end = a.total_timesteps if every is None else min((done // every + 1) * every, a.total_timesteps)
-        part = dataclasses.replace(a, total_timesteps=end)
-        sac.main(dataclasses.replace(part, resume=str(ckpt), extend=True, refill_lost_buffer=True)
-                 if ckpt.is_file() else part)
-        if every is None:
-            return
-
-
-def checkpoint_step(ckpt: Path) -> int:
-    return int(torch.load(ckpt, map_location="cpu", weights_only=False)["progress"]["global_step"])
+"""the curiosity arm's evaluation with the paper's protocol (`--evaluate icm`): icm_s<seed>_eval50k.json (the PPO
+and SAC arms' are the recipe's runs' own, in experiments/from_scratch.py's SEED_EVAL_DIR)."""
 
 
 def icm_run(num_envs: Optional[int] = None, seed: int = 1) -> Run:
@@ -109,7 +76,7 @@ PLANNED = {"ppo": SEEDS, "icm": (1,), "sac": SEEDS}
 
 
 def progress_csv(arm: str, log_dir: Path = CAMPAIGN_DIR, seed: int = 1) -> Path:
-    name = {"ppo": seed_run(seed).args.exp_name, "icm": icm_run(seed=seed).args.exp_name,
+    name = {"ppo": seed_run(seed, learner="ppo").args.exp_name, "icm": icm_run(seed=seed).args.exp_name,
             "sac": sac_args(seed).exp_name}[arm]
     return log_dir / name / "progress.csv"
 
@@ -119,15 +86,18 @@ def arm_checkpoint(arm: str, log_dir: Path = CAMPAIGN_DIR, seed: int = 1) -> Pat
 
 
 def eval_json(arm: str, seed: int, eval_dir: Optional[Path] = None) -> Path:
-    """Where `evaluate_arm` writes the arm's evaluation on `seed` (in EVAL_DIR unless `eval_dir`)."""
+    """Where `evaluate_arm` writes the curiosity arm's evaluation on `seed` (in EVAL_DIR unless `eval_dir`)."""
     return (eval_dir or EVAL_DIR) / f"{arm}_s{seed}_eval50k.json"
 
 
 def evaluate_arm(arm: str, workers: int = 2, log_dir: Path = CAMPAIGN_DIR, seed: int = 1) -> Path:
     """The paper's protocol (test seeds, 50,000 env steps per task, cp4, the policy's mean) on the arm's latest
-    checkpoint on `seed`, written to `eval_json` (the env steps it had trained are in its `checkpoint_step`)."""
+    checkpoint on `seed`: the PPO and SAC arms' as the recipe evaluates its runs (from_scratch.evaluate_seed), the
+    curiosity arm's to `eval_json` (the env steps it had trained are in its `checkpoint_step`)."""
     if arm not in ARMS:
         raise SystemExit(f"--evaluate {arm}: use one of {', '.join(ARMS)}")
+    if arm in from_scratch.LEARNERS:
+        return from_scratch.evaluate_seed(seed, workers=workers, learner=arm)
     ckpt = arm_checkpoint(arm, log_dir, seed)
     if not ckpt.is_file():
         raise SystemExit(f"--evaluate {arm}: no checkpoint at {ckpt}; train it first: "
@@ -141,11 +111,10 @@ def evaluate_arm(arm: str, workers: int = 2, log_dir: Path = CAMPAIGN_DIR, seed:
 
 def evaluated(arm: str, seed: int, eval_dir: Path = EVAL_DIR) -> list[tuple[int, dict]]:
     """(env steps, scripts/evaluate.py's JSON) of each evaluation of the arm on `seed` with the paper's protocol: the
-    PPO arm's snapshots the recipe evaluated (experiments/from_scratch.py `seed_evaluation_json`), another arm's
-    latest checkpoint (`evaluate_arm`)."""
-    if arm == "ppo":
-        paths = SEED_EVAL_DIR.glob(f"scratch_s{seed}_eval50k_*.json")
-        return sorted((int(p.stem.rsplit("_", 1)[1]), json.loads(p.read_text())) for p in paths)
+    PPO and SAC arms' snapshots the recipe evaluated (experiments/from_scratch.py `seed_evaluations`), the curiosity
+    arm's latest checkpoint (`evaluate_arm`)."""
+    if arm in from_scratch.LEARNERS:
+        return [(step, json.loads(p.read_text())) for step, p in seed_evaluations(seed, arm).items()]
     path = eval_json(arm, seed, eval_dir)
     if not path.is_file():
         return []
@@ -237,7 +206,9 @@ def report(results: Path = Path("docs/RESULTS.md"), log_dir: Path = CAMPAIGN_DIR
     for colour, (arm, label) in enumerate(ARMS.items()):
         for seed in PLANNED[arm]:
             if (arm, seed) not in curves:
-                lines.append(f"| {label} | {seed} | not run: `{COMMAND} --arm {arm} --seed {seed}` | | | | | | |")
+                command = (seed_run(seed, learner=arm).command if arm in from_scratch.LEARNERS
+                           else f"{COMMAND} --arm {arm} --seed {seed}")
+                lines.append(f"| {label} | {seed} | not run: `{command}` | | | | | | |")
                 continue
             c, whole = curves[arm, seed], curve(progress_csv(arm, log_dir, seed), until=None)
             lines.append(f"| {label} | {seed} | {int(c['steps'][-1]):,} | {c['hours'][-1]:.1f} | "
@@ -268,8 +239,8 @@ def report(results: Path = Path("docs/RESULTS.md"), log_dir: Path = CAMPAIGN_DIR
                       + ", ".join(f"{step:,}" for step in refilled) + " env steps (`--refill-lost-buffer`)."]
     body = "\n".join([
         "## Which learner, and curiosity", "",
-        f"Commands: `{COMMAND} --arm sac --seed S`, `{COMMAND} --arm icm` (the PPO arm on a seed is the recipe's run "
-        f"on it), `{COMMAND} --report`. Each from nothing on the same envs, dense reward, near-goal starts and seeds; "
+        f"Commands: `{from_scratch.COMMAND} --seed S [--learner ppo]` (the SAC and PPO arms on a seed are the "
+        f"recipe's runs on it), `{COMMAND} --arm icm`, `{COMMAND} --report`. Each from nothing on the same envs, dense reward, near-goal starts and seeds; "
         "the training episodes from ordinary resets, the worst of the three task types placed.", "", *lines,
         *evaluations_table(eval_dir, log_dir), "",
         f"![learners]({Path(*CURVES.parts[1:])})"])
@@ -280,7 +251,8 @@ def report(results: Path = Path("docs/RESULTS.md"), log_dir: Path = CAMPAIGN_DIR
 @dataclass
 class Args:
     arm: Optional[str] = None
-    """train (or resume) this arm to BUDGET: `sac` or `icm` (the PPO arm is the recipe's run)."""
+    """train (or resume) this arm to BUDGET: `icm` (the SAC and PPO arms are the recipe's runs:
+    experiments/from_scratch.py)."""
     seed: int = 1
     """the recipe's seed the arm runs (or is evaluated) on: one of SEEDS."""
     num_envs: Optional[int] = None
@@ -302,22 +274,15 @@ def main(args: Args) -> None:
     if args.evaluate is not None:
         print(f"wrote {evaluate_arm(args.evaluate, seed=args.seed)}")
         return
-    if args.arm not in ("sac", "icm"):
-        raise SystemExit(f"--arm {args.arm}: use sac or icm (the PPO arm is `python -m experiments.from_scratch "
-                         f"--seed {args.seed}`), or --report")
-    if args.arm == "icm":
-        run = icm_run(args.num_envs, args.seed)
-        print(describe(run))
-        print("as one ppo.py command: python baselines/ppo/ppo.py " + " ".join(command_line(run.args)))
-        if not args.dry_run:
-            run_or_resume(run)
-        return
-    a = sac_args(args.seed)
-    ckpt = sac_checkpoint(a)
-    print(f"SAC from nothing, seed {args.seed}, to {BUDGET:,} env steps in {ckpt.parent}: "
-          + ("resumes" if ckpt.is_file() else "starts fresh"))
+    if args.arm != "icm":
+        raise SystemExit(f"--arm {args.arm}: use icm (the SAC and PPO arms are the recipe's runs: "
+                         f"`{from_scratch.COMMAND} --seed {args.seed}` with SAC, `... --learner ppo` with PPO), or "
+                         "--report")
+    run = icm_run(args.num_envs, args.seed)
+    print(describe(run))
+    print("as one ppo.py command: python baselines/ppo/ppo.py " + " ".join(command_line(run.args)))
     if not args.dry_run:
-        run_sac(a)
+        run_or_resume(run)
 
 
 if __name__ == "__main__":

@@ -38,7 +38,8 @@ from tqdm import tqdm
 
 from baselines.ppo.evaluation import episode_job, pct, wilson
 from experiments import transfer
-from experiments.campaign import Run, checkpoint_of
+from baselines.ppo.checkpoints import load_checkpoint
+from experiments.campaign import Run, checkpoint_of, policy_only
 from ms_construction.curriculum import FINAL_STAGE
 from ms_construction.envs import PAPER_TASK_ENV_IDS
 from ms_construction.reporting import update_section
@@ -61,6 +62,22 @@ def training_run(start: str, seed: int = 1, num_envs: Optional[int] = None, lear
     return transfer.transfer_run(f"obstacles_{TRAIN_SCENE}", start, seed, num_envs, TRAIN_BUDGET,
                                  "python -m experiments.obstacles", f"a site with obstacles ({TRAIN_SCENE})",
                                  learner, obstacles=TRAIN_SCENE)
+
+
+def trained_policy(run: Run) -> tuple[int, Path]:
+    """The env steps of a training run's checkpoint, and its policy kept (committed) as
+    campaign/<run>/candidates/candidate_<env steps>.pt: its rows are named for it, so an evaluation of a run still
+    training is never read back as a later checkpoint's."""
+    ckpt = checkpoint_of(run)
+    if not ckpt.is_file():
+        raise SystemExit(f"--evaluate: {run.name} has no checkpoint at {ckpt}; train it first: {run.command}")
+    saved = load_checkpoint(ckpt)
+    step = int(saved["progress"]["global_step"])
+    policy = ckpt.parent / "candidates" / f"candidate_{step}.pt"
+    if not policy.is_file():
+        policy.parent.mkdir(parents=True, exist_ok=True)
+        torch.save(policy_only(saved), policy)
+    return step, policy
 
 
 def row_name(checkpoint: str) -> str:
@@ -180,7 +197,8 @@ def main(args: Args) -> dict:
         run = training_run(args.train, args.train_seed, args.num_envs, args.learner)
         if not args.evaluate:
             return transfer.train(run, args.dry_run)
-        args.agents = {**args.agents, f"{run.what} (trained among obstacles)": str(checkpoint_of(run))}
+        step, policy = trained_policy(run)
+        args.agents = {**args.agents, f"{run.what}, {step:,} env steps (trained among obstacles)": str(policy)}
     command = " ".join(["python -m experiments.obstacles", *map(shlex.quote, sys.argv[1:])])
     rows: dict[tuple[str, str], dict[str, dict]] = {}
     giving_way = []

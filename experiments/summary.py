@@ -13,7 +13,7 @@ from pathlib import Path
 from typing import Optional
 
 from baselines.ppo.evaluation import EXPERT_RESULTS, PAPER_TABLE_II, RESULTS_PATH
-from experiments import from_scratch, learners
+from experiments import from_scratch
 from ms_construction.reporting import update_section
 
 TASKS = tuple(PAPER_TABLE_II)
@@ -57,33 +57,24 @@ def paper_tasks_table() -> list[str]:
         how = how or from_scratch.shipped_how()
         lines.append(f"| {label} | {how} | " + " | ".join(_placed(data and data["tasks"])) + f" | {path} |")
     shipped_from = ((_read(from_scratch.EVAL_JSON) or {}).get("evaluated_as") or {}).get("json")
-    latest: dict[int, tuple[int, Path]] = {}
-    for path in from_scratch.SEED_EVAL_DIR.glob("scratch_s*_eval50k_*.json"):
-        seed, step = map(int, path.stem[len("scratch_s"):].split("_eval50k_"))
-        latest[seed] = max(latest.get(seed, (step, path)), (step, path))
-    for seed in from_scratch.SEEDS:
-        chosen = from_scratch.chosen_step(seed)
-        if chosen is not None and from_scratch.seed_evaluation_json(seed, chosen).is_file():
-            latest[seed] = (chosen, from_scratch.seed_evaluation_json(seed, chosen))
-        if seed in latest and shipped_from and latest[seed][1].resolve() == Path(shipped_from).resolve():
-            continue  # the shipped reward-only agent's row above is this seed's choice, weight for weight
-        if seed in latest:
-            step, path = latest[seed]
-            cells = _placed(json.loads(path.read_text())["tasks"])
+    how = {"ppo": "PPO on the tasks' default dense reward, one recipe unchanged from step 0",
+           "sac": "SAC on the tasks' default dense reward, one recipe unchanged from step 0"}
+    for learner in from_scratch.LEARNERS:
+        for seed in from_scratch.SEEDS:
+            name = f"the recipe from nothing ({learner.upper()}), seed {seed}"
+            found = from_scratch.seed_evaluations(seed, learner)
+            chosen = from_scratch.chosen_step(seed, learner)
+            step = chosen if chosen in found else max(found, default=None)
+            if step is None:
+                lines.append(f"| {name} | (its run has not ended: `{from_scratch.seed_run(seed, learner=learner).command}` "
+                             "runs it, and its snapshot rule's choice is evaluated at its end) | "
+                             + " | ".join("-" for _ in TASKS) + " | |")
+                continue
+            if shipped_from and found[step].resolve() == Path(shipped_from).resolve():
+                continue  # the shipped reward-only agent's row above is this seed's choice, weight for weight
             which = "the snapshot rule's choice" if step == chosen else "its latest evaluated snapshot, not yet chosen"
-            lines.append(f"| the recipe from nothing, seed {seed}, at {step:,} env steps ({which}) | PPO on the tasks' "
-                         f"default dense reward, one recipe unchanged from step 0 | " + " | ".join(cells) + f" | {path} |")
-        else:
-            lines.append(f"| the recipe from nothing, seed {seed} | (its run has not ended: `{from_scratch.COMMAND} --seed "
-                         f"{seed}` runs it, and its snapshot rule's choice is evaluated at its end) | "
-                         + " | ".join("-" for _ in TASKS) + " | |")
-    for seed in learners.SEEDS:  # SAC, the learner that met the recipe's target sooner (experiments/learners.py)
-        path = learners.eval_json("sac", seed)
-        if path.is_file():
-            data = json.loads(path.read_text())
-            lines.append(f"| SAC from nothing, seed {seed}, at {data['checkpoint_step']:,} env steps (not shipped) | SAC "
-                         "on the same dense reward and near-goal starts, no demonstrations | "
-                         + " | ".join(_placed(data["tasks"])) + f" | {path} |")
+            lines.append(f"| {name}, at {step:,} env steps ({which}) | {how[learner]} | "
+                         + " | ".join(_placed(json.loads(found[step].read_text())["tasks"])) + f" | {found[step]} |")
     return lines
 
 

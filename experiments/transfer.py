@@ -2,7 +2,7 @@
 from the weights of the shipped general agent learnt from reward alone, with no reward code of the setting's own:
 the test of the dense reward's rule and of what the recipe's policy carries over. experiments/paneling.py and
 experiments/obstacles.py run it (`--train nothing|shipped`); `--learner sac` runs SAC instead of PPO on the same
-envs, reward and near-goal starts (experiments/learners.py `sac_args`; from nothing only: SAC's critics have no
+envs, reward and near-goal starts (experiments/sac_recipe.py `sac_args`; from nothing only: SAC's critics have no
 shipped weights). Each run is resumable in campaign/<name>/ (commit its checkpoint and CSV to go on in another
 session), and `steps_to` reads from its training episodes the env steps it took to place TARGET of them."""
 
@@ -19,7 +19,7 @@ from baselines.ppo.args import command_line
 from baselines.sac import sac
 from experiments.campaign import Run, checkpoint_of, describe, run_or_resume
 from experiments.from_scratch import METHOD, csv_column, moving_mean, scratch_args, train as train_in_parts
-from experiments.learners import run_sac, sac_args
+from experiments.sac_recipe import METHOD as SAC_METHOD, run_sac, sac_args
 
 LEARNERS = ("ppo", "sac")
 """the learners a run may take: PPO (the from-scratch recipe) or SAC (experiments/learners.py)."""
@@ -61,7 +61,7 @@ def transfer_run(name: str, start: str, seed: int, num_envs: Optional[int], budg
                  learner: str = "ppo", **setting) -> Run:
     """The recipe (experiments/from_scratch.py's `scratch_args`) from `start` (STARTS) to `budget` env steps on
     seed `seed`, unchanged but for the `setting` (Args fields of both learners: an env, a scene), in
-    campaign/<name>_<start>_s<seed>/; with `learner` "sac", SAC's (experiments/learners.py `sac_args`) from nothing,
+    campaign/<name>_<start>_s<seed>/; with `learner` "sac", SAC's (experiments/sac_recipe.py `sac_args`) from nothing,
     in campaign/<name>_sac_s<seed>/."""
     if start not in STARTS:
         raise SystemExit(f"--train {start}: use one of {', '.join(STARTS)}")
@@ -76,8 +76,7 @@ def transfer_run(name: str, start: str, seed: int, num_envs: Optional[int], budg
                         **setting)
         return Run(exp_name, args, f"SAC on {what} from nothing, seed {seed}",
                    f"{command} --train nothing --learner sac --train-seed {seed}", None,
-                   method="SAC from nothing on the tasks' default dense reward and near-goal starts "
-                          "(experiments/learners.py); demonstrations: none")
+                   method=SAC_METHOD)
     exp_name = f"{name}_{start}_s{seed}"
     args = scratch_args(num_envs, seed=seed, exp_name=exp_name, total_timesteps=budget, checkpoint=STARTS[start], **setting)
     how = "from nothing" if STARTS[start] is None else f"from the weights of {STARTS[start]}"
@@ -106,11 +105,8 @@ def train(run: Run, dry_run: bool = False, stop_at_target: bool = False) -> None
     after the first part by whose end they have: what such an experiment measures (`steps_to`) is known then, and
     the rest of the budget would only train past it."""
     progress = checkpoint_of(run).parent / "progress.csv"
-    if isinstance(run.args, sac.Args):
-        print(f"{run.name}: {run.what}; {run.args.env_id}, {run.args.total_timesteps:,} env steps, "
-              + (f"resumes ({checkpoint_of(run)})" if checkpoint_of(run).is_file() else "starts fresh"))
-    else:
-        print(describe(run))
+    print(describe(run))
+    if not isinstance(run.args, sac.Args):
         print("as one ppo.py command: python baselines/ppo/ppo.py " + " ".join(command_line(run.args)))
     if stop_at_target:
         print(f"it stops at the first {STOP_EVERY:,}-env-step mark by which its training episodes placed >= {TARGET:.0%}")

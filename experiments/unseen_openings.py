@@ -4,7 +4,7 @@ held out of training, evaluated with the paper's protocol on the openings it nev
     python -m experiments.unseen_openings --seed 1 --dry-run     # the plan, and where that seed's run stands
     python -m experiments.unseen_openings --seed 1               # train (or resume) to the recipe's budget
     python -m experiments.unseen_openings --seed 1 --evaluate    # the paper's protocol, unseen and seen openings
-    python -m experiments.unseen_openings --seed 1 --learner sac # SAC instead (experiments/learners.py), to 90% placed
+    python -m experiments.unseen_openings --seed 1 --learner sac # SAC instead (experiments/sac_recipe.py), to 90% placed
     python -m experiments.unseen_openings --imitation --dry-run  # its plan, and how far it has come
     python -m experiments.unseen_openings --imitation            # the imitation twin: demonstrations -> clone ->
                                                                  # residual PPO on the trained openings, then evaluated
@@ -15,8 +15,8 @@ The recipe is experiments/from_scratch.py's, unchanged, but for the goal opening
 middle opening of every task type. The window openings at y = -0.85 and +0.85 are each other's mirror image, which
 the recipe's policy meets as one (`mirror_twins`): only the middle one is unseen in every form.
 
-With `--learner sac`, SAC on the same envs, reward and near-goal starts (experiments/learners.py `sac_args`, its
-training envs drawing TRAINED only: `goal_slots`), in parts of 250,000 env steps to at most learners.BUDGET, ending
+With `--learner sac`, SAC on the same envs, reward and near-goal starts (experiments/sac_recipe.py `sac_args`, its
+training envs drawing TRAINED only: `goal_slots`), in parts of 250,000 env steps to at most sac_recipe.BUDGET, ending
 at the first mark by which its training episodes placed 90% (experiments/transfer.py `steps_to`), as the runs on
 paneling do.
 
@@ -43,7 +43,7 @@ from baselines.ppo import evaluation
 from baselines.ppo.args import command_line
 from baselines.ppo.evaluation import pct, training_slot_weights
 from baselines.ppo.start_states import GOAL_SLOTS
-from experiments import learners, transfer
+from experiments import sac_recipe, transfer
 from experiments.campaign import Run, checkpoint_of, describe, run_or_resume
 from experiments.from_scratch import METHOD, scratch_args
 from ms_construction.envs import PAPER_TASK_ENV_IDS
@@ -67,9 +67,9 @@ def seed_run(seed: int, num_envs: Optional[int] = None) -> Run:
 
 
 def sac_run(seed: int) -> Run:
-    """SAC from nothing on `seed` (experiments/learners.py), its training envs never drawing the HELD_OUT openings."""
+    """SAC from nothing on `seed` (experiments/sac_recipe.py), its training envs never drawing the HELD_OUT openings."""
     name = f"unseen_sac_s{seed}"
-    return Run(name, learners.sac_args(seed, exp_name=name, goal_slots=TRAINED),
+    return Run(name, sac_recipe.sac_args(seed, exp_name=name, goal_slots=TRAINED),
                f"SAC from nothing, seed {seed}, goal openings {', '.join(map(str, HELD_OUT))} held out",
                f"{COMMAND} --seed {seed} --learner sac", None)
 

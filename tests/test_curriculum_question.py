@@ -20,7 +20,7 @@ def test_the_two_arms_are_the_recipe_s_run_and_the_recipe_through_table_i_s_stag
     cp4, curriculum = arms["cp4"], arms["curriculum"]
     for run in arms.values():
         ppo.validate(run.args)
-    assert cp4 == fs.seed_run(2, num_envs=2), "the cp4 arm is the seed's run of the recipe itself"
+    assert cp4 == fs.seed_run(2, num_envs=2, learner="ppo"), "the cp4 arm is the seed's run of the recipe itself"
     assert curriculum.args.stages.curriculum == ("cp1", "cp2", "cp3", "cp4")
     a, b = cp4.args.flat(), curriculum.args.flat()
     assert {k for k in a if a[k] != b[k]} == {"exp_name", "curriculum", "promote_success", "total_timesteps",
@@ -71,10 +71,10 @@ def test_the_report_compares_the_arms_at_cp4_per_seed_beside_the_paper_s_rows(tm
     results = tmp_path / "RESULTS.md"
     body = cq.report(seeds=(1, 2), results=results)
     rows = [line for line in body.splitlines() if line.startswith(("| 1 |", "| 2 |"))]
-    assert rows[0].startswith("| 1 | cp4: the recipe from nothing, seed 1 | 100.0 / 25.0 [12.5, 25.0] |")
+    assert rows[0].startswith("| 1 | cp4: the PPO recipe from nothing, seed 1 | 100.0 / 25.0 [12.5, 25.0] |")
     assert rows[1].startswith("| 1 | curriculum: the recipe through Table I's stages") and "| 100.0 / 50.0 [25.0, 50.0] |" in rows[1]
-    assert f"| 2 | cp4: the recipe from nothing, seed 2 | not yet at {cq.BUDGET:,} env steps (0; " \
-           "`python -m experiments.from_scratch --seed 2` goes on) |" in body
+    assert f"| 2 | cp4: the PPO recipe from nothing, seed 2 | not yet at {cq.BUDGET:,} env steps (0; " \
+           "`python -m experiments.from_scratch --seed 2 --learner ppo` goes on) |" in body
     assert f"`{cq.COMMAND} --seed 2` goes on" in rows[3]
     assert "| the paper | general agent: cp1 -> cp4, 2M steps each (Table II), 8M env steps | 84.55 / 68.04 |" in body
     page = (tmp_path / "page.md").read_text()

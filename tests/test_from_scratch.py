@@ -20,7 +20,7 @@ from experiments import from_scratch as fs
 
 
 def test_the_recipe_learns_from_reward_alone_on_the_tasks_default_reward_from_nothing():
-    run = fs.seed_run(2, num_envs=2)
+    run = fs.seed_run(2, num_envs=2, learner="ppo")
     a = run.args
     ppo.validate(a)
     assert a.env_id == "ConstructionPickPlace-v1" and a.stages.curriculum == ("cp4",) and a.total_timesteps <= 10_000_000
@@ -87,7 +87,7 @@ def test_the_recipe_changes_the_policy_and_a_stopped_run_resumes_in_the_uninterr
 def test_a_run_ships_at_its_end_or_a_chosen_snapshot_with_a_record_that_says_where_it_stands(tmp_path):
     small = dict(num_envs=2, num_steps=20, num_minibatches=2, update_epochs=1, num_eval_envs=1, eval_freq=100,
                  checkpoint_freq=1, env_id="Flooring-v1", task_weights=None, log_dir=str(tmp_path), exp_name="tiny", total_timesteps=80)
-    run = dataclasses.replace(fs.seed_run(1), args=fs.scratch_args(**small), shipped=tmp_path / "scratch.pt")
+    run = dataclasses.replace(fs.seed_run(1, learner="ppo"), args=fs.scratch_args(**small), shipped=tmp_path / "scratch.pt")
     campaign.run_or_resume(dataclasses.replace(run, shipped=None))
     longer = dataclasses.replace(run, args=run.args.replace(total_timesteps=160))
     with pytest.raises(SystemExit, match="at step 80 of 160"):
@@ -156,11 +156,11 @@ def test_the_seeds_report_has_a_row_per_seed_and_says_how_a_seed_not_started_sta
     monkeypatch.setattr(fs, "SEEDS_CURVE", tmp_path / "images" / "seeds.png")
     results = tmp_path / "RESULTS.md"
     body = fs.seeds_report(results, log_dir=tmp_path / "campaign")
-    assert ("| 1 | 300,000 / 10,000,000 | 0.2 h | 0.3 / 0.6 / 1.0 | 0.1, 0.2, 0.3 / 0.1, 0.2, 0.3 / 0.1, 0.2, 0.3 | "
+    assert ("| PPO | 1 | 300,000 / 10,000,000 | 0.2 h | 0.3 / 0.6 / 1.0 | 0.1, 0.2, 0.3 / 0.1, 0.2, 0.3 / 0.1, 0.2, 0.3 | "
             "0.0 / 10.0 / - | 50.0 |") in body
     with open(run_dir / "progress.csv", newline="") as f:
         assert fs.reach_radius(list(csv.DictReader(f)), "window")[-1] == pytest.approx(0.2)
-    assert "| 2 | not started: `python -m experiments.from_scratch --seed 2` |" in body
+    assert "| PPO | 2 | not started: `python -m experiments.from_scratch --seed 2 --learner ppo` |" in body
     assert (tmp_path / "images" / "seeds.png").stat().st_size > 0
     assert "<!-- begin from-scratch-seeds (generated) -->" in results.read_text()
 
@@ -174,17 +174,17 @@ def test_a_seed_is_evaluated_on_its_latest_snapshot_once_and_its_row_joins_the_s
     monkeypatch.setattr(fs, "EVAL_STEPS", 300)
     monkeypatch.setattr(fs, "SEEDS_CURVE", tmp_path / "images" / "seeds.png")
     with pytest.raises(SystemExit, match="no snapshots of seed 1"):
-        fs.evaluate_seed(1)
-    tiny = fs.seed_run(1).args.replace(num_envs=2, num_steps=20, num_minibatches=2, update_epochs=1, num_eval_envs=1,
+        fs.evaluate_seed(1, learner="ppo")
+    tiny = fs.seed_run(1, learner="ppo").args.replace(num_envs=2, num_steps=20, num_minibatches=2, update_epochs=1, num_eval_envs=1,
                                        eval_freq=100, checkpoint_freq=1, env_id="Flooring-v1", task_weights=None,
                                        total_timesteps=40)
     ppo.main(tiny)
-    snaps = fs.seed_snapshots(1)
+    snaps = fs.seed_snapshots(1, "ppo")
     snaps.mkdir(parents=True)
     shutil.copyfile(tmp_path / "campaign" / "scratch_s1" / "checkpoint.pt", snaps / "checkpoint_20.pt")
     with pytest.raises(SystemExit, match="there are: 20, 40"):
-        fs.evaluate_seed(1, 30)
-    out = fs.evaluate_seed(1, workers=1)
+        fs.evaluate_seed(1, 30, learner="ppo")
+    out = fs.evaluate_seed(1, workers=1, learner="ppo")
     assert out == tmp_path / "evals" / "scratch_s1_eval50k_40.json"
     tasks = json.loads(out.read_text())["tasks"]
     assert set(tasks) == {"CeilingInstallation-v1", "WindowInstallation-v1", "Flooring-v1"}
@@ -192,10 +192,10 @@ def test_a_seed_is_evaluated_on_its_latest_snapshot_once_and_its_row_joins_the_s
     assert json.loads(out.read_text())["command"] == (f"python scripts/evaluate.py --checkpoint {tmp_path}/campaign/scratch_s1/"
                                                       f"checkpoint.pt --all --steps 300 --seed 1000000 --json {out} --workers 1")
     written = out.stat().st_mtime_ns
-    assert fs.evaluate_seed(1) == out and out.stat().st_mtime_ns == written  # kept, not run again
+    assert fs.evaluate_seed(1, learner="ppo") == out and out.stat().st_mtime_ns == written  # kept, not run again
     body = fs.seeds_report(tmp_path / "RESULTS.md", log_dir=tmp_path / "campaign")
-    assert "| paper's general agent (Table II, cp4) | 8,000,000 | 84.55 / 68.04 |" in body
-    row = next(line for line in body.splitlines() if line.startswith("| 1 | 40 |"))
+    assert "| paper's general agent (Table II, cp4) | | 8,000,000 | 84.55 / 68.04 |" in body
+    row = next(line for line in body.splitlines() if line.startswith("| PPO | 1 | 40 |"))
     assert row.count("/") == 3
 
 
@@ -217,39 +217,39 @@ def test_a_seed_s_snapshots_are_screened_as_made_and_the_rule_chooses_among_the_
     def fake_validate(checkpoint, out, episodes, seed=fs.VALIDATION_SEED):
         step = int(checkpoint.stem.split("_")[1])
         confirming = (episodes, seed) == (fs.CONFIRM_EPISODES, fs.CONFIRMATION_SEED)
-        assert confirming == (checkpoint.parent == fs.seed_candidates(1)), "confirmed from the committed candidates"
+        assert confirming == (checkpoint.parent == fs.seed_candidates(1, "ppo")), "confirmed from the committed candidates"
         placed = dict(zip(envs, (confirmation if confirming else screening)[step]))
         episodes = {e: [dict(goal_slot=i % 3, placed=i < round(10 * v)) for i in range(10)] for e, v in placed.items()}
         out.write_text(json.dumps(dict(tasks={e: dict(place_success=v, episode_results=episodes[e])
                                               for e, v in placed.items()})))
         return placed
 
-    def screen_and_look(seed, step, snapshot):
-        placed = real_screen(seed, step, snapshot)
-        kept_after.append(sorted(int(p.stem.split("_")[1]) for p in fs.seed_candidates(1).glob("candidate_*.pt")))
+    def screen_and_look(seed, step, snapshot, learner):
+        placed = real_screen(seed, step, snapshot, learner)
+        kept_after.append(sorted(int(p.stem.split("_")[1]) for p in fs.seed_candidates(1, "ppo").glob("candidate_*.pt")))
         return placed
 
     real_screen = fs.screen_snapshot
     monkeypatch.setattr(fs, "validate", fake_validate)
     monkeypatch.setattr(fs, "screen_snapshot", screen_and_look)
-    run = fs.seed_run(1)
+    run = fs.seed_run(1, learner="ppo")
     run = dataclasses.replace(run, args=run.args.replace(
         num_envs=2, num_steps=10, num_minibatches=2, update_epochs=1, num_eval_envs=1, eval_freq=100, checkpoint_freq=1,
         env_id="Flooring-v1", task_weights=None, total_timesteps=80))
     evaluated_at, real_evaluate_seed = [], fs.evaluate_seed
     monkeypatch.setattr(fs, "EVALUATE_AT", (40,))
-    monkeypatch.setattr(fs, "evaluate_seed", lambda seed, step: evaluated_at.append((seed, step)))
-    fs.train(run, every=20, snapshots=fs.seed_snapshots(1), after_snapshot=functools.partial(fs.snapshot_made, 1))
+    monkeypatch.setattr(fs, "evaluate_seed", lambda seed, step, learner: evaluated_at.append((seed, step, learner)))
+    fs.train(run, every=20, snapshots=fs.seed_snapshots(1, "ppo"), after_snapshot=functools.partial(fs.snapshot_made, 1, learner="ppo"))
     assert kept_after == [[20], [20, 40], [20, 60], [20, 60]], "the two best-screened so far, the others deleted"
-    assert evaluated_at == [(1, 40)], "the snapshot at EVALUATE_AT meets the paper's protocol as it is made"
+    assert evaluated_at == [(1, 40, "ppo")], "the snapshot at EVALUATE_AT meets the paper's protocol as it is made"
     monkeypatch.setattr(fs, "evaluate_seed", real_evaluate_seed)
-    assert fs.seed_screening(1) == {s: dict(zip(envs, v)) for s, v in screening.items()}
-    candidate = torch.load(fs.seed_candidates(1) / "candidate_60.pt", weights_only=False)
+    assert fs.seed_screening(1, "ppo") == {s: dict(zip(envs, v)) for s, v in screening.items()}
+    candidate = torch.load(fs.seed_candidates(1, "ppo") / "candidate_60.pt", weights_only=False)
     assert candidate["progress"]["global_step"] == 60 and "optimizer" not in candidate and "rng" not in candidate
-    shutil.rmtree(fs.seed_snapshots(1))  # a fresh machine: the committed candidates and validations only
-    assert fs.chosen_step(1) is None
-    assert fs.choose_snapshot(1) == 20, "the confirmation chooses (worst task 70% against 40%), not the screening"
-    assert fs.chosen_step(1) == 20
+    shutil.rmtree(fs.seed_snapshots(1, "ppo"))  # a fresh machine: the committed candidates and validations only
+    assert fs.chosen_step(1, "ppo") is None
+    assert fs.choose_snapshot(1, "ppo") == 20, "the confirmation chooses (worst task 70% against 40%), not the screening"
+    assert fs.chosen_step(1, "ppo") == 20
     evaluated = []
 
     def fake_paper_protocol(args):
@@ -259,14 +259,14 @@ def test_a_seed_s_snapshots_are_screened_as_made_and_the_rule_chooses_among_the_
                                                             place_success_ci95=[0.8, 0.95]) for e in envs})))
 
     monkeypatch.setattr(fs.evaluation, "main", fake_paper_protocol)
-    assert fs.evaluate_seed(1, fs.chosen_step(1)) == fs.seed_evaluation_json(1, 20)
-    assert evaluated == [fs.seed_candidates(1) / "candidate_20.pt"]
+    assert fs.evaluate_seed(1, fs.chosen_step(1, "ppo"), learner="ppo") == fs.seed_evaluation_json(1, 20, "ppo")
+    assert evaluated == [fs.seed_candidates(1, "ppo") / "candidate_20.pt"]
     body = fs.seeds_report(tmp_path / "RESULTS.md", log_dir=tmp_path / "campaign")
-    assert next(line for line in body.splitlines() if line.startswith("| 1 | 20 |")).endswith("| **yes** |")
-    assert "| 1 | 4 | 20 (80 / 70 / 90); 60 (40 / 90 / 90) | 20 |" in body
+    assert next(line for line in body.splitlines() if line.startswith("| PPO | 1 | 20 |")).endswith("| **yes** |")
+    assert "| PPO | 1 | 4 | 20 (80 / 70 / 90); 60 (40 / 90 / 90) | 20 |" in body
     # the latest screening (80 env steps: 70 / 20 / 80 % of 10 episodes, slots 0, 1, 2 in turn) per goal slot
     assert "| 3/4, 2/3, 2/3 / 1/4, 1/3, 0/3 / 3/4, 3/3, 2/3 (at 80) |" in body
-    assert "| 2 | 0 | (chosen at the end of its run) | - |" in body
+    assert "| PPO | 2 | 0 | (chosen at the end of its run) | - |" in body
 
 
 def test_the_better_seed_on_validation_ships_only_if_it_places_what_the_shipped_policy_does_on_the_test_seeds(
@@ -278,9 +278,9 @@ def test_the_better_seed_on_validation_ships_only_if_it_places_what_the_shipped_
     monkeypatch.setattr(fs, "SEED_EVAL_DIR", tmp_path / "evals")
     monkeypatch.setattr(fs, "EVAL_JSON", tmp_path / "shipped_eval.json")
     shipped = tmp_path / "scratch_general_agent.pt"
-    with pytest.raises(SystemExit, match="--seed 1`, `python -m experiments.from_scratch --seed 2"):
-        fs.ship_seeds(shipped)
-    ppo.main(fs.seed_run(1).args.replace(num_envs=2, num_steps=20, num_minibatches=2, update_epochs=1, num_eval_envs=1,
+    with pytest.raises(SystemExit, match="--seed 1 --learner ppo`, `python -m experiments.from_scratch --seed 2 --learner ppo"):
+        fs.ship_seeds(shipped, "ppo")
+    ppo.main(fs.seed_run(1, learner="ppo").args.replace(num_envs=2, num_steps=20, num_minibatches=2, update_epochs=1, num_eval_envs=1,
                                          eval_freq=100, checkpoint_freq=1, env_id="Flooring-v1", task_weights=None,
                                          total_timesteps=40))
     shutil.copytree(tmp_path / "campaign" / "scratch_s1", tmp_path / "campaign" / "scratch_s2")
@@ -291,21 +291,87 @@ def test_the_better_seed_on_validation_ships_only_if_it_places_what_the_shipped_
                 "tasks": {e: dict(pick_success=1.0, place_success=placed, place_success_ci95=[0, 1]) for e in envs}}
 
     for seed, (validated, tested) in {1: (0.8, 0.97), 2: (0.9, 0.9)}.items():
-        fs.seed_candidates(seed).mkdir(parents=True)
+        fs.seed_candidates(seed, "ppo").mkdir(parents=True)
         shutil.copyfile(tmp_path / "campaign" / f"scratch_s{seed}" / "checkpoint.pt",
-                        fs.seed_candidates(seed) / "candidate_40.pt")
-        fs.chosen_json(seed).parent.mkdir(parents=True, exist_ok=True)
-        fs.chosen_json(seed).write_text(json.dumps(dict(step=40, confirmed={"40": dict.fromkeys(envs, validated)})))
-        fs.seed_evaluation_json(seed, 40).write_text(json.dumps(tasks(tested)))
+                        fs.seed_candidates(seed, "ppo") / "candidate_40.pt")
+        fs.chosen_json(seed, "ppo").parent.mkdir(parents=True, exist_ok=True)
+        fs.chosen_json(seed, "ppo").write_text(json.dumps(dict(step=40, confirmed={"40": dict.fromkeys(envs, validated)})))
+        fs.seed_evaluation_json(seed, 40, "ppo").write_text(json.dumps(tasks(tested)))
     fs.EVAL_JSON.write_text(json.dumps(tasks(0.95)))
-    assert fs.ship_seeds(shipped) is None and not shipped.exists(), "seed 2 is better on validation, worse on test"
+    assert fs.ship_seeds(shipped, "ppo") is None and not shipped.exists(), "seed 2 is better on validation, worse on test"
     fs.EVAL_JSON.write_text(json.dumps(tasks(0.85)))
-    assert fs.ship_seeds(shipped) == shipped
+    assert fs.ship_seeds(shipped, "ppo") == shipped
     record = torch.load(shipped, weights_only=False)["campaign"]["record"]
     assert record["chosen"].startswith("seed 2 of 2") and "demonstrations: none" in record["chosen"]
-    assert f"at commit {fs.recipe_commit()}" in record["chosen"] and fs.recipe_commit() != "unknown"
+    assert f"at commit {fs.recipe_commit('ppo')}" in record["chosen"] and fs.recipe_commit("ppo") != "unknown"
     now = json.loads(fs.EVAL_JSON.read_text())
     assert now["tasks"] == tasks(0.9)["tasks"], "its evaluation is the shipped policy's now"
     assert now["command"] == (f"python scripts/evaluate.py --checkpoint {shipped} --all --steps 50000 --seed 1000000 "
                               f"--json {fs.EVAL_JSON}")
-    assert now["evaluated_as"] == dict(checkpoint="runs/snapshot.pt", json=str(fs.seed_evaluation_json(2, 40)))
+    assert now["evaluated_as"] == dict(checkpoint="runs/snapshot.pt", json=str(fs.seed_evaluation_json(2, 40, "ppo")))
+
+
+def test_sac_is_the_recipe_s_learner_and_its_run_keeps_screens_chooses_and_ships_snapshots_as_ppo_s_does(tmp_path,
+                                                                                                         monkeypatch):
+    """`--seed S` runs SAC (experiments/sac_recipe.py) unless `--learner ppo`: in parts of SNAPSHOT_EVERY env steps,
+    each part's checkpoint kept as a snapshot and screened, the best committed as a candidate without the critics or
+    the replay buffer (a policy only); at its end the rule chooses, the paper's protocol evaluates the choice, and
+    `--ship-seeds` ships it with a record naming SAC and its recipe's commit."""
+    from baselines.sac import sac
+    from experiments import sac_recipe
+
+    monkeypatch.setattr(fs, "CAMPAIGN_DIR", tmp_path / "campaign")
+    monkeypatch.setattr(fs, "SNAPSHOT_DIR", tmp_path / "runs" / "snaps")
+    monkeypatch.setattr(fs, "SEED_EVAL_DIR", tmp_path / "evals")
+    monkeypatch.setattr(fs, "EVAL_JSON", tmp_path / "shipped_eval.json")
+    monkeypatch.setattr(fs, "SNAPSHOT_EVERY", 150)
+    monkeypatch.setattr(fs, "CONFIRM_TOP", 1)
+    assert fs.LEARNER == "sac" and fs.Args().learner == "sac"
+    run = fs.seed_run(1)
+    assert isinstance(run.args, sac.Args) and run.args == sac_recipe.sac_args(1) and run.name == "sac_s1"
+    assert run.command == "python -m experiments.from_scratch --seed 1" and "demonstrations: none" in run.method
+    assert fs.seed_run(1, learner="ppo").command == "python -m experiments.from_scratch --seed 1 --learner ppo"
+    with pytest.raises(SystemExit, match="--learner td3: use one of sac, ppo"):
+        fs.seed_run(1, learner="td3")
+    envs = list(fs.PAPER_TABLE_II)
+    screened, evaluated = {150: 0.4, 300: 0.7}, []
+
+    def fake_validate(checkpoint, out, episodes, seed=fs.VALIDATION_SEED):
+        step = torch.load(checkpoint, weights_only=False)["progress"]["global_step"]
+        placed = dict.fromkeys(envs, screened[step] + (0.1 if episodes == fs.CONFIRM_EPISODES else 0.0))
+        out.write_text(json.dumps(dict(tasks={e: dict(place_success=v, episode_results=[]) for e, v in placed.items()})))
+        return placed
+
+    def fake_paper_protocol(args):
+        evaluated.append(args.checkpoint)
+        args.json.parent.mkdir(parents=True, exist_ok=True)
+        args.json.write_text(json.dumps(dict(command="python scripts/evaluate.py ...", checkpoint=str(args.checkpoint),
+                                             tasks={e: dict(pick_success=1.0, place_success=0.95,
+                                                            place_success_ci95=[0.9, 1.0]) for e in envs})))
+
+    monkeypatch.setattr(fs, "validate", fake_validate)
+    monkeypatch.setattr(fs.evaluation, "main", fake_paper_protocol)
+    tiny = dataclasses.replace(run.args, num_envs=1, hidden_size=32, num_layers=1, batch_size=32, learning_starts=100,
+                               buffer_size=1000, utd=1.0, log_freq=50, eval_freq=0, total_timesteps=300,
+                               checkpoint_freq=150, log_dir=str(tmp_path / "campaign"), env_id="Flooring-v1")
+    monkeypatch.setattr(fs, "seed_run", lambda seed, num_envs=None, learner=fs.LEARNER: dataclasses.replace(run, args=tiny))
+    fs.main(fs.Args(seed=1))
+    assert sorted(p.name for p in fs.seed_snapshots(1).glob("*.pt")) == ["checkpoint_150.pt", "checkpoint_300.pt"]
+    assert fs.seed_screening(1) == {150: dict.fromkeys(envs, 0.4), 300: dict.fromkeys(envs, 0.7)}
+    candidate = torch.load(fs.seed_candidates(1) / "candidate_300.pt", weights_only=False)
+    assert set(candidate["sac"]) == {"actor"} and "replay_buffer" not in candidate and "rng" not in candidate
+    assert fs.chosen_step(1) == 300 and evaluated == [fs.seed_snapshots(1) / "checkpoint_300.pt"]
+    assert fs.seed_evaluations(1) == {300: fs.seed_evaluation_json(1, 300)}
+    # seed 2 as seed 1 (a copy), then the better on validation ships: it places what the shipped policy does
+    shutil.copytree(tmp_path / "campaign" / "sac_s1", tmp_path / "campaign" / "sac_s2")
+    for path in (fs.chosen_json(1), fs.seed_evaluation_json(1, 300)):
+        shutil.copyfile(path, str(path).replace("sac_s1", "sac_s2"))
+    fs.EVAL_JSON.write_text(json.dumps(dict(tasks={e: dict(place_success=0.95) for e in envs})))
+    shipped = fs.ship_seeds(tmp_path / "scratch_general_agent.pt")
+    policy = torch.load(shipped, weights_only=False)
+    record = policy["campaign"]["record"]
+    assert record["chosen"].startswith("seed 1 of 2") and "the recipe: SAC, sac_args of experiments/sac_recipe.py" \
+        in record["chosen"] and "demonstrations: none" in record["chosen"]
+    assert record["method"] == sac_recipe.METHOD and "h of training iterations" in record["wall time"]
+    assert set(policy["sac"]) == {"actor"}
+    assert fs.shipped_how(shipped).startswith("SAC on the dense reward, no demonstrations; the recipe unchanged")

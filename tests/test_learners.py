@@ -46,6 +46,7 @@ def test_the_curve_takes_each_arm_s_wall_time_and_the_worst_task_type(tmp_path):
 
 def test_the_report_rows_each_arm_and_says_how_to_run_those_not_run(tmp_path, monkeypatch):
     monkeypatch.setattr(ln, "CURVES", tmp_path / "images" / "learners.png")
+    monkeypatch.setattr(from_scratch, "SEED_EVAL_DIR", tmp_path / "from_scratch")
     log_dir = tmp_path / "campaign"
     # the PPO arm: nothing placed for 60 rows of 2,000 env steps (4 s each), then 90% of its worst task
     _write(ln.progress_csv("ppo", log_dir), _rows(100, lambda i: 0.0 if i < 60 else 0.9))
@@ -57,8 +58,10 @@ def test_the_report_rows_each_arm_and_says_how_to_run_those_not_run(tmp_path, mo
     # each task's mean over its last 50 rows (100,000 env steps), 40 of them after the jump: ceiling 0.9 x 40 / 50,
     # window (0.1 x 10 + 1.0 x 40) / 50, flooring 1.0
     assert row.endswith("| 176,000 / - | 0.1 / - | 72% / 82% / 100% |")
-    for arm, seed in (("ppo", 2), ("sac", 1), ("sac", 2), ("icm", 1)):  # each planned run not yet run says how
-        assert f"| {seed} | not run: `{ln.COMMAND} --arm {arm} --seed {seed}` |" in body
+    # each planned run not yet run says how: the SAC and PPO arms are the recipe's runs (SAC its learner)
+    for seed, command in ((2, f"{from_scratch.COMMAND} --seed 2 --learner ppo"), (1, f"{from_scratch.COMMAND} --seed 1"),
+                          (2, f"{from_scratch.COMMAND} --seed 2"), (1, f"{ln.COMMAND} --arm icm --seed 1")):
+        assert f"| {seed} | not run: `{command}` |" in body
     assert "--arm icm --seed 2" not in body, "curiosity is one probe, on seed 1"
     assert (tmp_path / "images" / "learners.png").stat().st_size > 0
     assert "refilled" not in body
@@ -71,10 +74,12 @@ def test_the_report_rows_each_arm_and_says_how_to_run_those_not_run(tmp_path, mo
 
 
 def test_an_unknown_arm_is_refused_and_the_icm_arm_is_the_recipe_with_curiosity(tmp_path):
-    with pytest.raises(SystemExit, match="use sac or icm"):
-        ln.main(ln.Args(arm="ppo"))
+    for arm in ("ppo", "sac"):  # the recipe's runs: experiments/from_scratch.py runs them
+        with pytest.raises(SystemExit, match="use icm .the SAC and PPO arms are the recipe's runs: `python -m "
+                                             "experiments.from_scratch --seed 1` with SAC"):
+            ln.main(ln.Args(arm=arm))
     with pytest.raises(SystemExit, match="--seed 3: use one of 1, 2"):
-        ln.main(ln.Args(arm="sac", seed=3))
+        ln.main(ln.Args(arm="icm", seed=3))
     run = ln.icm_run(num_envs=2)
     recipe = from_scratch.scratch_args(2, seed=1)
     changed = {k for k, v in vars(run.args).items() if v != vars(recipe)[k]}
@@ -88,11 +93,11 @@ def test_an_unknown_arm_is_refused_and_the_icm_arm_is_the_recipe_with_curiosity(
 
 def test_each_paper_protocol_evaluation_is_rowed_with_its_wall_time_and_whether_it_meets_the_target(tmp_path,
                                                                                                    monkeypatch):
-    """The evaluations table: `--evaluate ARM --seed S` writes EVAL_DIR/<arm>_s<seed>_eval50k.json as
-    scripts/evaluate.py --all does, with the env steps its checkpoint had trained; the PPO arm's are the recipe's
-    snapshot evaluations (experiments/from_scratch.py). Each row has the training wall time its run had taken by
+    """The evaluations table: `--evaluate icm --seed S` writes EVAL_DIR/icm_s<seed>_eval50k.json as
+    scripts/evaluate.py --all does, with the env steps its checkpoint had trained; the SAC and PPO arms' are the
+    recipe's snapshot evaluations (experiments/from_scratch.py). Each row has the training wall time its run had taken by
     then and whether every task met the target (placed >= 90%, picked >= 95%); nothing where none is."""
-    monkeypatch.setattr(ln, "SEED_EVAL_DIR", tmp_path / "from_scratch")
+    monkeypatch.setattr(from_scratch, "SEED_EVAL_DIR", tmp_path / "from_scratch")
     log_dir = tmp_path / "campaign"
     assert ln.evaluations_table(tmp_path, log_dir) == []
 
@@ -100,12 +105,12 @@ def test_each_paper_protocol_evaluation_is_rowed_with_its_wall_time_and_whether_
         return {env_id: {"place_success": p, "place_success_ci95": [p - 0.05, p], "pick_success": picked}
                 for env_id, p in zip(("CeilingInstallation-v1", "WindowInstallation-v1", "Flooring-v1"), placed)}
 
-    ln.eval_json("sac", 2, tmp_path).write_text(json.dumps({"tasks": tasks((0.9, 0.95, 1.0)),
-                                                             "checkpoint_step": 350_000}))
+    (tmp_path / "from_scratch").mkdir()
+    from_scratch.seed_evaluation_json(2, 350_000, "sac").write_text(json.dumps({"tasks": tasks((0.9, 0.95, 1.0))}))
     _write(ln.progress_csv("sac", log_dir, seed=2), _rows(200, lambda i: 0.5, wall=36.0))  # 2,000 env steps a row
-    ppo_snapshot = tmp_path / "from_scratch" / "scratch_s1_eval50k_3000000.json"
-    ppo_snapshot.parent.mkdir()
-    ppo_snapshot.write_text(json.dumps({"tasks": tasks((0.99, 0.95, 0.99), picked=0.9)}))
+    from_scratch.seed_evaluation_json(1, 3_000_000, "ppo").write_text(
+        json.dumps({"tasks": tasks((0.99, 0.95, 0.99), picked=0.9)}))
+    ln.eval_json("icm", 1, tmp_path).write_text(json.dumps({"tasks": tasks((0.5, 0.5, 0.5)), "checkpoint_step": 40}))
     table = "\n".join(ln.evaluations_table(tmp_path, log_dir))
     assert "| learner | seed | its env steps | its training wall time (h) | CeilingInstallation-v1: placed % [95% CI] |" \
         in table
@@ -114,6 +119,7 @@ def test_each_paper_protocol_evaluation_is_rowed_with_its_wall_time_and_whether_
            "95.0 [90.0, 95.0] | 100.0 [95.0, 100.0] | yes |" in table
     assert "| PPO (the recipe's run) | 1 | 3,000,000 | - | 99.0 [94.0, 99.0] | 95.0 [90.0, 95.0] | 99.0 [94.0, 99.0] | " \
            "no |" in table, "picked 90%: short of the target; no progress.csv: no wall time"
+    assert "| PPO + ICM (the recipe with curiosity) | 1 | 40 | - | 50.0 [45.0, 50.0] |" in table
     with pytest.raises(SystemExit, match="no checkpoint at .*--arm icm --seed 1"):
         ln.evaluate_arm("icm", log_dir=tmp_path)
     with pytest.raises(SystemExit, match="use one of ppo, icm, sac"):

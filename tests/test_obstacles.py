@@ -2,6 +2,7 @@
 the state round trip, the planning expert among the obstacles, shipped agents meeting them blind, PPO training among
 them."""
 
+import dataclasses
 import json
 
 import pytest
@@ -286,6 +287,15 @@ def test_the_recipe_trains_among_obstacles_from_the_shipped_weights_unchanged_bu
     w, w0 = trained["agent"]["actor_mean.0.weight"], before["agent"]["actor_mean.0.weight"]
     rest = torch.cat([w[:, :at], w[:, at + OBSTACLE_OBS_SIZE:]], 1)
     assert torch.allclose(rest, w0, atol=0.05) and not torch.equal(rest, w0), "started from the shipped weights, and trained"
+    # `--evaluate` evaluates the run's policy at its env steps, kept beside it: a later checkpoint gets rows of its own
+    local = dataclasses.replace(run, args=tiny)
+    step, policy = obstacles.trained_policy(local)
+    assert (step, policy) == (40, tmp_path / run.name / "candidates" / "candidate_40.pt")
+    kept = torch.load(policy, weights_only=False)
+    assert "optimizer" not in kept and torch.equal(kept["agent"]["actor_mean.0.weight"], w)
+    assert obstacles.row_name(str(policy)) == f"{run.name}_candidate_40"
+    with pytest.raises(SystemExit, match="has no checkpoint at .*train it first: python -m experiments.obstacles"):
+        obstacles.trained_policy(dataclasses.replace(run, args=tiny.replace(log_dir=str(tmp_path / "none"))))
 
 
 def test_more_agents_join_the_shipped_ones_and_a_bad_one_is_refused():

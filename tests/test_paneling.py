@@ -327,11 +327,11 @@ def test_a_run_that_used_its_whole_budget_short_of_the_target_says_so(tmp_path, 
     assert "from nothing, seed 1 | 10,000 | not yet | 0.0 | not yet: `python -m experiments.paneling --train nothing" in body
 
 
-def test_sac_on_paneling_is_the_learners_sac_but_for_the_env_and_budget_from_nothing_only_and_trains_there(tmp_path):
-    """`--learner sac`: experiments/learners.py's SAC arguments, but for the env, the budget and the run's name; it
+def test_sac_on_paneling_is_the_recipe_s_sac_but_for_the_env_and_budget_from_nothing_only_and_trains_there(tmp_path):
+    """`--learner sac`: experiments/sac_recipe.py's SAC arguments, but for the env, the budget and the run's name; it
     starts from nothing only (SAC has no shipped critics); a tiny run on PanelInstallation-v1 trains its actor."""
     from baselines.sac import sac
-    from experiments import learners, paneling
+    from experiments import paneling, sac_recipe
 
     with pytest.raises(SystemExit, match="SAC trains from nothing only"):
         paneling.training_run("shipped", learner="sac")
@@ -340,7 +340,7 @@ def test_sac_on_paneling_is_the_learners_sac_but_for_the_env_and_budget_from_not
     run = paneling.training_run("nothing", seed=2, learner="sac")
     assert run.command == "python -m experiments.paneling --train nothing --learner sac --train-seed 2"
     assert paneling.train_eval_json(run) == Path("docs/data/paneling/train_sac_s2_eval50k.json")
-    changed = {k for k, v in vars(run.args).items() if v != vars(learners.sac_args(2))[k]}
+    changed = {k for k, v in vars(run.args).items() if v != vars(sac_recipe.sac_args(2))[k]}
     assert changed == {"env_id", "total_timesteps", "exp_name"} and run.args.env_id == paneling.ENV_ID
     tiny = dataclasses.replace(run.args, num_envs=1, hidden_size=32, num_layers=1, batch_size=32, learning_starts=100,
                                buffer_size=1000, utd=1.0, log_freq=50, eval_freq=0, total_timesteps=300,
@@ -351,7 +351,7 @@ def test_sac_on_paneling_is_the_learners_sac_but_for_the_env_and_budget_from_not
         actors.append(torch.load(ckpt_path, weights_only=False)["sac"]["actor"])
         return False
 
-    learners.run_sac(tiny, every=150, stop=after_part)
+    sac_recipe.run_sac(tiny, every=150, stop=after_part)
     ckpt = torch.load(ckpt_path, weights_only=False)
     assert ckpt["progress"]["global_step"] == 300 and ckpt["args"]["env_id"] == paneling.ENV_ID
     assert len(actors) == 1, "two parts, the second resumed from the first's checkpoint"

@@ -14,7 +14,7 @@ def _tasks(placed: float) -> dict:
 def test_each_row_reads_its_file_and_a_seed_shows_its_latest_evaluation(tmp_path, monkeypatch):
     monkeypatch.setattr(from_scratch, "SEED_EVAL_DIR", tmp_path)
     for step, placed in ((4_000_000, 0.5), (6_000_000, 0.925)):
-        (tmp_path / f"scratch_s1_eval50k_{step}.json").write_text(json.dumps({"tasks": _tasks(placed)}))
+        from_scratch.seed_evaluation_json(1, step, "ppo").write_text(json.dumps({"tasks": _tasks(placed)}))
     body = sm.summary()
     assert "| the paper's general agent (Table II, cp4) | PPO + ICM (ML-Agents), Table I's stages, 8M env steps | " \
            "68.04 | 84.82 | 85.17 | the paper |" in body
@@ -22,31 +22,33 @@ def test_each_row_reads_its_file_and_a_seed_shows_its_latest_evaluation(tmp_path
     shipped = json.loads(path.read_text())["tasks"]
     row = next(line for line in body.splitlines() if line.startswith(f"| {label} |"))
     assert row.split(" | ")[2:5] == [f"{100 * shipped[t]['place_success']:.1f}" for t in sm.TASKS]
-    seed1 = next(line for line in body.splitlines() if "the recipe from nothing, seed 1" in line)
+    seed1 = next(line for line in body.splitlines() if "the recipe from nothing (PPO), seed 1" in line)
     assert "at 6,000,000 env steps" in seed1 and seed1.count("| 92.5 ") == 3
-    assert "(its run has not ended: `python -m experiments.from_scratch --seed 2` runs it" in body
-    from_scratch.chosen_json(1).parent.mkdir()
-    from_scratch.chosen_json(1).write_text(json.dumps({"step": 4_000_000}))
-    seed1 = next(line for line in sm.summary().splitlines() if "the recipe from nothing, seed 1" in line)
+    assert "(its run has not ended: `python -m experiments.from_scratch --seed 2 --learner ppo` runs it" in body
+    assert "| the recipe from nothing (SAC), seed 1 | (its run has not ended: `python -m experiments.from_scratch " \
+           "--seed 1` runs it" in body, "SAC is the recipe's learner: its command needs no --learner"
+    from_scratch.chosen_json(1, "ppo").parent.mkdir()
+    from_scratch.chosen_json(1, "ppo").write_text(json.dumps({"step": 4_000_000}))
+    seed1 = next(line for line in sm.summary().splitlines() if "the recipe from nothing (PPO), seed 1" in line)
     assert "at 4,000,000 env steps (the snapshot rule's choice)" in seed1 and seed1.count("| 50.0 ") == 3
     # once shipped, the seed's choice is the reward-only agent's row, not a second row of the same policy
     shipped_eval = tmp_path / "shipped_eval.json"
     shipped_eval.write_text(json.dumps({"tasks": _tasks(0.5), "evaluated_as": {
-        "json": str(from_scratch.seed_evaluation_json(1, 4_000_000))}}))
+        "json": str(from_scratch.seed_evaluation_json(1, 4_000_000, "ppo"))}}))
     monkeypatch.setattr(from_scratch, "EVAL_JSON", shipped_eval)
     body = sm.summary()
-    assert "the recipe from nothing, seed 1" not in body and "the recipe from nothing, seed 2" in body
+    assert "the recipe from nothing (PPO), seed 1" not in body and "the recipe from nothing (PPO), seed 2" in body
 
 
 def test_a_sac_seed_s_evaluation_is_a_row_with_its_env_steps(tmp_path, monkeypatch):
-    """SAC's seeds (experiments/learners.py `--evaluate sac --seed S`): a row each where its evaluation is there."""
-    from experiments import learners
-
-    monkeypatch.setattr(learners, "EVAL_DIR", tmp_path)
-    assert "SAC from nothing" not in sm.summary()
-    learners.eval_json("sac", 2).write_text(json.dumps({"tasks": _tasks(0.975), "checkpoint_step": 300_368}))
-    row = next(line for line in sm.summary().splitlines() if line.startswith("| SAC from nothing"))
-    assert row.startswith("| SAC from nothing, seed 2, at 300,368 env steps (not shipped) |") and row.count("| 97.5 ") == 3
+    """SAC's seeds (`python -m experiments.from_scratch --seed S --evaluate`): a row each where an evaluation is
+    there, its latest until the snapshot rule has chosen."""
+    monkeypatch.setattr(from_scratch, "SEED_EVAL_DIR", tmp_path)
+    assert "(SAC), seed 2, at" not in sm.summary()
+    from_scratch.seed_evaluation_json(2, 300_368, "sac").write_text(json.dumps({"tasks": _tasks(0.975)}))
+    row = next(line for line in sm.summary().splitlines() if "the recipe from nothing (SAC), seed 2" in line)
+    assert row.startswith("| the recipe from nothing (SAC), seed 2, at 300,368 env steps (its latest evaluated "
+                          "snapshot, not yet chosen) | SAC on") and row.count("| 97.5 ") == 3
 
 
 def test_a_file_not_there_yet_shows_a_dash_and_the_section_lands_between_its_markers(tmp_path, monkeypatch):

@@ -35,13 +35,13 @@ def test_the_run_is_the_recipe_with_the_held_out_openings_never_drawn_in_trainin
     assert training == set(uo.TRAINED) and evaluating == set(uo.TRAINED) | set(uo.HELD_OUT)
 
 
-def test_sac_s_run_is_the_learners_sac_with_the_held_out_openings_never_drawn_in_training():
-    """`--learner sac`: experiments/learners.py's SAC but for its name and the goal slots its training envs draw (its
+def test_sac_s_run_is_the_recipe_s_sac_with_the_held_out_openings_never_drawn_in_training():
+    """`--learner sac`: experiments/sac_recipe.py's SAC but for its name and the goal slots its training envs draw (its
     evaluations during training draw every slot: tests/test_sac.py)."""
-    from experiments import learners
+    from experiments import sac_recipe
 
     run = uo.sac_run(2)
-    changed = {k for k, v in vars(run.args).items() if v != vars(learners.sac_args(2))[k]}
+    changed = {k for k, v in vars(run.args).items() if v != vars(sac_recipe.sac_args(2))[k]}
     assert changed == {"exp_name", "goal_slots"} and run.args.goal_slots == uo.TRAINED
     assert run.command == "python -m experiments.unseen_openings --seed 2 --learner sac"
     with pytest.raises(SystemExit, match="--learner td3: use ppo or sac"):
