@@ -151,9 +151,9 @@ def evaluations_table(eval_dir: Path = EVAL_DIR, log_dir: Path = CAMPAIGN_DIR) -
     if not rows:
         return []
     names = " | ".join(f"{env_id}: placed % [95% CI]" for env_id in tasks)
-    return ["", f"The paper's protocol (test seeds, 50,000 env steps per task, cp4, the policy's mean): the PPO arm's "
-            f"snapshots as the recipe evaluated them, another arm's latest checkpoint (`{COMMAND} --evaluate ARM "
-            "--seed S`):", "", f"| learner | seed | its env steps | its training wall time (h) | {names} | target met "
+    return ["", f"The paper's protocol (test seeds, 50,000 env steps per task, cp4, the policy's mean): the SAC and PPO "
+            f"arms' snapshots as the recipe evaluated them (`{from_scratch.COMMAND} --seed S [--learner ppo] --evaluate`), "
+            f"the curiosity arm's latest checkpoint (`{COMMAND} --evaluate icm --seed S`):", "", f"| learner | seed | its env steps | its training wall time (h) | {names} | target met "
             f"(every task placed >= {TARGET:.0%}, picked >= {PICK_TARGET:.0%}) |",
             "|---|---|---|---|" + "---|" * len(tasks) + "---|", *rows]
 
