@@ -50,7 +50,12 @@ def choose(runs: list[Run], names: tuple[str, ...]) -> list[Run]:
 
 
 def checkpoint_of(run: Run) -> Path:
-    return Path(run.args.log_dir) / run.args.exp_name / "checkpoint.pt"
+    return args_checkpoint(run.args)
+
+
+def args_checkpoint(a: Args | sac.Args) -> Path:
+    """Where a PPO or SAC run's Args keep its latest checkpoint (both learners write it there)."""
+    return Path(a.log_dir) / a.exp_name / "checkpoint.pt"
 
 
 def describe(run: Run) -> str:

@@ -165,8 +165,8 @@ def curve(path: Path, until: Optional[int] = BUDGET) -> dict[str, np.ndarray]:
     with open(path, newline="") as f:
         rows = [r for r in csv.DictReader(f) if until is None or int(float(r["global_step"])) <= until]
     steps = csv_column(rows, "global_step")
-    if rows and "wall_s" in rows[0]:  # SAC writes its wall time
-        wall = csv_column(rows, "wall_s")
+    if rows and "update_s" in rows[0]:  # SAC writes its env and update seconds (its evaluations' are not training)
+        wall = csv_column(rows, "env_s") + csv_column(rows, "update_s")
     else:  # PPO: each row is an iteration of (its env steps) at its sps
         wall = np.cumsum(np.diff(steps, prepend=0.0) / csv_column(rows, "sps"))
     window = max(1, int(round(MOVING_WINDOW / max(float(np.median(np.diff(steps, prepend=0.0))), 1.0))))

@@ -18,7 +18,7 @@ from typing import Callable, Optional
 import torch
 
 from baselines.sac import sac
-from experiments.campaign import CAMPAIGN_DIR
+from experiments.campaign import CAMPAIGN_DIR, args_checkpoint
 
 BUDGET = 2_000_000
 """env steps of a SAC run from nothing per seed: PPO's and SAC's comparison at equal env steps (issue 52: at least
@@ -35,10 +35,6 @@ def sac_args(seed: int = 1, **overrides) -> sac.Args:
                        **overrides})
 
 
-def sac_checkpoint(a: sac.Args) -> Path:
-    return Path(a.log_dir) / a.exp_name / "checkpoint.pt"
-
-
 def checkpoint_step(ckpt: Path) -> int:
     return int(torch.load(ckpt, map_location="cpu", weights_only=False)["progress"]["global_step"])
 
@@ -50,7 +46,7 @@ def run_sac(a: sac.Args, every: Optional[int] = None, stop: Optional[Callable[[]
     it (checkpoint marks, so a part's end is a resume point), each part's end given to `after_part(env steps,
     checkpoint)`; with `stop`, ending after the first part at whose end `stop()` is true. SIGTERM or Ctrl-C stops it
     with a checkpoint (sac.py raises SystemExit: no `after_part` for a part cut short)."""
-    ckpt = sac_checkpoint(a)
+    ckpt = args_checkpoint(a)
     while (done := checkpoint_step(ckpt) if ckpt.is_file() else 0) < a.total_timesteps:
         if done and stop is not None and stop():
             return

@@ -66,10 +66,13 @@ GENERAL = "ConstructionPickPlace-v1"
 """the task the general agent trains on: the vectorized and training measurements use it."""
 
 
-TRAINING = (("free", "none"), ("free", "icm"), ("held", "none"), ("held", "icm"), ("free", "recipe"))
-"""the PPO trainings measured against the simulation alone: free-running or held steps, ICM off or on (the paper's
-learner: sparse reward), and the from-scratch recipe (experiments/from_scratch.py: the dense reward, its
-observation's joint moves, near-goal starts, its rollout and update sizes)."""
+TRAINING = (("free", "none"), ("free", "icm"), ("held", "none"), ("held", "icm"), ("free", "recipe"), ("free", "sac"))
+"""the trainings measured against the simulation alone: PPO free-running or held steps, ICM off or on (the paper's
+learner: sparse reward), PPO's from-scratch recipe (experiments/from_scratch.py: the dense reward, its
+observation's joint moves, near-goal starts, its rollout and update sizes), and SAC's (experiments/sac_recipe.py,
+the recipe's learner: the same envs and reward, a replay buffer and its gradient steps)."""
+CPU_ONLY = {"sac"}
+"""trainings whose learner runs on the CPU only (baselines/sac/sac.py has no GPU learner)."""
 
 
 @dataclass
@@ -87,9 +90,9 @@ class Args:
     rgb_steps: int = 200
     """env steps per rgb-camera measurement (one env; 0: skip it)."""
     trainings: tuple[str, ...] = tuple(f"{steps}-{curiosity}" for steps, curiosity in TRAINING)
-    """the PPO trainings measured against the simulation alone, each STEPS-CURIOSITY of TRAINING (free-none, free-icm,
-    held-none, held-icm, free-recipe); with `-cuda` after it (free-recipe-cuda), the same with the learner on the GPU
-    (its rollouts' forward passes and its update)."""
+    """the trainings measured against the simulation alone, each STEPS-SETTING of TRAINING (free-none, free-icm,
+    held-none, held-icm, free-recipe, free-sac); with `-cuda` after a PPO one (free-recipe-cuda), the same with the
+    learner on the GPU (its rollouts' forward passes and its update)."""
     cpu: bool = True
     """run the CPU sections."""
     gpu: bool = True
@@ -114,13 +117,13 @@ def trainings(args: Args) -> list[tuple[str, str, str]]:
     """--trainings as (steps, curiosity, learner device) of TRAINING; a clear error for any other, and for a learner
     on the GPU where there is none."""
     allowed = {f"{steps}-{curiosity}{suffix}": (steps, curiosity, device) for steps, curiosity in TRAINING
-               for suffix, device in (("", "cpu"), ("-cuda", "cuda"))}
+               for suffix, device in (("", "cpu"), ("-cuda", "cuda")) if not (device == "cuda" and curiosity in CPU_ONLY)}
     unknown = [t for t in args.trainings if t not in allowed]
     if not args.trainings or len(set(args.trainings)) < len(args.trainings):
         raise SystemExit(f"--trainings {' '.join(args.trainings)}: give one or more, each once")
     if unknown:
         raise SystemExit(f"--trainings: unknown {', '.join(unknown)}; allowed: "
-                         f"{', '.join(t for t in allowed if not t.endswith('-cuda'))}, each also with -cuda")
+                         f"{', '.join(t for t in allowed if not t.endswith('-cuda'))}, each PPO one also with -cuda")
     if any(allowed[t][2] == "cuda" for t in args.trainings) and not torch.cuda.is_available():
         raise SystemExit("--trainings: a learner on the GPU (-cuda) needs a CUDA GPU, and this machine has none")
     return [allowed[t] for t in args.trainings]
@@ -292,6 +295,26 @@ def ppo_steps_per_second(iterations: int, backend: str, num_envs: Optional[int] 
                 curiosity=run.args.icm.curiosity, reward_mode=run.args.reward_mode)
 
 
+def sac_steps_per_second(rows: int, num_envs: int) -> dict:
+    """SAC as the recipe trains it (experiments/sac_recipe.py `sac_args`) on `num_envs` env processes: the median env
+    steps/s of `rows` progress rows (log_freq env steps each, its gradient steps included) once its buffer holds
+    learning_starts transitions; the rows of its random-action start, and the one that straddles it, left out. No
+    checkpoints, no evaluations."""
+    import csv
+
+    from baselines.sac import sac
+    from experiments.sac_recipe import sac_args
+
+    with tempfile.TemporaryDirectory() as log_dir:
+        a = sac_args(1, num_envs=num_envs, log_dir=log_dir, exp_name="benchmark", eval_freq=0, save_model=False)
+        first = -(-a.learning_starts // a.log_freq) * a.log_freq  # the first row with gradient steps in it
+        a.total_timesteps = first + rows * a.log_freq
+        sac.main(a)
+        with open(Path(log_dir) / "benchmark" / "progress.csv") as f:
+            sps = [float(row["sps"]) for row in csv.DictReader(f) if int(row["global_step"]) > first]
+    return dict(sps=statistics.median(sps), num_envs=num_envs)
+
+
 START_UP = "start-up and shut-down"
 """the training envs made and closed: timed apart, and left out of the vector step."""
 
@@ -409,6 +432,8 @@ def worker_peak_rss_mib(envs: CPUVectorEnv) -> float:
 
 
 def cpu_sections(args: Args) -> str:
+    from experiments.sac_recipe import sac_args
+
     load_before = os.getloadavg()[0]
     one_env = one_env_table(args)
     rgb = rgb_table(args) if args.rgb_steps else None
@@ -453,13 +478,15 @@ def cpu_sections(args: Args) -> str:
         "",
         processes,
         "",
-        "### PPO training against simulating alone",
+        "### Training against simulating alone",
         "",
         f"baselines/ppo/ppo.py training on {GENERAL}: its defaults but the paper's sparse reward, the number of envs "
-        "and the curiosity, or (curiosity \"recipe\") the from-scratch recipe (experiments/from_scratch.py: its dense "
+        "and the curiosity, or (\"recipe\") PPO's from-scratch recipe (experiments/from_scratch.py: its dense "
         "reward, the joint moves in its observation, near-goal and reach starts, 2,000-step rollouts); "
         f"{args.train_iterations} timed iterations after an untimed one, each its rollout and its PPO update (and ICM's "
-        "where on); free-running steps, or the element held in every training env from every reset on; \"learner\": where "
+        "where on); (\"sac\") baselines/sac/sac.py as the recipe trains it now (experiments/sac_recipe.py: the same "
+        f"envs and dense reward, {sac_args().utd:g} gradient steps per env step), {args.train_iterations} rows of its "
+        f"progress ({sac_args().log_freq:,} env steps each) after its buffer has filled; free-running steps, or the element held in every training env from every reset on; \"learner\": where "
         "its policy's forward passes and its update run (the env processes on the CPU either way). \"Share\": "
         "training's env steps/s over those of the same processes simulating alone with the sparse reward (the table "
         f"above) in the same round; median (range) of {args.rounds} rounds that alternate between them. Target: 0.6 or "
@@ -532,7 +559,7 @@ def process_table(args: Args) -> tuple[str, str, float]:
     processes, free-running and held, ICM off and on, with its share of the simulation alone."""
     sim_rows = [f"| env processes | {REFERENCE} | {GENERAL} | {GENERAL}, held | {GENERAL}, every env in a worker | "
                 "gain: env 0 in the learner's process |", "|---|---|---|---|---|---|"]
-    ppo_rows = ["| env processes | env steps | curiosity | learner | PPO training, env steps/s | "
+    ppo_rows = ["| env processes | env steps | curiosity or recipe | learner | training, env steps/s | "
                 "simulating alone, env steps/s | share: training / simulating alone |", "|---|---|---|---|---|---|---|"]
     worker_rss = 0.0
     measured = trainings(args)
@@ -551,9 +578,10 @@ def process_table(args: Args) -> tuple[str, str, float]:
             ours.call("set_hold", True)
             m["held"].append(vector_steps_per_second(ours, args.vector_steps, seed=r))
             for steps, curiosity, learner in measured:
-                m[steps, curiosity, learner].append(ppo_steps_per_second(
-                    args.train_iterations, "physx_cpu", n, held=steps == "held", curiosity=curiosity,
-                    learner=learner)["sps"])
+                m[steps, curiosity, learner].append(
+                    sac_steps_per_second(args.train_iterations, n)["sps"] if curiosity == "sac" else
+                    ppo_steps_per_second(args.train_iterations, "physx_cpu", n, held=steps == "held",
+                                         curiosity=curiosity, learner=learner)["sps"])
         worker_rss = max(worker_rss, worker_peak_rss_mib(ours))
         for envs in (ref, ours, apart):
             envs.close()

@@ -22,9 +22,35 @@ def test_trainings_default_to_every_training_and_reject_unknown_repeated_or_none
 def test_a_learner_on_the_gpu_is_asked_for_with_cuda_and_refused_without_a_gpu(monkeypatch):
     monkeypatch.setattr(torch.cuda, "is_available", lambda: True)
     assert bench.trainings(bench.Args(trainings=("free-recipe-cuda",))) == [("free", "recipe", "cuda")]
+    with pytest.raises(SystemExit, match="unknown free-sac-cuda"):  # SAC's learner runs on the CPU only
+        bench.trainings(bench.Args(trainings=("free-sac-cuda",)))
     monkeypatch.setattr(torch.cuda, "is_available", lambda: False)
     with pytest.raises(SystemExit, match="needs a CUDA GPU"):
         bench.trainings(bench.Args(trainings=("free-recipe-cuda",)))
+
+
+def test_sac_s_speed_is_its_rows_with_gradient_steps_in_them_as_the_recipe_trains(monkeypatch):
+    from baselines.sac import sac
+    from experiments.sac_recipe import sac_args
+
+    seen = {}
+
+    def main(a):
+        seen.update(a=a)
+        # rows every log_freq env steps: random actions (fast) until learning_starts, then gradient steps (slow)
+        rows = ["global_step,sps"] + [f"{step},{1000 if step <= a.learning_starts else 50 + step // a.log_freq}"
+                                      for step in range(a.log_freq, a.total_timesteps + 1, a.log_freq)]
+        path = bench.Path(a.log_dir) / a.exp_name / "progress.csv"
+        path.parent.mkdir(parents=True)
+        path.write_text("\n".join(rows) + "\n")
+
+    monkeypatch.setattr(sac, "main", main)
+    out = bench.sac_steps_per_second(3, 2)
+    a, recipe = seen["a"], sac_args(1)
+    assert (a.num_envs, a.eval_freq, a.save_model) == (2, 0, False)
+    assert (a.utd, a.batch_size, a.reward_mode) == (recipe.utd, recipe.batch_size, recipe.reward_mode)
+    # learning_starts 5,000 of rows of 2,000: the row at 6,000 straddles it; then 3 rows, at 8,000 / 10,000 / 12,000
+    assert a.total_timesteps == 12_000 and out == dict(sps=55.0, num_envs=2)
 
 
 @pytest.mark.parametrize("backend, learner, cuda", [("physx_cpu", None, False), ("physx_cpu", "cuda", True),

@@ -23,13 +23,14 @@ def _write(path, rows):
 
 
 def _rows(n, placed, wall=None):
-    """n rows of 2,000 env steps: PPO's (500 env steps/s) or, with `wall` seconds per row, SAC's."""
+    """n rows of 2,000 env steps: PPO's (500 env steps/s) or, with `wall` seconds of training per row, SAC's (a
+    quarter simulating, the rest updating; its evaluations' seconds, in wall_s only, are not training)."""
     rows = []
     for i in range(n):
         row = dict(global_step=2000 * (i + 1), sps=500.0, ordinary_place_ceiling=placed(i),
                    ordinary_place_window=placed(i) + 0.1, ordinary_place_flooring=1.0)
         if wall is not None:
-            row["wall_s"] = wall * (i + 1)
+            row.update(env_s=0.25 * wall * (i + 1), update_s=0.75 * wall * (i + 1), wall_s=1.5 * wall * (i + 1))
         rows.append(row)
     return rows
 
