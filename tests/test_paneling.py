@@ -305,6 +305,9 @@ def test_the_training_section_reads_each_run_s_progress_and_evaluation(tmp_path,
     assert "| not run: `python -m experiments.paneling --train nothing --train-seed 1` |" in body
     assert "| SAC on paneling from nothing, seed 1 | not run: `python -m experiments.paneling --train nothing " \
            "--learner sac --train-seed 1` |" in body
+    assert "| SAC on paneling from nothing, seed 2 | not run: `python -m experiments.paneling --train nothing " \
+           "--learner sac --train-seed 2` |" in body  # SAC's two seeds, PPO's one from each start
+    assert body.count("| not run: ") == 3
     assert (tmp_path / "images" / "curve.png").stat().st_size > 0 and "](images/curve.png)" in body
     assert "<!-- begin paneling-training (generated) -->" in (tmp_path / "RESULTS.md").read_text()
 
