@@ -6,6 +6,7 @@ general agent from reward alone (experiments/from_scratch.py) are campaigns."""
 from __future__ import annotations
 
 import csv
+import json
 import os
 import platform
 import shutil
@@ -56,6 +57,15 @@ def checkpoint_of(run: Run) -> Path:
 def args_checkpoint(a: Args | sac.Args) -> Path:
     """Where a PPO or SAC run's Args keep its latest checkpoint (both learners write it there)."""
     return Path(a.log_dir) / a.exp_name / "checkpoint.pt"
+
+
+def record_checkpoint_step(evaluation_json: Path, checkpoint: Path) -> None:
+    """Write into an evaluation's JSON the env steps its checkpoint had trained (`checkpoint_step`), where the
+    checkpoint says: a run's latest checkpoint moves on after it is evaluated."""
+    step = torch.load(checkpoint, map_location="cpu", weights_only=False).get("progress", {}).get("global_step")
+    if step is not None:
+        data = json.loads(evaluation_json.read_text())
+        evaluation_json.write_text(json.dumps(dict(data, checkpoint_step=int(step)), indent=1) + "\n")
 
 
 def describe(run: Run) -> str:

@@ -41,7 +41,7 @@ import tyro
 from baselines.ppo import evaluation
 from baselines.ppo.evaluation import episode_job, pct, wilson
 from experiments import transfer
-from experiments.campaign import Run, checkpoint_of, training_wall_s
+from experiments.campaign import Run, checkpoint_of, record_checkpoint_step, training_wall_s
 from experiments.from_scratch import csv_column, moving_mean
 from experiments.obstacles import RESULTS_PATH, row_name, run_row, with_more_agents
 from experiments.transfer import transfer_run
@@ -147,6 +147,7 @@ def train(args: Args) -> None:
         out = train_eval_json(run)
         evaluation.main(evaluation.Args(checkpoint=checkpoint_of(run), env_id=ENV_ID, steps=50_000,
                                         workers=args.workers, json=out))
+        record_checkpoint_step(out, checkpoint_of(run))
     else:
         transfer.train(run, args.dry_run, stop_at_target=True)
     if not args.dry_run and args.write_results:

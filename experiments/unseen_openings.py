@@ -36,7 +36,6 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Optional
 
-import torch
 import tyro
 
 from baselines.ppo import evaluation
@@ -44,7 +43,7 @@ from baselines.ppo.args import command_line
 from baselines.ppo.evaluation import pct, training_slot_weights
 from baselines.ppo.start_states import GOAL_SLOTS
 from experiments import sac_recipe, transfer
-from experiments.campaign import Run, checkpoint_of, describe, run_or_resume
+from experiments.campaign import Run, checkpoint_of, describe, record_checkpoint_step, run_or_resume
 from experiments.from_scratch import METHOD, scratch_args
 from ms_construction.envs import PAPER_TASK_ENV_IDS
 from ms_construction.reporting import update_section
@@ -93,13 +92,11 @@ def evaluation_json(seed, seen: bool) -> Path:
 def evaluate(checkpoint: Path, seed, steps: int = EVAL_STEPS, workers: int = 2) -> None:
     """The paper's protocol (test seeds, `steps` per task, cp4) on the held-out openings, then on the trained ones;
     each JSON records the env steps the checkpoint had trained (`checkpoint_step`) where the checkpoint says."""
-    step = torch.load(checkpoint, map_location="cpu", weights_only=False).get("progress", {}).get("global_step")
     for seen, slots in ((False, HELD_OUT), (True, TRAINED)):
         out = evaluation_json(seed, seen)
         evaluation.main(evaluation.Args(checkpoint=checkpoint, all=True, steps=steps, goal_slots=slots,
                                         workers=workers, json=out))
-        if step is not None:
-            out.write_text(json.dumps(dict(json.loads(out.read_text()), checkpoint_step=int(step)), indent=1) + "\n")
+        record_checkpoint_step(out, checkpoint)
 
 
 def imitation(run_dir: Path = IMITATION_DIR, clone: Optional[dict] = None, refine_args: Optional[dict] = None) -> Path:
@@ -131,12 +128,24 @@ def imitation_plan(run_dir: Path = IMITATION_DIR) -> str:
     return "\n".join(lines)
 
 
-def report(results: Path = Path("docs/RESULTS.md"), seeds: tuple[int, ...] = (1, 2)) -> str:
-    """RESULTS' section: per run evaluated (the recipe's seeds, the imitation twin), place success on the unseen and
-    the seen openings per task."""
+SEEDS = (1, 2)
+EVALUATED = (*SEEDS, *(f"sac_s{s}" for s in SEEDS), "imitation")
+"""the runs whose evaluations the report looks for (`evaluation_json`'s `seed`): the recipe's seeds, SAC's, the
+imitation twin."""
+
+
+def run_label(seed) -> str:
+    """How RESULTS names the run of `evaluation_json`'s `seed`."""
+    return (f"the recipe from nothing, seed {seed}" if isinstance(seed, int) else
+            f"SAC from nothing, seed {seed.removeprefix('sac_s')}" if seed.startswith("sac_s") else
+            "imitation (clone + residual PPO)")
+
+
+def report(results: Path = Path("docs/RESULTS.md")) -> str:
+    """RESULTS' section: per run evaluated (EVALUATED), place success on the unseen and the seen openings per task."""
     lines = ["| run | its env steps | openings | " + " | ".join(f"{k}: placed % [95% CI]" for k in PAPER_TASK_ENV_IDS)
              + " |", "|---|---|---|" + "---|" * len(PAPER_TASK_ENV_IDS)]
-    for seed in (*seeds, *(f"sac_s{s}" for s in seeds), "imitation"):
+    for seed in EVALUATED:
         for seen in (False, True):
             path = evaluation_json(seed, seen)
             if not path.is_file():
@@ -146,11 +155,8 @@ def report(results: Path = Path("docs/RESULTS.md"), seeds: tuple[int, ...] = (1,
             cells = [pct(tasks[e]["place_success"], tasks[e]["place_success_ci95"]) for e in PAPER_TASK_ENV_IDS.values()]
             slots = ", ".join(map(str, TRAINED if seen else HELD_OUT))
             which = f"{'trained on' if seen else 'never trained on'} ({slots})"
-            name = (f"the recipe from nothing, seed {seed}" if isinstance(seed, int) else
-                    f"SAC from nothing, seed {seed.removeprefix('sac_s')}" if seed.startswith("sac_s") else
-                    "imitation (clone + residual PPO)")
             trained = f"{data['checkpoint_step']:,}" if "checkpoint_step" in data else "-"
-            lines.append(f"| {name} | {trained} | {which} | " + " | ".join(cells) + " |")
+            lines.append(f"| {run_label(seed)} | {trained} | {which} | " + " | ".join(cells) + " |")
     table = "\n".join(lines) if len(lines) > 2 else "No run has been evaluated yet."
     body = ("## Openings no agent trained on\n\n"
             f"Commands: `{COMMAND} --seed S` (training), `{COMMAND} --seed S --evaluate`, `{COMMAND} --imitation`, "

@@ -202,3 +202,14 @@ def test_each_shipped_campaign_checkpoint_loads_and_evaluates_with_its_record(ru
     out = tmp_path / "eval.json"
     evaluation.main(evaluation.Args(checkpoint=path, env_id=env_id, episodes=1, workers=1, json=out))
     assert json.loads(out.read_text())["episodes"] == 1
+
+
+def test_an_evaluation_records_the_env_steps_its_checkpoint_had_trained_where_the_checkpoint_says(tmp_path):
+    out, ckpt, bare = tmp_path / "eval.json", tmp_path / "checkpoint.pt", tmp_path / "policy.pt"
+    out.write_text(json.dumps({"place_success": 0.9}))
+    torch.save({"progress": {"global_step": 250_000}}, ckpt)
+    torch.save({"agent": {}}, bare)  # a shipped policy keeps no progress
+    campaign.record_checkpoint_step(out, bare)
+    assert json.loads(out.read_text()) == {"place_success": 0.9}
+    campaign.record_checkpoint_step(out, ckpt)
+    assert json.loads(out.read_text()) == {"place_success": 0.9, "checkpoint_step": 250_000}

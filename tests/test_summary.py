@@ -62,3 +62,29 @@ def test_a_file_not_there_yet_shows_a_dash_and_the_section_lands_between_its_mar
     sm.main()
     text = results.read_text()
     assert "old" not in text and text.index("## At a glance") < text.index("## next") and text.startswith("# Results")
+
+
+def test_the_trained_generalization_rows_are_the_runs_evaluated_each_in_its_own_column(tmp_path, monkeypatch):
+    from experiments import paneling
+    from experiments import unseen_openings as uo
+
+    monkeypatch.chdir(tmp_path)  # every evaluation's path is relative to the repository: none is here
+    monkeypatch.setattr(sm, "OBSTACLES", tmp_path / "obstacles.json")
+    assert sm.trained_table()[2:] == []
+    sac = paneling.training_run("nothing", 2, learner="sac")
+    paneling.train_eval_json(sac).parent.mkdir(parents=True)
+    paneling.train_eval_json(sac).write_text(json.dumps({"env_id": paneling.ENV_ID, "place_success": 0.95,
+                                                         "checkpoint_step": 250_000}))
+    uo.EVAL_DIR.mkdir(parents=True)
+    uo.evaluation_json("sac_s1", seen=False).write_text(json.dumps({"tasks": _tasks(0.25), "checkpoint_step": 300_000}))
+    uo.evaluation_json("sac_s1", seen=True).write_text(json.dumps({"tasks": _tasks(1.0), "checkpoint_step": 300_000}))
+    (tmp_path / "obstacles.json").write_text(json.dumps({"rows": {
+        "SAC among obstacles, 100 env steps (trained among obstacles) | moving (solvable seeds)": _tasks(0.5),
+        "SAC among obstacles, 100 env steps (trained among obstacles) | none (solvable seeds)": _tasks(0.0),
+        "planning expert | moving (solvable seeds)": _tasks(1.0)}}))
+    rows = sm.trained_table()[2:]
+    assert rows == [
+        f"| SAC on paneling from nothing, seed 2, 250,000 env steps | 95.0 | - | - | {paneling.train_eval_json(sac)} |",
+        f"| SAC from nothing, seed 1, 300,000 env steps | - | 25.0 / 25.0 / 25.0 | - | "
+        f"{uo.evaluation_json('sac_s1', seen=False)} |",
+        f"| SAC among obstacles, 100 env steps | - | - | 50.0 / 50.0 / 50.0 | {tmp_path / 'obstacles.json'} |"]
