@@ -59,19 +59,25 @@ def args_checkpoint(a: Args | sac.Args) -> Path:
     return Path(a.log_dir) / a.exp_name / "checkpoint.pt"
 
 
+def checkpoint_step(checkpoint: Path) -> Optional[int]:
+    """The env steps a PPO or SAC checkpoint had trained (its progress' global_step); None where it records none (an
+    agent shipped without its clock)."""
+    step = torch.load(checkpoint, map_location="cpu", weights_only=False).get("progress", {}).get("global_step")
+    return None if step is None else int(step)
+
+
 def record_checkpoint_step(evaluation_json: Path, checkpoint: Path) -> None:
     """Write into an evaluation's JSON the env steps its checkpoint had trained (`checkpoint_step`), where the
     checkpoint says: a run's latest checkpoint moves on after it is evaluated."""
-    step = torch.load(checkpoint, map_location="cpu", weights_only=False).get("progress", {}).get("global_step")
-    if step is not None:
+    if (step := checkpoint_step(checkpoint)) is not None:
         data = json.loads(evaluation_json.read_text())
-        evaluation_json.write_text(json.dumps(dict(data, checkpoint_step=int(step)), indent=1) + "\n")
+        evaluation_json.write_text(json.dumps(dict(data, checkpoint_step=step), indent=1) + "\n")
 
 
 def describe(run: Run) -> str:
     """One line: the run, its budget and stages (PPO's), and where it stands."""
     a, ckpt = run.args, checkpoint_of(run)
-    done = load_checkpoint(ckpt)["progress"]["global_step"] if ckpt.is_file() else 0
+    done = checkpoint_step(ckpt) if ckpt.is_file() else 0
     if isinstance(a, sac.Args):
         return (f"{run.name}: {run.what}; {a.env_id}, {a.total_timesteps:,} env steps, seed {a.seed}, {a.num_envs} envs; "
                 f"{'resumes at step ' + format(done, ',') if done else 'starts fresh'} ({ckpt})")

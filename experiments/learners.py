@@ -37,9 +37,9 @@ from baselines.ppo import evaluation
 from baselines.ppo.args import command_line
 from baselines.ppo.evaluation import pct
 from experiments import from_scratch
-from experiments.campaign import CAMPAIGN_DIR, Run, describe, run_or_resume
+from experiments.campaign import CAMPAIGN_DIR, Run, describe, record_checkpoint_step, run_or_resume
 from experiments.from_scratch import csv_column, moving_mean, scratch_args, seed_evaluations, seed_run
-from experiments.sac_recipe import BUDGET, checkpoint_step, sac_args
+from experiments.sac_recipe import BUDGET, sac_args
 from ms_construction.parameters import PAPER_KINDS
 from ms_construction.reporting import update_section
 
@@ -102,10 +102,9 @@ def evaluate_arm(arm: str, workers: int = 2, log_dir: Path = CAMPAIGN_DIR, seed:
     if not ckpt.is_file():
         raise SystemExit(f"--evaluate {arm}: no checkpoint at {ckpt}; train it first: "
                          f"{COMMAND} --arm {arm} --seed {seed}")
-    step = checkpoint_step(ckpt)
     out = eval_json(arm, seed)
     evaluation.main(evaluation.Args(checkpoint=ckpt, all=True, steps=50_000, workers=workers, json=out))
-    out.write_text(json.dumps(dict(json.loads(out.read_text()), checkpoint_step=step), indent=1) + "\n")
+    record_checkpoint_step(out, ckpt)
     return out
 
 

@@ -54,6 +54,8 @@ TRAIN_SCENE = "moving"
 """the scene a training run among obstacles draws: the stack and the post, and the worker walking across."""
 TRAIN_BUDGET = 3_000_000
 """env steps of each training run among obstacles."""
+TRAINED = " (trained among obstacles)"
+"""what the label of an agent trained on the moving scene (`--train`) ends with in summary.json."""
 
 
 def training_run(start: str, seed: int = 1, num_envs: Optional[int] = None, learner: str = "ppo") -> Run:
@@ -189,6 +191,13 @@ def with_more_agents(agents: dict[str, str], specs: tuple[str, ...]) -> dict[str
     return {**agents, **more}
 
 
+def scene_rows(summary: dict, scene: str) -> dict[str, dict]:
+    """{agent label: its per-task results} of one scene (SCENES) in summary.json, whose rows are keyed
+    "<label> | <scene> (...)" (`main`)."""
+    return {label: per_task for key, per_task in summary.get("rows", {}).items()
+            for label, _, rest in [key.partition(" | ")] if rest.startswith(scene)}
+
+
 def main(args: Args) -> dict:
     if args.episodes < 1 or args.workers < 1:
         raise SystemExit("--episodes and --workers must be positive")
@@ -198,7 +207,7 @@ def main(args: Args) -> dict:
         if not args.evaluate:
             return transfer.train(run, args.dry_run)
         step, policy = trained_policy(run)
-        args.agents = {**args.agents, f"{run.what}, {step:,} env steps (trained among obstacles)": str(policy)}
+        args.agents = {**args.agents, f"{run.what}, {step:,} env steps{TRAINED}": str(policy)}
     command = " ".join(["python -m experiments.obstacles", *map(shlex.quote, sys.argv[1:])])
     rows: dict[tuple[str, str], dict[str, dict]] = {}
     giving_way = []

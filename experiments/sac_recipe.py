@@ -15,10 +15,8 @@ import dataclasses
 from pathlib import Path
 from typing import Callable, Optional
 
-import torch
-
 from baselines.sac import sac
-from experiments.campaign import CAMPAIGN_DIR, args_checkpoint
+from experiments.campaign import CAMPAIGN_DIR, args_checkpoint, checkpoint_step
 
 BUDGET = 2_000_000
 """env steps of a SAC run from nothing per seed: PPO's and SAC's comparison at equal env steps (issue 52: at least
@@ -33,10 +31,6 @@ def sac_args(seed: int = 1, **overrides) -> sac.Args:
     to BUDGET; `overrides` replace any field."""
     return sac.Args(**{**dict(exp_name=f"sac_s{seed}", seed=seed, total_timesteps=BUDGET, log_dir=str(CAMPAIGN_DIR)),
                        **overrides})
-
-
-def checkpoint_step(ckpt: Path) -> int:
-    return int(torch.load(ckpt, map_location="cpu", weights_only=False)["progress"]["global_step"])
 
 
 def run_sac(a: sac.Args, every: Optional[int] = None, stop: Optional[Callable[[], bool]] = None,

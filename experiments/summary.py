@@ -14,7 +14,8 @@ from typing import Optional
 
 from baselines.ppo import evaluation
 from baselines.ppo.evaluation import EXPERT_RESULTS, PAPER_TABLE_II, RESULTS_PATH
-from experiments import from_scratch
+from experiments import from_scratch, paneling, unseen_openings
+from experiments.obstacles import TRAINED, scene_rows as obstacles_scene_rows
 from ms_construction.reporting import update_section
 
 TASKS = tuple(PAPER_TABLE_II)
@@ -87,8 +88,7 @@ def generalization_table() -> list[str]:
         panel = (paneling or {}).get("rows", {}).get(key if key == "planning expert" else f"{key}, zero-shot")
         cells = [f"{100 * panel['place_success']:.1f}" if panel else "-"]
         for scene in ("static", "moving"):
-            row = next((r for name, r in (obstacles or {}).get("rows", {}).items()
-                        if name.startswith(f"{key} | {scene}")), None)
+            row = obstacles_scene_rows(obstacles or {}, scene).get(key)
             cells.append(" / ".join(_placed(row)) if row else "-")
         lines.append(f"| {label} | " + " | ".join(cells) + f" | {PANELING}, {OBSTACLES} |")
     return lines
@@ -97,8 +97,6 @@ def generalization_table() -> list[str]:
 def trained_table() -> list[str]:
     """A row per generalization run that has been evaluated: trained on paneling (its placed %), with an opening of
     each task type held out (placed on the openings it never saw), or among moving obstacles (placed there)."""
-    from experiments import paneling, unseen_openings
-
     lines = ["| trained run | paneling: placed % | the openings it never saw: placed % (ceiling / window / flooring) | "
              "moving obstacles: placed % (ceiling / window / flooring) | source |", "|---|---|---|---|---|"]
     for learner, start, seed in paneling.TRAIN_PLAN:
@@ -113,10 +111,10 @@ def trained_table() -> list[str]:
         if (data := _read(path)) is not None:
             lines.append(f"| {unseen_openings.run_label(seed)}, {data['checkpoint_step']:,} env steps | - | "
                          + " / ".join(_placed(data["tasks"])) + f" | - | {path} |")
-    for name, row in (_read(OBSTACLES) or {}).get("rows", {}).items():
-        if "(trained among obstacles) | moving" in name:
-            lines.append(f"| {name.split(' | ')[0].replace(' (trained among obstacles)', '')} | - | - | "
-                         + " / ".join(_placed(row)) + f" | {OBSTACLES} |")
+    for label, row in obstacles_scene_rows(_read(OBSTACLES) or {}, "moving").items():
+        if label.endswith(TRAINED):
+            lines.append(f"| {label.removesuffix(TRAINED)} | - | - | " + " / ".join(_placed(row))
+                         + f" | {OBSTACLES} |")
     return lines
 
 

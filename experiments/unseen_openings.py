@@ -70,7 +70,7 @@ def sac_run(seed: int) -> Run:
     name = f"unseen_sac_s{seed}"
     return Run(name, sac_recipe.sac_args(seed, exp_name=name, goal_slots=TRAINED),
                f"SAC from nothing, seed {seed}, goal openings {', '.join(map(str, HELD_OUT))} held out",
-               f"{COMMAND} --seed {seed} --learner sac", None)
+               f"{COMMAND} --seed {seed} --learner sac", None, method=sac_recipe.METHOD)
 
 
 IMITATION_DIR = Path("runs/unseen_imitation")

@@ -44,6 +44,7 @@ def test_sac_s_run_is_the_recipe_s_sac_with_the_held_out_openings_never_drawn_in
     changed = {k for k, v in vars(run.args).items() if v != vars(sac_recipe.sac_args(2))[k]}
     assert changed == {"exp_name", "goal_slots"} and run.args.goal_slots == uo.TRAINED
     assert run.command == "python -m experiments.unseen_openings --seed 2 --learner sac"
+    assert run.method == sac_recipe.METHOD  # its campaign record says SAC, not the paper setting
     with pytest.raises(SystemExit, match="--learner td3: use ppo or sac"):
         uo.main(uo.Args(seed=1, learner="td3", dry_run=True))
 
