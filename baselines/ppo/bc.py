@@ -93,20 +93,22 @@ def main(args: Args) -> Path:
     ret = discounted_returns(np.concatenate([f["rewards"] for f in files])[keep], ep, args.gamma)
     episodes = np.unique(ep)
     rng = np.random.default_rng(args.seed)
-    val_eps = rng.choice(episodes, max(1, int(len(episodes) * args.val_fraction)), replace=False)
-    val = np.isin(ep, val_eps)
+    # at least one episode left to train on; a single demonstration is its own validation (in-sample, as printed)
+    val_eps = rng.choice(episodes, min(max(1, int(len(episodes) * args.val_fraction)), len(episodes) - 1), replace=False)
+    val = np.isin(ep, val_eps) if len(val_eps) else np.ones(len(ep), bool)
+    train = ~val if len(val_eps) else val
     obs_t, act_t, ret_t = (torch.as_tensor(x, dtype=torch.float32) for x in (obs, act, ret))
-    print(f"{len(episodes)} demonstrations, {len(obs)} steps ({int((~val).sum())} train, {int(val.sum())} validation)")
+    print(f"{len(episodes)} demonstrations, {len(obs)} steps ({int(train.sum())} train, {int(val.sum())} validation)")
 
     ppo_args = PPOArgs.of(env_id=args.env_id, control_mode="pd_joint_delta_pos", hidden_size=args.hidden_size,
                        rotation_features=args.rotation_features, seed=args.seed, exp_name=args.out.parent.name)
     agent = make_agent(ppo_args, obs.shape[1], act.shape[1])
-    agent.obs_rms.update(agent.features(obs_t[torch.as_tensor(~val)]))
+    agent.obs_rms.update(agent.features(obs_t[torch.as_tensor(train)]))
     with torch.no_grad():
         agent.actor_logstd.fill_(args.init_logstd)
     params = list(agent.actor_mean.parameters()) + list(agent.critic.parameters())
     optimizer = torch.optim.Adam(params, lr=args.learning_rate)
-    train_idx = np.repeat(np.flatnonzero(~val), weight[~val])
+    train_idx = np.repeat(np.flatnonzero(train), weight[train])
     steps_per_epoch = int(np.ceil(len(train_idx) / args.batch_size))
     sched = torch.optim.lr_scheduler.CosineAnnealingLR(optimizer, args.epochs * steps_per_epoch)
 
