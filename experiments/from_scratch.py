@@ -420,17 +420,18 @@ def train(run: Run, snapshots: Path, every: int = SNAPSHOT_EVERY,
           after_snapshot: Optional[Callable[[int, Path], None]] = None, stop: Optional[Callable[[], bool]] = None) -> None:
     """Run (or resume) `run` to its budget in parts of `every` env steps, each part's checkpoint copied to `snapshots`
     and given to `after_snapshot(env steps, path)` (a seed's run: `snapshot_made`); with `stop`, the run ends after
-    the first part at whose end `stop()` is true. Ctrl-C stops it with the checkpoint saved (ppo.py)."""
+    the first part at whose end `stop()` is true (a run resumed inside a part finishes the part first). Ctrl-C stops
+    it with the checkpoint saved (ppo.py)."""
     ckpt = checkpoint_of(run)
     snapshots.mkdir(parents=True, exist_ok=True)
     while (done := load_checkpoint(ckpt)["progress"]["global_step"] if ckpt.is_file() else 0) < run.args.total_timesteps:
+        if done and done % every == 0 and stop is not None and stop():
+            return
         part = run.args.replace(total_timesteps=min((done // every + 1) * every, run.args.total_timesteps))
         ppo.main(part.replace(resume=str(ckpt), extend=True) if ckpt.is_file() else part)
         shutil.copyfile(ckpt, snapshots / f"checkpoint_{part.total_timesteps}.pt")
         if after_snapshot is not None:
             after_snapshot(part.total_timesteps, snapshots / f"checkpoint_{part.total_timesteps}.pt")
-        if stop is not None and stop():
-            return
 
 
 def seed_validation_json(seed: int, step: int, confirm: bool = False, learner: str = LEARNER) -> Path:

@@ -38,11 +38,12 @@ def run_sac(a: sac.Args, every: Optional[int] = None, stop: Optional[Callable[[]
     """Run (or resume) the SAC run `a` to its total_timesteps, from its checkpoint where there is one (a lost replay
     buffer refilled: `refill_lost_buffer`, recorded in the checkpoint). With `every`, in parts ending at multiples of
     it (checkpoint marks, so a part's end is a resume point), each part's end given to `after_part(env steps,
-    checkpoint)`; with `stop`, ending after the first part at whose end `stop()` is true. SIGTERM or Ctrl-C stops it
-    with a checkpoint (sac.py raises SystemExit: no `after_part` for a part cut short)."""
+    checkpoint)`; with `stop`, ending after the first part at whose end `stop()` is true (a run resumed inside a part
+    finishes the part first, whatever `stop()` says: it ends on a mark, as an uninterrupted run does). SIGTERM or
+    Ctrl-C stops it with a checkpoint (sac.py raises SystemExit: no `after_part` for a part cut short)."""
     ckpt = args_checkpoint(a)
     while (done := checkpoint_step(ckpt) if ckpt.is_file() else 0) < a.total_timesteps:
-        if done and stop is not None and stop():
+        if done and stop is not None and every is not None and done % every == 0 and stop():
             return
         end = a.total_timesteps if every is None else min((done // every + 1) * every, a.total_timesteps)
         part = dataclasses.replace(a, total_timesteps=end)

@@ -117,7 +117,7 @@ def train(run: Run, dry_run: bool = False, stop_at_target: bool = False) -> None
         run_sac(run.args, every=STOP_EVERY if stop_at_target else None, stop=reached if stop_at_target else None)
     elif not stop_at_target:
         run_or_resume(run)
-    elif not reached():
+    else:
         train_in_parts(run, SNAPSHOT_DIR / run.name, every=STOP_EVERY, stop=reached)
     reached = steps_to(progress)
     print(f"{run.name}: training episodes placed >= {TARGET:.0%} "

@@ -360,3 +360,37 @@ def test_sac_on_paneling_is_the_recipe_s_sac_but_for_the_env_and_budget_from_not
     assert len(actors) == 1, "two parts, the second resumed from the first's checkpoint"
     assert any(not torch.equal(v, actors[0][k]) for k, v in ckpt["sac"]["actor"].items() if v.is_floating_point()), \
         "the actor trained on in the second part"
+
+
+@pytest.mark.parametrize("learner", ["ppo", "sac"])
+def test_a_run_resumed_inside_a_part_after_its_target_finishes_the_part_to_the_mark(tmp_path, monkeypatch, learner):
+    """A stop-at-target run cut short inside a part (SIGTERM at a session's end) after its training episodes got to
+    the target resumes to the part's end, as the uninterrupted run would have ended, and no further; resumed at
+    that mark it trains no more. (The learner's main is a stand-in that writes the checkpoint of each part.)"""
+    from experiments import campaign, paneling, sac_recipe, transfer
+    from experiments import from_scratch as fs
+
+    run = paneling.training_run("nothing", learner=learner)
+    run = dataclasses.replace(run, args=dataclasses.replace(run.args, log_dir=str(tmp_path / "campaign"),
+                                                            total_timesteps=1_000_000))
+    monkeypatch.setattr(transfer, "SNAPSHOT_DIR", tmp_path / "snapshots")
+    for module in (fs, campaign):
+        monkeypatch.setattr(module, "load_checkpoint", lambda path: torch.load(path, weights_only=False))
+    ckpt = campaign.args_checkpoint(run.args)
+    ckpt.parent.mkdir(parents=True)
+    # cut short at 141,824 env steps, its training episodes placing every time from 2,000 on
+    (ckpt.parent / "progress.csv").write_text("global_step,ordinary_place_success\n"
+                                              + "".join(f"{s},1.0\n" for s in range(2000, 141_825, 2000)))
+    torch.save({"progress": {"global_step": 141_824}}, ckpt)
+    parts = []
+
+    def part_of_training(args):
+        assert args.resume == str(ckpt), "the part resumes the checkpoint"
+        torch.save({"progress": {"global_step": args.total_timesteps}}, ckpt)
+        parts.append(args.total_timesteps)
+
+    monkeypatch.setattr(sac_recipe.sac if learner == "sac" else fs.ppo, "main", part_of_training)
+    transfer.train(run, stop_at_target=True)
+    assert parts == [transfer.STOP_EVERY], "the part finished to its mark, then the run stopped"
+    transfer.train(run, stop_at_target=True)
+    assert parts == [transfer.STOP_EVERY], "resumed at the mark, past its target: it trains no more"
