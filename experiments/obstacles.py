@@ -5,6 +5,8 @@
     python -m experiments.obstacles --train shipped      # the recipe among obstacles from the shipped reward-only
                                                          # agent's weights (or: nothing), resumable
     python -m experiments.obstacles --train shipped --evaluate   # that run's rows beside the zero-shot ones
+    python -m experiments.obstacles --share 0.5 --train nothing --learner sac   # SAC on a mixed scene: half of
+                                                         # its training episodes among obstacles, half without
 
 Protocol, per task (ceiling, window, flooring), on evaluation seeds (from 1,000,000: never trained on):
 1. the planning expert solves each seed's static scene (a material stack and a scaffold post, seeded per episode):
@@ -58,12 +60,23 @@ TRAINED = " (trained among obstacles)"
 """what the label of an agent trained on the moving scene (`--train`) ends with in summary.json."""
 
 
-def training_run(start: str, seed: int = 1, num_envs: Optional[int] = None, learner: str = "ppo") -> Run:
+def training_run(start: str, seed: int = 1, num_envs: Optional[int] = None, learner: str = "ppo",
+                 share: float = 1.0) -> Run:
     """The recipe among obstacles (TRAIN_SCENE) from `start` (experiments/transfer.py's STARTS) with `learner`,
-    unchanged but for the tasks' `obstacles` and the budget."""
-    return transfer.transfer_run(f"obstacles_{TRAIN_SCENE}", start, seed, num_envs, TRAIN_BUDGET,
-                                 "python -m experiments.obstacles", f"a site with obstacles ({TRAIN_SCENE})",
-                                 learner, obstacles=TRAIN_SCENE)
+    unchanged but for the tasks' `obstacles` and the budget; with `share` < 1 (SAC only), a mixed scene: that share
+    of its training episodes with obstacles, the others on the site as built (the tasks' `obstacle_share`)."""
+    if not 0 < share <= 1:
+        raise SystemExit(f"--share {share}: the share of training episodes with obstacles, in (0, 1]")
+    if share == 1:
+        return transfer.transfer_run(f"obstacles_{TRAIN_SCENE}", start, seed, num_envs, TRAIN_BUDGET,
+                                     "python -m experiments.obstacles", f"a site with obstacles ({TRAIN_SCENE})",
+                                     learner, obstacles=TRAIN_SCENE)
+    if learner != "sac":
+        raise SystemExit(f"--share {share:g}: a mixed scene is SAC's option (--learner sac); PPO's recipe has none")
+    return transfer.transfer_run(f"obstacles_{TRAIN_SCENE}_share{round(100 * share)}", start, seed, num_envs,
+                                 TRAIN_BUDGET, f"python -m experiments.obstacles --share {share:g}",
+                                 f"a site with obstacles ({TRAIN_SCENE}) in {share:.0%} of its training episodes",
+                                 learner, obstacles=TRAIN_SCENE, obstacle_share=share)
 
 
 def trained_policy(run: Run) -> tuple[int, Path]:
@@ -105,6 +118,9 @@ class Args(transfer.TrainOptions):
     """label -> checkpoint of the agents to run."""
     more_agents: tuple[str, ...] = ()
     """more agents to run after those, LABEL=CHECKPOINT each (a seed's candidate snapshot, say)."""
+    share: float = 1.0
+    """with --train (SAC): the share of its training episodes with obstacles; below 1, a mixed scene, the others on
+    the site as built, in its own run (campaign/obstacles_moving_share<%>_sac_s<seed>/)."""
     write_results: bool = True
     """write the table into docs/RESULTS.md (section `obstacles-zero-shot`)."""
 
@@ -203,7 +219,7 @@ def main(args: Args) -> dict:
         raise SystemExit("--episodes and --workers must be positive")
     args.agents = with_more_agents(args.agents, args.more_agents)
     if args.train is not None:
-        run = training_run(args.train, args.train_seed, args.num_envs, args.learner)
+        run = training_run(args.train, args.train_seed, args.num_envs, args.learner, args.share)
         if not args.evaluate:
             return transfer.train(run, args.dry_run)
         step, policy = trained_policy(run)

@@ -38,6 +38,40 @@ def test_every_sampled_layout_keeps_the_rules():
     assert set(torch.sign(layouts[:, 8]).tolist()) == {-1.0, 1.0}
 
 
+def test_a_mixed_scene_draws_per_episode_whether_the_obstacles_are_there_and_hides_them_when_not():
+    """`obstacle_share` < 1: about that share of layouts on the site, each of the others parked out of reach (the
+    stack under the floor, the post beyond the barrier, the worker never setting off) with the observation's entry
+    zeros; bad shares are refused, naming what is allowed."""
+    torch.manual_seed(0)
+    layouts = sample_layouts(4000, SiteParams(), 20, "cpu", share=0.5)
+    present = layouts[:, 2] > 0
+    assert 0.45 < float(present.float().mean()) < 0.55
+    assert bool(keeps_rules(layouts[present], SiteParams()).all())
+    assert bool((layouts[~present, 2] < -10).all()) and bool((layouts[~present, 5] < -SiteParams().barrier_extent[2]).all())
+    env = make_env("Flooring-v1", obstacles="moving", obstacle_share=0.5)
+    u, seen = env.unwrapped, set()
+    for seed in range(12):
+        obs, _ = env.reset(seed=seed)
+        here = bool(u.obstacles_present()[0])
+        seen.add(here)
+        assert bool((obs[0, -OBSTACLE_OBS_SIZE:] != 0).any()) == here
+        if not here:
+            u.obstacle_clock[:] = 10_000  # long after any worker would have set off
+            assert not bool(u.worker_walking()[0]) and bool(u.clear_paths().all())
+    assert seen == {True, False}
+    env.close()
+    for share, kwargs in ((0.0, dict(obstacles="static")), (1.5, dict(obstacles="static")), (0.5, {})):
+        with pytest.raises(ValueError, match=r"obstacle_share=.*in \(0, 1\]"):
+            make_env("Flooring-v1", obstacle_share=share, **kwargs)
+    # SAC's `--obstacle-share`: its training envs only (its evaluations during training meet obstacles every time)
+    from baselines.sac import sac
+
+    mixed = sac.Args(obstacles="moving", obstacle_share=0.5)
+    assert sac.env_kwargs(mixed)["obstacle_share"] == 0.5 and "obstacle_share" not in sac.env_kwargs(mixed, train=False)
+    with pytest.raises(SystemExit, match="below 1 only with --obstacles"):
+        sac.validate(sac.Args(obstacle_share=0.5))
+
+
 def test_a_seed_draws_the_same_episode_with_and_without_obstacles_and_the_obstacles_are_seeded():
     plain, static = make_env("ConstructionPickPlace-v1"), make_env("ConstructionPickPlace-v1", obstacles="static")
     for seed in (3, 4):
@@ -306,3 +340,21 @@ def test_more_agents_join_the_shipped_ones_and_a_bad_one_is_refused():
     for spec in ("no checkpoint", "label=missing.pt"):
         with pytest.raises(SystemExit, match="LABEL=CHECKPOINT"):
             obstacles.with_more_agents({}, (spec,))
+
+
+def test_sac_on_a_mixed_scene_is_its_own_run_unchanged_but_for_the_share_and_refuses_ppo():
+    """`--share 0.5 --train nothing --learner sac`: SAC's obstacle run but for `obstacle_share`, in a run (and a
+    command) of its own; PPO's recipe has no such option, and a share outside (0, 1] is refused."""
+    from experiments import obstacles
+
+    full, mixed = obstacles.training_run("nothing", learner="sac"), obstacles.training_run("nothing", learner="sac",
+                                                                                             share=0.5)
+    changed = {k for k, v in vars(mixed.args).items() if v != vars(full.args)[k]}
+    assert changed == {"obstacle_share", "exp_name"} and mixed.args.obstacle_share == 0.5
+    assert mixed.name == "obstacles_moving_share50_sac_s1" != full.name
+    assert mixed.command == "python -m experiments.obstacles --share 0.5 --train nothing --learner sac --train-seed 1"
+    assert "in 50% of its training episodes" in mixed.what
+    with pytest.raises(SystemExit, match="SAC's option"):
+        obstacles.training_run("shipped", share=0.5)
+    with pytest.raises(SystemExit, match=r"in \(0, 1\]"):
+        obstacles.training_run("nothing", learner="sac", share=0.0)

@@ -132,6 +132,9 @@ class Args:
     obstacles: Optional[Literal["static", "moving"]] = None
     """the tasks' `obstacles` option (a site that changes), in training and evaluation; the policy observes them
     (`obs_obstacles`)."""
+    obstacle_share: float = 1.0
+    """with `obstacles`, the share of training episodes that have them (the tasks' `obstacle_share`: a mixed scene,
+    the others on the site as built); evaluation during training: all."""
     num_envs: int = 2
     """training envs, one per process (physx_cpu): one per core of the 2-core machine."""
     total_timesteps: int = 2_000_000
@@ -304,6 +307,9 @@ def validate(args: Args) -> None:
         raise SystemExit(f"--near-goal-step {args.near_goal_step} must lie in (0, 1]")
     if args.near_goal_max_steps is not None and args.near_goal_max_steps < 1:
         raise SystemExit(f"--near-goal-max-steps {args.near_goal_max_steps}: a positive step count or None")
+    if not 0 < args.obstacle_share <= 1 or (args.obstacle_share < 1 and args.obstacles is None):
+        raise SystemExit(f"--obstacle-share {args.obstacle_share}: the share of training episodes with obstacles, in "
+                         "(0, 1], below 1 only with --obstacles static or moving")
 
 
 # ------------------------------------------------------------------------------------------------- #
@@ -312,10 +318,12 @@ def validate(args: Args) -> None:
 def env_kwargs(args: Args, train: bool = True) -> dict:
     """gym.make's kwargs of the training (or evaluation) envs: PPO's from-scratch recipe's observation, reward and
     controller (checkpoints.policy_env_kwargs reads the same fields off a checkpoint's args), the site's obstacles,
-    and in training the goal slots drawn."""
+    and in training the goal slots drawn and the share of episodes with obstacles."""
     kwargs = dict(obs_mode="state", reward_mode=args.reward_mode, **policy_env_kwargs(args.flat()))
     if args.obstacles is not None:
         kwargs["obstacles"] = args.obstacles
+        if train and args.obstacle_share < 1.0:
+            kwargs["obstacle_share"] = args.obstacle_share
     if train and args.goal_slots:
         kwargs["goal_slot_weights"] = slot_weights(args.goal_slots)
     return kwargs

@@ -98,6 +98,7 @@ class ConstructionTaskEnv(SiteObstacles, StartStates, BaseEnv):
         reach_start_share: float = 0.0,
         obstacles: Optional[str] = None,
         obs_obstacles: Optional[bool] = None,
+        obstacle_share: float = 1.0,
         **kwargs,
     ):
         self._tol_init = resolve_tolerances(curriculum_stage, tolerances)
@@ -116,7 +117,7 @@ class ConstructionTaskEnv(SiteObstacles, StartStates, BaseEnv):
         self.obs_install_offset = bool(obs_install_offset)
         self.obs_path_offset = bool(obs_path_offset)
         self._init_start_states(reach_start_share)
-        self._init_obstacles(obstacles, obs_obstacles)
+        self._init_obstacles(obstacles, obs_obstacles, obstacle_share)
         self.robot_init_qpos_noise = robot_init_qpos_noise
         self._step_cache: dict = {}
         self._in_step_readout = False

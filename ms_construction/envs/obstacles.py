@@ -7,6 +7,9 @@
 `obstacles="static"` puts the stack and the post in the workspace, the worker standing outside the work cell;
 `"moving"` is the same scene at the start, and the worker then walks across the cell once, along its lane at walking
 speed, entering at a time drawn per episode, and leaves.
+`obstacle_share` < 1 draws, per episode, whether the scene has them at all (a mixed scene for training): an episode
+without them has them parked off the site (the stack under the floor, the post beyond the arm's reach, the worker
+never setting off) and the observation's obstacle entry zeros, as on the site as built.
 The stack and the post stand within the arm's reach, clear of the staging table, the floor recesses, the window
 fronts, the arm's rest pose and (the post) the ceiling openings; none of the three overlaps another or the lane. A
 layout may still block every way to a goal: `experiments/generalization.py` keeps the evaluation seeds whose static
@@ -53,6 +56,12 @@ WORKER_START_S = (0.0, 6.0)
 """s; when the worker enters its lane (`moving`), uniform per episode."""
 WORKER_PARKED_XY = (0.0, -3.0)
 """m; where the worker stands when not in its lane: outside the barriers, beyond the arm's reach."""
+PARKED = (-1.0, -3.0, -20.0, 0.0, 1.0, -3.0)
+"""an episode without obstacles (`obstacle_share`): the stack's x, y, top z and yaw, the post's x and y; the stack
+buried, the post outside the barriers beyond the arm's reach like the parked worker. A top z below the floor marks
+the episode (`obstacles_present`)."""
+NEVER = 1e9
+"""the control step a parked worker sets off at."""
 PLACE_RADIUS = (0.7, 1.7)
 """m; the stack's and the post's distance from the arm's axis, uniform (within the arm's reach)."""
 MARGIN = 0.05
@@ -125,9 +134,11 @@ def post_keeps_rules(post: torch.Tensor, lane_y: torch.Tensor, stack: torch.Tens
     return ok & (torch.linalg.norm(post - stack, dim=-1) > R_STACK + R_POST + MARGIN)
 
 
-def sample_layouts(b: int, site: SiteParams, control_freq: float, device) -> torch.Tensor:
+def sample_layouts(b: int, site: SiteParams, control_freq: float, device, share: float = 1.0) -> torch.Tensor:
     """[b, LAYOUT_SIZE] obstacle layouts, from torch's generator (ManiSkill seeds it per reset): the lane, then
-    CANDIDATES stacks per env, the first that keeps the rules, then CANDIDATES posts, the first that keeps them."""
+    CANDIDATES stacks per env, the first that keeps the rules, then CANDIDATES posts, the first that keeps them; with
+    `share` < 1, then whether each episode has them (the others PARKED). At share 1 nothing more is drawn: a seed's
+    episode is the same as before the option."""
     with torch.device(device):
         def in_ring() -> torch.Tensor:
             r = torch.empty(b, CANDIDATES).uniform_(*PLACE_RADIUS)
@@ -148,8 +159,13 @@ def sample_layouts(b: int, site: SiteParams, control_freq: float, device) -> tor
         start_x = torch.where(forward, torch.tensor(WORKER_LANE_X[0]), torch.tensor(WORKER_LANE_X[1]))
         speed = torch.empty(b).uniform_(*WORKER_SPEED) * torch.where(forward, 1.0, -1.0)
         set_off = torch.floor(torch.empty(b).uniform_(*WORKER_START_S) * control_freq)
-        return torch.cat([stack, stack_h[:, None], stack_yaw[:, None], post,
-                          torch.stack([start_x, lane_y, speed, torch.zeros(b), set_off], -1)], -1)
+        layout = torch.cat([stack, stack_h[:, None], stack_yaw[:, None], post,
+                            torch.stack([start_x, lane_y, speed, torch.zeros(b), set_off], -1)], -1)
+        if share < 1.0:
+            absent = torch.rand(b) >= share
+            layout[absent, 0:6] = torch.tensor(PARKED)
+            layout[absent, 10] = NEVER
+        return layout
 
 
 def keeps_rules(layout: torch.Tensor, site: SiteParams) -> torch.Tensor:
@@ -161,11 +177,15 @@ def keeps_rules(layout: torch.Tensor, site: SiteParams) -> torch.Tensor:
 class SiteObstacles:
     """The `obstacles` option of ConstructionTaskEnv (a mixin; the module docstring)."""
 
-    def _init_obstacles(self, obstacles: Optional[str], obs_obstacles: Optional[bool]) -> None:
+    def _init_obstacles(self, obstacles: Optional[str], obs_obstacles: Optional[bool], share: float = 1.0) -> None:
         mode = "none" if obstacles is None else obstacles
         if mode not in OBSTACLE_MODES:
             raise ValueError(f"obstacles={obstacles!r}: use one of {', '.join(map(repr, OBSTACLE_MODES))} (or None)")
+        if not 0.0 < share <= 1.0 or (share < 1.0 and mode == "none"):
+            raise ValueError(f"obstacle_share={share!r}: the share of episodes with obstacles, in (0, 1], below 1 only "
+                             f"with obstacles='static' or 'moving' (obstacles={obstacles!r})")
         self.obstacle_mode = mode
+        self.obstacle_share = float(share)
         # None: the entry where there are obstacles; True: always (zeros without them: a policy trained among
         # obstacles on a site without); False: never (a policy trained without them meets them blind)
         self.obs_obstacles = mode != "none" if obs_obstacles is None else bool(obs_obstacles)
@@ -212,7 +232,7 @@ class SiteObstacles:
         self._clear_paths = None
         if not self.has_obstacles:
             return
-        layouts = sample_layouts(len(env_idx), self._obstacle_site, self.control_freq, self.device)
+        layouts = sample_layouts(len(env_idx), self._obstacle_site, self.control_freq, self.device, self.obstacle_share)
         self.obstacle_layout[env_idx] = layouts
         self.obstacle_clock[env_idx] = 0
         self.obstacle_collided[env_idx] = False
@@ -231,6 +251,10 @@ class SiteObstacles:
         self.obstacles["stack"].set_pose(Pose.create(stack))
         self.obstacles["post"].set_pose(Pose.create(post))
         self.obstacles["worker"].set_pose(Pose.create(torch.cat([self.worker_xy(), worker_z[:, None], upright], -1)))
+
+    def obstacles_present(self) -> torch.Tensor:
+        """[n] whether each env's episode has its obstacles on the site (not PARKED: `obstacle_share`)."""
+        return self.obstacle_layout[:, 2] > 0
 
     def worker_walking(self, clock: Optional[torch.Tensor] = None) -> torch.Tensor:
         """[n] whether the worker is in its lane at control step `clock` of the episode (default: now)."""
@@ -282,7 +306,9 @@ class SiteObstacles:
         if not self.has_obstacles:
             return None
         if self._clear_paths is None:
-            self._clear_paths = self._check_paths()
+            n_paths = self.geometry.paths["waypoints"].shape[2]
+            self._clear_paths = (self._check_paths() if bool(self.obstacles_present().all())
+                                 else torch.ones(self.num_envs, n_paths, dtype=torch.bool, device=self.device))
         return self._clear_paths
 
     def _check_paths(self) -> torch.Tensor:
@@ -311,8 +337,9 @@ class SiteObstacles:
             return torch.zeros(self.num_envs, OBSTACLE_OBS_SIZE, device=self.device)
         lay = self.obstacle_layout
         two_yaw = 2 * lay[:, 3]  # the box looks the same turned half a turn
-        return torch.cat([lay[:, 0:3], torch.cos(two_yaw)[:, None], torch.sin(two_yaw)[:, None], lay[:, 4:6],
-                          self.worker_xy(), self.worker_velocity()], -1)
+        obs = torch.cat([lay[:, 0:3], torch.cos(two_yaw)[:, None], torch.sin(two_yaw)[:, None], lay[:, 4:6],
+                         self.worker_xy(), self.worker_velocity()], -1)
+        return torch.where(self.obstacles_present()[:, None], obs, 0.0)
 
     def obstacle_info(self) -> dict:
         if not self.has_obstacles:

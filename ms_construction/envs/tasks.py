@@ -112,7 +112,9 @@ them where no start states are set (as in every evaluation). A touch of the arm 
 `info["obstacle_collision"]` and fails the episode (`info["fail"]`). The observation ends with their state
 (`extra/obstacles`, {OBSTACLE_OBS_SIZE} numbers: the stack's place, height and turn, the post's place, the worker's place and
 velocity): `obs_obstacles=None` (the default) where there are obstacles, `True` always (zeros without them),
-`False` never (how a policy trained without them meets them). The dense reward measures
+`False` never (how a policy trained without them meets them). `obstacle_share` below 1 gives only that share of
+episodes obstacles, drawn per episode (a mixed scene for training; the others as on the site as built, the entry
+zeros). The dense reward measures
 the carry and the reach along the goal slot's start paths that keep clear of the stack and the post (checked once
 per episode; along all of them where none does). A layout may block every way to a goal: the evaluations keep the
 seeds the planning expert solves at the start.
