@@ -67,16 +67,15 @@ def training_run(start: str, seed: int = 1, num_envs: Optional[int] = None, lear
     of its training episodes with obstacles, the others on the site as built (the tasks' `obstacle_share`)."""
     if not 0 < share <= 1:
         raise SystemExit(f"--share {share}: the share of training episodes with obstacles, in (0, 1]")
-    if share == 1:
-        return transfer.transfer_run(f"obstacles_{TRAIN_SCENE}", start, seed, num_envs, TRAIN_BUDGET,
-                                     "python -m experiments.obstacles", f"a site with obstacles ({TRAIN_SCENE})",
-                                     learner, obstacles=TRAIN_SCENE)
-    if learner != "sac":
+    if share < 1 and learner != "sac":
         raise SystemExit(f"--share {share:g}: a mixed scene is SAC's option (--learner sac); PPO's recipe has none")
-    return transfer.transfer_run(f"obstacles_{TRAIN_SCENE}_share{round(100 * share)}", start, seed, num_envs,
-                                 TRAIN_BUDGET, f"python -m experiments.obstacles --share {share:g}",
-                                 f"a site with obstacles ({TRAIN_SCENE}) in {share:.0%} of its training episodes",
-                                 learner, obstacles=TRAIN_SCENE, obstacle_share=share)
+    mixed = share < 1
+    return transfer.transfer_run(f"obstacles_{TRAIN_SCENE}" + (f"_share{round(100 * share)}" if mixed else ""), start,
+                                 seed, num_envs, TRAIN_BUDGET,
+                                 "python -m experiments.obstacles" + (f" --share {share:g}" if mixed else ""),
+                                 f"a site with obstacles ({TRAIN_SCENE})"
+                                 + (f" in {share:.0%} of its training episodes" if mixed else ""),
+                                 learner, obstacles=TRAIN_SCENE, **({"obstacle_share": share} if mixed else {}))
 
 
 def trained_policy(run: Run) -> tuple[int, Path]:
