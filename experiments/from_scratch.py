@@ -267,26 +267,29 @@ def evaluate_seed(seed: int, step: Optional[int] = None, workers: int = 2, learn
 
 
 def seed_evaluations_table() -> list[str]:
-    """Every seed evaluation there is, a row each (learner, seed, then env steps), beside the paper's Table II."""
-    found = [(learner, seed, step, path) for learner in LEARNERS for seed in SEEDS
-             for step, path in seed_evaluations(seed, learner).items()]
+    """Per learner and seed, one row beside the paper's Table II: the snapshot the rule chose, or, before it has
+    chosen, the latest evaluated (every evaluated snapshot, with the wall time its run had taken, is in the learners'
+    section: experiments/learners.py)."""
+    found = [(learner, seed, *shown) for learner in LEARNERS for seed in SEEDS
+             if (shown := shown_evaluation(seed, learner)) is not None]
     if not found:
         return ["No seed has been evaluated with the paper's protocol yet "
                 f"(`{COMMAND} --seed S --evaluate`, at the end of its run)."]
     envs = list(PAPER_TABLE_II)
     lines = [f"With the paper's protocol (`{COMMAND} --seed S [--learner L] --evaluate [--at-step N]`: test seeds from "
              f"1,000,000, {EVAL_STEPS:,} env steps per task, cp4, the policy's mean; the seed's snapshot at N env "
-             "steps):", "",
+             "steps), each seed's chosen snapshot or, until the rule has chosen, its latest evaluated one (every one "
+             "evaluated: [which learner](#which-learner-and-curiosity)):", "",
              "| learner | seed | env steps | " + " | ".join(f"{e}: picked / placed % [95% CI]" for e in envs)
-             + " | the snapshot rule's choice |",
+             + " | which snapshot |",
              "|---|---|---|" + "---|" * len(envs) + "---|",
              "| paper's general agent (Table II, cp4) | | 8,000,000 | "
              + " | ".join(f"{PAPER_TABLE_II[e][0]:.2f} / {PAPER_TABLE_II[e][1]:.2f}" for e in envs) + " | |"]
-    for learner, seed, step, path in found:
+    for learner, seed, step, path, chosen in found:
         tasks = json.loads(path.read_text())["tasks"]
         lines.append(f"| {learner.upper()} | {seed} | {step:,} | " + " | ".join(
             f"{100 * tasks[e]['pick_success']:.1f} / {pct(tasks[e]['place_success'], tasks[e]['place_success_ci95'])}"
-            for e in envs) + f" | {'**yes**' if step == chosen_step(seed, learner) else ''} |")
+            for e in envs) + f" | {'**the rule chose it**' if chosen else 'the latest, not yet chosen'} |")
     return lines
 
 
@@ -533,6 +536,17 @@ def chosen_json(seed: int, learner: str = LEARNER) -> Path:
 def chosen_step(seed: int, learner: str = LEARNER) -> Optional[int]:
     """The env steps of the seed's snapshot the rule chose, or None before its run has ended."""
     return json.loads(chosen_json(seed, learner).read_text())["step"] if chosen_json(seed, learner).is_file() else None
+
+
+def shown_evaluation(seed: int, learner: str = LEARNER) -> Optional[tuple[int, Path, bool]]:
+    """The seed's evaluation a reader is shown: (env steps, its JSON, whether the rule chose it) of the snapshot the
+    rule chose, or, before it has, of the latest evaluated; None where none is evaluated."""
+    evaluated = seed_evaluations(seed, learner)
+    if not evaluated:
+        return None
+    chosen = chosen_step(seed, learner)
+    step = chosen if chosen in evaluated else max(evaluated)
+    return step, evaluated[step], step == chosen
 
 
 def recipe_commit(learner: str = LEARNER) -> str:

@@ -1,6 +1,7 @@
-"""The paper's experiment, from its evaluation JSONs and its runs' progress.csv in campaign/: Table II and a table of
-the runs in docs/RESULTS.md, each run's curriculum stages and the settings on docs/experiments/paper.md, and Figure 3
-(and Figure 4 once the control groups have run) as PNGs drawn by scripts/plot_training.py.
+"""The paper's experiment, from its evaluation JSONs and its runs' progress.csv in campaign/: Table II in
+docs/RESULTS.md; on docs/experiments/paper.md a table of the runs, where each of Table II's rows comes from, each run's
+curriculum stages and the settings; Figure 3 (and Figure 4 once the control groups have run) as PNGs drawn by
+scripts/plot_training.py, shown on that page.
 
     python -m experiments.paper_report                  # print the tables
     python -m experiments.paper_report --write-results  # and write them, with the figures, into docs/
@@ -50,7 +51,8 @@ class Args:
     """write the section `paper-experiment` of docs/RESULTS.md and the figures into docs/images/."""
     results: Path = Path("docs/RESULTS.md")
     experiment_page: Path = Path("docs/experiments/paper.md")
-    """where each run's stages and the settings go (its section `paper-stages`), with --write-results."""
+    """where the runs, each Table II row's source, each run's stages and the settings go (its section `paper-stages`),
+    with --write-results."""
     readme: Path = Path("README.md")
     """where the headline table goes (its section `headline`)."""
     images: Path = Path("docs/images")
@@ -231,8 +233,9 @@ def _cells(row: TableRow) -> Optional[dict[str, str]]:
             for e, r in tasks.items()}
 
 
-def table_ii(campaign_dir: Path, eval_dir: Path = EVAL_DIR) -> str:
-    """Table II: pick / place success % per task and agent (ours with 95% intervals, the paper's as printed)."""
+def table_ii(campaign_dir: Path, eval_dir: Path = EVAL_DIR) -> tuple[str, str]:
+    """Table II: pick / place success % per task and agent (ours with 95% intervals, the paper's as printed); and
+    where each of our rows comes from (its command and JSON, or why it is not there yet and the command then)."""
     env_ids = list(PAPER_TASK_ENV_IDS.values())
     lines = ["| agent | method; env steps | " + " | ".join(f"{e}: pick / place % [95% CI]" for e in env_ids) + " |",
              "|---|---|" + "---|" * len(env_ids)]
@@ -246,7 +249,7 @@ def table_ii(campaign_dir: Path, eval_dir: Path = EVAL_DIR) -> str:
             notes.append(f"- {row.agent}: `{json.loads(row.json.read_text())['command']}` ({row.json})")
         lines.append(f"| {row.agent} | {row.method} | " + " | ".join(cells.get(e, "-") for e in env_ids) + " |")
     return "\n".join(lines + ["", "-: not this agent's task (a control group trains on one task and is judged on it "
-                               "alone, as in the paper).", "", "Where each row comes from:", ""] + notes)
+                               "alone, as in the paper)."]), "\n".join(notes)
 
 
 def settings_table() -> str:
@@ -282,27 +285,32 @@ def main(args: Args) -> str:
     if args.write_results:
         update_section(args.readme, "headline", headline(args.campaign_dir, args.eval_dir), "ms_construction")
         commands = figures(csvs, args.images)
-        pictures = [f"![{Path(c.split('--out ')[1].split()[0]).stem}]({Path(*Path(c.split('--out ')[1].split()[0]).parts[1:])})\n\n"
-                    f"*Made by `{c}`.*" for c in commands]
+        pictures = []
+        for c in commands:  # the figures sit on the experiment page, beside the runs they draw
+            out = Path(c.split("--out ")[1].split()[0])
+            pictures.append(f"![{out.stem}]({Path(os.path.relpath(out, args.experiment_page.parent)).as_posix()})\n\n"
+                            f"*Made by `{c}`.*")
         page = Path(os.path.relpath(args.experiment_page, args.results.parent)).as_posix()
+        table, sources = table_ii(args.campaign_dir, args.eval_dir)
         update_section(args.results, "paper-experiment", "\n".join([
             "## The paper's experiment", "",
-            "Command: `python -m experiments.paper_report --write-results` (Table II from the evaluation JSONs named "
-            f"below; the training runs from their progress.csv in campaign/; settings: experiments/paper.py and [the "
-            f"experiment page]({page}#each-stage-and-the-settings), with each run's stages).", "",
+            "Command: `python -m experiments.paper_report --write-results` (Table II from the evaluation JSONs of "
+            f"docs/data/paper/; each row's command, the training runs and Figures 3 and 4: [the experiment page]({page}"
+            "#the-training-runs)).", "",
             "### Table II", "",
             "The paper's protocol: 50,000 env steps per task at cp4, deterministic actions (the policy's mean), seeds "
             "1,000,000 on (never used in training); the paper's rows as it printed them.", "",
-            table_ii(args.campaign_dir, args.eval_dir), "",
-            "### The training runs", "",
-            "Training episodes: the policy's sampled actions; "
-            f"'lately' is the last {LAST:,} env steps; 'end' is where the element was when the episode ended "
-            "(its distance and angle to the goal, whether the plate held it), the mean over the episodes.", "",
-            body, "", *pictures]), "Results")
+            table]), "Results")
         update_section(args.experiment_page, "paper-stages", "\n".join([
+            "## The training runs", "",
+            "Made by `python -m experiments.paper_report --write-results`, from each run's progress.csv in campaign/. "
+            f"Training episodes: the policy's sampled actions; 'lately' is the last {LAST:,} env steps; 'end' is where "
+            "the element was when the episode ended (its distance and angle to the goal, whether the plate held it), "
+            "the mean over the episodes.", "",
+            body, "", *pictures, "",
+            "### Where each row of Table II comes from", "", sources, "",
             "## Each stage, and the settings", "",
-            "Made by `python -m experiments.paper_report --write-results`. Each stage of the runs, all its training "
-            "episodes:", "", stages, "",
+            "Each stage of the runs, all its training episodes:", "", stages, "",
             "The settings, from experiments/paper.py (where the paper is silent: ML-Agents' documented "
             "defaults where they carry over, ppo.py's otherwise):", "", settings_table()]), "The paper's experiment")
     return body

@@ -64,19 +64,18 @@ def paper_tasks_table() -> list[str]:
     for learner in from_scratch.LEARNERS:
         for seed in from_scratch.SEEDS:
             name = f"the recipe from nothing ({learner.upper()}), seed {seed}"
-            found = from_scratch.seed_evaluations(seed, learner)
-            chosen = from_scratch.chosen_step(seed, learner)
-            step = chosen if chosen in found else max(found, default=None)
-            if step is None:
+            shown = from_scratch.shown_evaluation(seed, learner)
+            if shown is None:
                 lines.append(f"| {name} | (its run has not ended: `{from_scratch.seed_run(seed, learner=learner).command}` "
                              "runs it, and its snapshot rule's choice is evaluated at its end) | "
                              + " | ".join("-" for _ in TASKS) + " | |")
                 continue
-            if shipped_from and found[step].resolve() == Path(shipped_from).resolve():
+            step, path, chosen = shown
+            if shipped_from and path.resolve() == Path(shipped_from).resolve():
                 continue  # the shipped reward-only agent's row above is this seed's choice, weight for weight
-            which = "the snapshot rule's choice" if step == chosen else "its latest evaluated snapshot, not yet chosen"
+            which = "the snapshot rule's choice" if chosen else "its latest evaluated snapshot, not yet chosen"
             lines.append(f"| {name}, at {step:,} env steps ({which}) | {how[learner]} | "
-                         + " | ".join(_placed(json.loads(found[step].read_text())["tasks"])) + f" | {found[step]} |")
+                         + " | ".join(_placed(json.loads(path.read_text())["tasks"])) + f" | {path} |")
     return lines
 
 

@@ -143,33 +143,34 @@ def test_the_campaign_report_summarizes_each_run_and_stage_and_draws_figure_3_an
                          capture_output=True, text=True, cwd=ROOT, env={**os.environ, "PYTHONPATH": str(ROOT)})
     assert res.returncode == 0, res.stderr
     text = results.read_text()
-    page = (tmp_path / "experiments" / "paper.md").read_text()  # the stages and the settings: the experiment page's
-    assert "(experiments/paper.md#each-stage-and-the-settings)" in text and "## Each stage, and the settings" in page
+    page = (tmp_path / "experiments" / "paper.md").read_text()  # the runs, the stages, the settings: the page's
+    assert "(experiments/paper.md#the-training-runs)" in text and "## Each stage, and the settings" in page
+    assert "## The training runs" in page and "### The training runs" not in text
     assert "| curiosity |" in page and "| curiosity |" not in text
-    assert text.index("### Table II") < text.index("### The training runs")
-    assert "| paper_general_agent | the paper setting" in text and "4,000,000 / 8,000,000 | cp2 | 200,000 | 800 |" in text
-    assert "| paper_general_agent | cp1 | 0-2,000,000 |" not in text
+    assert "| paper_general_agent | the paper setting" in page and "4,000,000 / 8,000,000 | cp2 | 200,000 | 800 |" in page
+    assert "| paper_general_agent | the paper setting" not in text
     assert "| paper_general_agent | cp1 | 0-2,000,000 | 8,000 | 50.0 | 0.0 |" in page
     assert "| paper_general_agent | cp2 | 2,000,000-4,000,000 | 8,000 | 50.0 | 25.0 |" in page
-    assert "| control_ceiling | controlGroup4.1" in text and "not started" in text
-    assert "| control_flooring | controlGroup4.3: Flooring-v1, cp4 from the first step | 2,100,000 / 8,000,000 | cp4 |" in text
+    assert "| control_ceiling | controlGroup4.1" in page and "not started" in page
+    assert "| control_flooring | controlGroup4.3: Flooring-v1, cp4 from the first step | 2,100,000 / 8,000,000 | cp4 |" in page
     assert "| control_flooring | cp4 | 2,000,000-2,100,000 | 400 | 100.0 | 0.0 |" in page
     assert (tmp_path / "images" / "paper_fig4.png").stat().st_size > 0
     assert (tmp_path / "images" / "paper_fig3.png").stat().st_size > 0
-    assert "| paper_cp1_no_curiosity | run 1's cp1 stage without curiosity" in text and "1,000,000 / 2,000,000 | cp1 |" in text
+    assert "| paper_cp1_no_curiosity | run 1's cp1 stage without curiosity" in page and "1,000,000 / 2,000,000 | cp1 |" in page
     assert "| paper_cp1_no_curiosity | cp1 | 0-1,000,000 | 4,000 | 25.0 | 0.0 |" in page
-    # curiosity's effect: run 3 beside run 1's own cp1 stage only
+    # curiosity's effect: run 3 beside run 1's own cp1 stage only; the figures shown on the page, linked from it
     assert (tmp_path / "images" / "paper_curiosity.png").stat().st_size > 0
-    assert "--max-steps 2000000 --out" in text and "paper_curiosity.png)" in text
+    assert "--max-steps 2000000 --out" in page and "](../images/paper_curiosity.png)" in page
     table = text.split("### Table II")[1]
     assert "| paper: general agent |" in table and "| 84.55 / 68.04 | 95.32 / 84.82 | 88.43 / 85.17 |" in table
     assert "| 63.00 / 0.21 | 62.89 / 0.30 | 64.72 / 4.45 |" in table
     assert "| ours: paper setting, general agent |" in table and "| not yet | not yet | not yet |" in table
+    sources = page.split("### Where each row of Table II comes from")[1]
     assert ("ours: paper setting, general agent: not yet (its run is at step 4,000,000 of 8,000,000 "
             "(python -m experiments.paper)); then `python scripts/evaluate.py --checkpoint "
-            "assets/checkpoints/paper_general_agent.pt --all --steps 50000") in table
-    assert "ours: paper setting, end of cp3: not yet (the end of cp3 comes at step 6,000,000)" in table
-    assert "--checkpoint assets/checkpoints/control_window_8m.pt --env-id WindowInstallation-v1 --steps 50000" in table
+            "assets/checkpoints/paper_general_agent.pt --all --steps 50000") in sources
+    assert "ours: paper setting, end of cp3: not yet (the end of cp3 comes at step 6,000,000)" in sources
+    assert "--checkpoint assets/checkpoints/control_window_8m.pt --env-id WindowInstallation-v1 --steps 50000" in sources
     # a control group is judged on its own task alone
     assert "| ours: controlGroup4.2, 2M | controlGroup4.2: WindowInstallation-v1, cp4 from the first step; 2M env steps " \
            "| - | not yet | - |" in table
@@ -178,7 +179,7 @@ def test_the_campaign_report_summarizes_each_run_and_stage_and_draws_figure_3_an
     # the from-scratch agent: shipped, so its row waits on its evaluation, with the command that writes it
     assert "| ours: from reward alone |" in table
     assert ("ours: from reward alone: not yet (not evaluated yet); then `python scripts/evaluate.py --checkpoint "
-            "assets/checkpoints/scratch_general_agent.pt --all") in table
+            "assets/checkpoints/scratch_general_agent.pt --all") in sources
     # the README's headline: Table II's rows a reader compares first, the same cells
     headline = (tmp_path / "README.md").read_text()
     assert "| paper: general agent | 84.55 / 68.04 | 95.32 / 84.82 | 88.43 / 85.17 |" in headline

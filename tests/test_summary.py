@@ -88,3 +88,19 @@ def test_the_trained_generalization_rows_are_the_runs_evaluated_each_in_its_own_
         f"| SAC from nothing, seed 1, 300,000 env steps | - | 25.0 / 25.0 / 25.0 | - | "
         f"{uo.evaluation_json('sac_s1', seen=False)} |",
         f"| SAC among obstacles, 100 env steps | - | - | 50.0 / 50.0 / 50.0 | {tmp_path / 'obstacles.json'} |"]
+
+
+def test_the_seeds_evaluation_table_shows_each_seed_s_chosen_snapshot_or_its_latest(tmp_path, monkeypatch):
+    """experiments/from_scratch.py's table beside Table II: one row per learner and seed, the rule's choice once made
+    (not its latest), the latest evaluated before; every evaluated snapshot is the learners' section's."""
+    monkeypatch.setattr(from_scratch, "SEED_EVAL_DIR", tmp_path)
+    for step, placed in ((4_000_000, 0.5), (6_000_000, 0.925)):
+        from_scratch.seed_evaluation_json(1, step, "ppo").write_text(json.dumps({"tasks": _tasks(placed)}))
+    rows = [line for line in from_scratch.seed_evaluations_table() if line.startswith("| PPO |")]
+    assert rows == ["| PPO | 1 | 6,000,000 | " + " | ".join(["100.0 / 92.5 [0.0, 100.0]"] * 3)
+                    + " | the latest, not yet chosen |"]
+    from_scratch.chosen_json(1, "ppo").parent.mkdir()
+    from_scratch.chosen_json(1, "ppo").write_text(json.dumps({"step": 4_000_000}))
+    rows = [line for line in from_scratch.seed_evaluations_table() if line.startswith("| PPO |")]
+    assert rows == ["| PPO | 1 | 4,000,000 | " + " | ".join(["100.0 / 50.0 [0.0, 100.0]"] * 3)
+                    + " | **the rule chose it** |"]
