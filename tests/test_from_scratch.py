@@ -262,7 +262,7 @@ def test_a_seed_s_snapshots_are_screened_as_made_and_the_rule_chooses_among_the_
     assert fs.evaluate_seed(1, fs.chosen_step(1, "ppo"), learner="ppo") == fs.seed_evaluation_json(1, 20, "ppo")
     assert evaluated == [fs.seed_candidates(1, "ppo") / "candidate_20.pt"]
     body = fs.seeds_report(tmp_path / "RESULTS.md", log_dir=tmp_path / "campaign")
-    assert next(line for line in body.splitlines() if line.startswith("| PPO | 1 | 20 |")).endswith("| **yes** |")
+    assert next(line for line in body.splitlines() if line.startswith("| PPO | 1 | 20 |")).endswith("| **the rule chose it** |")
     assert "| PPO | 1 | 4 | 20 (80 / 70 / 90); 60 (40 / 90 / 90) | 20 |" in body
     # the latest screening (80 env steps: 70 / 20 / 80 % of 10 episodes, slots 0, 1, 2 in turn) per goal slot
     assert "| 3/4, 2/3, 2/3 / 1/4, 1/3, 0/3 / 3/4, 3/3, 2/3 (at 80) |" in body
