@@ -11,7 +11,7 @@ held out of training, evaluated with the paper's protocol on the openings it nev
     python -m experiments.unseen_openings --report               # RESULTS' section from the evaluations
 
 The recipe is experiments/from_scratch.py's, unchanged, but for the goal openings its training envs draw
-(`--starts.goal-slot-weights`: HELD_OUT never); its evaluations during training draw every opening. Held out: the
+(`--goal-slot-weights`: HELD_OUT never); its evaluations during training draw every opening. Held out: the
 middle opening of every task type. The window openings at y = -0.85 and +0.85 are each other's mirror image, which
 the recipe's policy meets as one (`mirror_twins`): only the middle one is unseen in every form.
 

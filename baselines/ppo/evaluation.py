@@ -100,7 +100,7 @@ class Args:
     """write the table (with how the agent was trained, from its checkpoint) into docs/RESULTS.md."""
     goal_slots: tuple[int, ...] = ()
     """evaluate on these goal slots only (indices 0-2, the same for every task type; default: all): the openings a
-    run held out in training (ppo.py's `--starts.goal-slot-weights` with zeros there)."""
+    run held out in training (ppo.py's `--goal-slot-weights` with zeros there)."""
     obstacles: Optional[str] = None
     """the tasks' `obstacles` option ('static' or 'moving'); a policy trained without them meets them blind. Each
     episode's record then says whether it collided (which ends it)."""
@@ -239,7 +239,7 @@ def slot_weights(goal_slots: tuple[int, ...]) -> Optional[dict]:
 
 
 def training_slot_weights(goal_slots: tuple[int, ...]) -> Optional[tuple[float, ...]]:
-    """ppo.py's `--starts.goal-slot-weights` that train on `goal_slots` of every paper task type only (None: all)."""
+    """ppo.py's `--goal-slot-weights` that train on `goal_slots` of every paper task type only (None: all)."""
     if not goal_slots:
         return None
     return tuple(float(i in goal_slots) for _ in PAPER_TASK_ENV_IDS for i in range(GOAL_SLOTS))
@@ -467,7 +467,8 @@ def write_results(args: Args, results: dict[str, dict], beside: Optional[dict[st
                                             else "-" for e in results) + " |" for label, tasks in rows.items()]
     lines.append("")
     if campaign:
-        lines += ["Training (`" + campaign["command"] + "`):", ""]
+        # the command as the checkpoint's record holds it, from when it ran: a module since moved keeps its old name
+        lines += ["Training (the command recorded when it ran: `" + campaign["command"] + "`):", ""]
         lines += [f"- {k}: {v}" for k, v in campaign["record"].items()]
         lines.append("")
     update_section(RESULTS_PATH, "general-agent", title="Results", body="\n".join(lines))
