@@ -298,7 +298,8 @@ def rule_table() -> list[str]:
     lines = [f"The snapshot rule (`screen_snapshot`, `choose_snapshot`): every snapshot screened on {VALIDATION_EPISODES} "
              f"validation episodes per task as the run makes it, the {CONFIRM_TOP} best of them validated again on "
              f"{CONFIRM_EPISODES} fresh episodes per task, the one that places most there on its worst task chosen, a tie "
-             "going to the earliest (validation seeds only; the test seeds judge the choice above):", "",
+             "going to the better screened, then the earliest (validation seeds only; the test seeds judge the "
+             "choice above):", "",
              "| learner | seed | snapshots screened | candidates: env steps (placed on confirmation, ceiling / window "
              "/ flooring %) | chosen |", "|---|---|---|---|---|"]
     for learner, seed in ((learner, seed) for learner in LEARNERS for seed in SEEDS):
@@ -507,7 +508,7 @@ def choose_snapshot(seed: int, learner: str = LEARNER) -> int:
     """The snapshot rule's second half, at the end of the seed's run: screen any snapshot on this machine not
     screened yet (a run from before the rule), validate the CONFIRM_TOP candidates again on CONFIRM_EPISODES fresh
     episodes per task from CONFIRMATION_SEED, and choose the one that places most there on its worst task, then
-    on average, a tie to the earliest (`refine.best_snapshot`), written to the seed's chosen.json. Its env steps."""
+    on average, a tie to the better screened, then the earliest (`refine.best_snapshot`), written to the seed's chosen.json. Its env steps."""
     for path in sorted(seed_snapshots(seed, learner).glob("checkpoint_*.pt"), key=lambda p: int(p.stem.split("_")[1])):
         if int(path.stem.split("_")[1]) not in seed_screening(seed, learner):
             screen_snapshot(seed, int(path.stem.split("_")[1]), path, learner)

@@ -234,7 +234,7 @@ def shipped_refinement(clone: Path) -> bool:
 
 def ranked_snapshots(validated: dict) -> list:
     """The snapshots (their env steps), best first: most placed on the worst task, then on average; ties keep
-    `validated`'s order (the recipe's screenings are ordered by env steps, so a tie goes to the earliest)."""
+    `validated`'s order (the recipe's screenings are ordered by env steps: a tie there goes to the earliest)."""
     return sorted(validated, key=lambda k: (min(validated[k].values()), sum(validated[k].values())), reverse=True)
 
 
