@@ -2,11 +2,11 @@
 
     python -m experiments.obstacles                       # every row; then the RESULTS section and its JSON
     python -m experiments.obstacles --episodes 20 --workers 1
-    python -m experiments.obstacles --train shipped      # the recipe among obstacles from the shipped reward-only
-                                                         # agent's weights (or: nothing), resumable
+    python -m experiments.obstacles --train shipped      # PPO's recipe among obstacles from the shipped reward-only
+                                                         # agent's weights (or: nothing, SAC's), resumable
     python -m experiments.obstacles --train shipped --evaluate   # that run's rows beside the zero-shot ones
-    python -m experiments.obstacles --share 0.5 --train nothing --learner sac   # SAC on a mixed scene: half of
-                                                         # its training episodes among obstacles, half without
+    python -m experiments.obstacles --share 0.5 --train nothing   # SAC on a mixed scene: half of its training
+                                                                  # episodes among obstacles, half without
 
 Protocol, per task (ceiling, window, flooring), on evaluation seeds (from 1,000,000: never trained on):
 1. the planning expert solves each seed's static scene (a material stack and a scaffold post, seeded per episode):
@@ -60,14 +60,15 @@ TRAINED = " (trained among obstacles)"
 """what the label of an agent trained on the moving scene (`--train`) ends with in summary.json."""
 
 
-def training_run(start: str, seed: int = 1, num_envs: Optional[int] = None, learner: str = "ppo",
+def training_run(start: str, seed: int = 1, num_envs: Optional[int] = None, learner: Optional[str] = None,
                  share: float = 1.0) -> Run:
-    """The recipe among obstacles (TRAIN_SCENE) from `start` (experiments/transfer.py's STARTS) with `learner`,
-    unchanged but for the tasks' `obstacles` and the budget; with `share` < 1 (SAC only), a mixed scene: that share
-    of its training episodes with obstacles, the others on the site as built (the tasks' `obstacle_share`)."""
+    """The recipe among obstacles (TRAIN_SCENE) from `start` (experiments/transfer.py's STARTS) with `learner`
+    (default: `transfer.learner_for` the start), unchanged but for the tasks' `obstacles` and the budget; with
+    `share` < 1 (SAC only), a mixed scene: that share of its training episodes with obstacles, the others on the
+    site as built (the tasks' `obstacle_share`)."""
     if not 0 < share <= 1:
         raise SystemExit(f"--share {share}: the share of training episodes with obstacles, in (0, 1]")
-    if share < 1 and learner != "sac":
+    if share < 1 and transfer.learner_for(start, learner) != "sac":
         raise SystemExit(f"--share {share:g}: a mixed scene is SAC's option (--learner sac); PPO's recipe has none")
     mixed = share < 1
     return transfer.transfer_run(f"obstacles_{TRAIN_SCENE}" + (f"_share{round(100 * share)}" if mixed else ""), start,

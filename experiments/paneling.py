@@ -3,8 +3,9 @@ from-scratch recipe learning it.
 
     python -m experiments.paneling                       # every zero-shot row; then the RESULTS section and its JSON
     python -m experiments.paneling --episodes 20 --workers 1
-    python -m experiments.paneling --train nothing       # the recipe on paneling from nothing (or: shipped), resumable
-                                                         # (--train-seed S: another seed; --learner sac: SAC's)
+    python -m experiments.paneling --train nothing       # the recipe (SAC) on paneling from nothing, resumable
+                                                         # (--train-seed S: another seed; --learner ppo: PPO's;
+                                                         # --train shipped: PPO from the reward-only agent's weights)
     python -m experiments.paneling --train shipped --evaluate   # the paper's protocol on that run's policy
     python -m experiments.paneling --training-report     # RESULTS' section on the training runs there are
 
@@ -16,7 +17,8 @@ row is written to --out as it finishes and skipped when the file is there with t
 run goes on where it stopped.
 
 Training (`--train`): the from-scratch recipe on PanelInstallation-v1 with the task's own dense reward, from nothing
-or from the shipped reward-only agent's weights (experiments/transfer.py), in campaign/paneling_<start>_s<seed>/:
+(SAC, the recipe's learner; `--learner ppo`: PPO's) or from the shipped reward-only agent's weights (PPO)
+(experiments/transfer.py), in campaign/paneling_<start>_s<seed>/ (SAC's: paneling_sac_s<seed>/):
 TRAIN_BUDGET env steps at most, ending at the first 250,000-step mark by which its training episodes placed 90%
 (`transfer.steps_to`: the env steps to 90% placed, what the run measures), then confirmed with the paper's protocol
 (`--evaluate`).
@@ -63,9 +65,9 @@ TRAIN_PLAN = (("ppo", "nothing", 1), ("ppo", "shipped", 1), ("sac", "nothing", 1
 TRAIN_CURVE = Path("docs/images/paneling_training.png")
 
 
-def training_run(start: str, seed: int = 1, num_envs: Optional[int] = None, learner: str = "ppo") -> Run:
-    """The recipe on PanelInstallation-v1 from `start` (experiments/transfer.py's STARTS) with `learner`, unchanged
-    but for the env and the budget."""
+def training_run(start: str, seed: int = 1, num_envs: Optional[int] = None, learner: Optional[str] = None) -> Run:
+    """The recipe on PanelInstallation-v1 from `start` (experiments/transfer.py's STARTS) with `learner` (default:
+    `transfer.learner_for` the start), unchanged but for the env and the budget."""
     return transfer_run("paneling", start, seed, num_envs, TRAIN_BUDGET, "python -m experiments.paneling", "paneling",
                         learner, env_id=ENV_ID)
 
@@ -187,8 +189,8 @@ def training_report(results: Path = RESULTS_PATH, curve: Path = TRAIN_CURVE) -> 
     if curves:
         plot_training(curves, curve)
     body = ("## Paneling, trained\n\n"
-            "Commands: `python -m experiments.paneling --train nothing`, `--train shipped`, `--train nothing "
-            "--learner sac` (each resumable), then `--evaluate` beside any; this section: `python -m "
+            "Commands: `python -m experiments.paneling --train nothing` (SAC), `--train nothing --learner ppo`, "
+            "`--train shipped` (PPO; each resumable), then `--evaluate` beside any; this section: `python -m "
             "experiments.paneling --training-report`. The from-scratch recipe unchanged but for the env "
             "(PanelInstallation-v1, its dense reward from the same rule as the paper's tasks) and the budget "
             f"({TRAIN_BUDGET:,} env steps at most, ending at the first {transfer.STOP_EVERY:,}-step mark by which its "

@@ -1,10 +1,11 @@
 """The from-scratch recipe on a setting it was not made for (a fourth task, a site with obstacles), from nothing or
 from the weights of the shipped general agent learnt from reward alone, with no reward code of the setting's own:
 the test of the dense reward's rule and of what the recipe's policy carries over. experiments/paneling.py and
-experiments/obstacles.py run it (`--train nothing|shipped`); `--learner sac` runs SAC instead of PPO on the same
-envs, reward and near-goal starts (experiments/sac_recipe.py `sac_args`; from nothing only: SAC's critics have no
-shipped weights). Each run is resumable in campaign/<name>/ (commit its checkpoint and CSV to go on in another
-session), and `steps_to` reads from its training episodes the env steps it took to place TARGET of them."""
+experiments/obstacles.py run it (`--train nothing|shipped`) with the recipe's learner (`learner_for`): SAC from
+nothing (experiments/sac_recipe.py `sac_args`, on the same envs, reward and near-goal starts), PPO from the shipped
+weights (a PPO policy: SAC's critics have none); `--learner ppo` runs PPO's recipe from nothing. Each run is
+resumable in campaign/<name>/ (commit its checkpoint and CSV to go on in another session), and `steps_to` reads
+from its training episodes the env steps it took to place TARGET of them."""
 
 from __future__ import annotations
 
@@ -18,7 +19,7 @@ import numpy as np
 from baselines.ppo.args import command_line
 from baselines.sac import sac
 from experiments.campaign import Run, checkpoint_of, describe, run_or_resume
-from experiments.from_scratch import METHOD, csv_column, moving_mean, scratch_args, train as train_in_parts
+from experiments.from_scratch import LEARNER, METHOD, csv_column, moving_mean, scratch_args, train as train_in_parts
 from experiments.sac_recipe import METHOD as SAC_METHOD, run_sac, sac_args
 
 LEARNERS = ("ppo", "sac")
@@ -46,9 +47,9 @@ class TrainOptions:
     TRAIN_BUDGET, resuming its checkpoint; then exit."""
     train_seed: int = 1
     """with --train: the training run's seed (--seed is the first evaluation seed)."""
-    learner: str = "ppo"
-    """with --train: `ppo` (the from-scratch recipe) or `sac` (SAC on the same envs, reward and starts; from
-    nothing only)."""
+    learner: Optional[str] = None
+    """with --train: `sac` (on the same envs, reward and starts; from nothing only) or `ppo` (the from-scratch recipe
+    as PPO runs it); default: `learner_for` the start (SAC from nothing, PPO from the shipped weights)."""
     num_envs: Optional[int] = None
     """with --train: env processes (default: one per CPU core); a resumed run keeps its own."""
     evaluate: bool = False
@@ -57,16 +58,26 @@ class TrainOptions:
     """with --train: print the plan and where the run stands, and exit."""
 
 
+def learner_for(start: str, learner: Optional[str] = None) -> str:
+    """`learner`, checked, or the default for `start`: the recipe's learner (experiments/from_scratch.py LEARNER)
+    from nothing; PPO from the shipped agent's weights, which are a PPO policy and value network."""
+    if start not in STARTS:
+        raise SystemExit(f"--train {start}: use one of {', '.join(STARTS)}")
+    if learner is None:
+        return LEARNER if STARTS[start] is None else "ppo"
+    if learner not in LEARNERS:
+        raise SystemExit(f"--learner {learner}: use one of {', '.join(LEARNERS)}")
+    return learner
+
+
 def transfer_run(name: str, start: str, seed: int, num_envs: Optional[int], budget: int, command: str, what: str,
-                 learner: str = "ppo", **setting) -> Run:
+                 learner: Optional[str] = None, **setting) -> Run:
     """The recipe (experiments/from_scratch.py's `scratch_args`) from `start` (STARTS) to `budget` env steps on
     seed `seed`, unchanged but for the `setting` (Args fields of both learners: an env, a scene), in
     campaign/<name>_<start>_s<seed>/; with `learner` "sac", SAC's (experiments/sac_recipe.py `sac_args`) from nothing,
-    in campaign/<name>_sac_s<seed>/."""
-    if start not in STARTS:
-        raise SystemExit(f"--train {start}: use one of {', '.join(STARTS)}")
-    if learner not in LEARNERS:
-        raise SystemExit(f"--learner {learner}: use one of {', '.join(LEARNERS)}")
+    in campaign/<name>_sac_s<seed>/ (`learner` None: `learner_for` the start). Its command names the learner,
+    but for PPO from the shipped weights (the one learner that start allows)."""
+    learner = learner_for(start, learner)
     if learner == "sac":
         if STARTS[start] is not None:
             raise SystemExit(f"--learner sac --train {start}: SAC trains from nothing only (the shipped agent is PPO's "
@@ -81,7 +92,8 @@ def transfer_run(name: str, start: str, seed: int, num_envs: Optional[int], budg
     args = scratch_args(num_envs, seed=seed, exp_name=exp_name, total_timesteps=budget, checkpoint=STARTS[start], **setting)
     how = "from nothing" if STARTS[start] is None else f"from the weights of {STARTS[start]}"
     return Run(exp_name, args, f"the from-scratch recipe on {what} {how}, seed {seed}",
-               f"{command} --train {start} --train-seed {seed}", None, method=METHOD)
+               f"{command} --train {start} --train-seed {seed}"
+               + ("" if learner_for(start) == "ppo" else " --learner ppo"), None, method=METHOD)
 
 
 def steps_to(progress: Path, target: float = TARGET, window: int = STEPS_WINDOW) -> Optional[int]:

@@ -2,23 +2,23 @@
 held out of training, evaluated with the paper's protocol on the openings it never saw and on those it trained on.
 
     python -m experiments.unseen_openings --seed 1 --dry-run     # the plan, and where that seed's run stands
-    python -m experiments.unseen_openings --seed 1               # train (or resume) to the recipe's budget
+    python -m experiments.unseen_openings --seed 1               # train (or resume) the recipe (SAC), to 90% placed
     python -m experiments.unseen_openings --seed 1 --evaluate    # the paper's protocol, unseen and seen openings
-    python -m experiments.unseen_openings --seed 1 --learner sac # SAC instead (experiments/sac_recipe.py), to 90% placed
+    python -m experiments.unseen_openings --seed 1 --learner ppo # PPO's recipe instead, to its budget
     python -m experiments.unseen_openings --imitation --dry-run  # its plan, and how far it has come
     python -m experiments.unseen_openings --imitation            # the imitation twin: demonstrations -> clone ->
                                                                  # residual PPO on the trained openings, then evaluated
     python -m experiments.unseen_openings --report               # RESULTS' section from the evaluations
 
-The recipe is experiments/from_scratch.py's, unchanged, but for the goal openings its training envs draw
-(`--goal-slot-weights`: HELD_OUT never); its evaluations during training draw every opening. Held out: the
+The recipe is experiments/from_scratch.py's, unchanged, but for the goal openings its training envs draw (HELD_OUT
+never); its evaluations during training draw every opening. Held out: the
 middle opening of every task type. The window openings at y = -0.85 and +0.85 are each other's mirror image, which
 the recipe's policy meets as one (`mirror_twins`): only the middle one is unseen in every form.
 
-With `--learner sac`, SAC on the same envs, reward and near-goal starts (experiments/sac_recipe.py `sac_args`, its
-training envs drawing TRAINED only: `goal_slots`), in parts of 250,000 env steps to at most sac_recipe.BUDGET, ending
-at the first mark by which its training episodes placed 90% (experiments/transfer.py `steps_to`), as the runs on
-paneling do.
+Its learner is the recipe's, SAC (experiments/sac_recipe.py `sac_args`, its training envs drawing TRAINED only:
+`goal_slots`), in parts of 250,000 env steps to at most sac_recipe.BUDGET, ending at the first mark by which its
+training episodes placed 90% (experiments/transfer.py `steps_to`), as the runs on paneling do. With `--learner ppo`,
+PPO's recipe (`--goal-slot-weights`) to its budget.
 
 The imitation twin (`--imitation`) is the shipped imitation agent's recipe, its two commands as their records name
 them (IMITATION_CLONE: experiments/general_agent.py's direct-path demonstrations and behaviour clone;
@@ -44,7 +44,7 @@ from baselines.ppo.evaluation import pct, training_slot_weights
 from baselines.ppo.start_states import GOAL_SLOTS
 from experiments import sac_recipe, transfer
 from experiments.campaign import Run, checkpoint_of, describe, record_checkpoint_step, run_or_resume
-from experiments.from_scratch import METHOD, scratch_args
+from experiments.from_scratch import LEARNER, LEARNERS, METHOD, scratch_args
 from ms_construction.envs import PAPER_TASK_ENV_IDS
 from ms_construction.reporting import update_section
 
@@ -62,7 +62,7 @@ def seed_run(seed: int, num_envs: Optional[int] = None) -> Run:
     name = f"unseen_s{seed}"
     return Run(name, scratch_args(num_envs, seed=seed, exp_name=name, goal_slot_weights=training_slot_weights(TRAINED)),
                f"the recipe from nothing, seed {seed}, goal openings {', '.join(map(str, HELD_OUT))} held out",
-               f"{COMMAND} --seed {seed}", None, method=METHOD)
+               f"{COMMAND} --seed {seed} --learner ppo", None, method=METHOD)
 
 
 def sac_run(seed: int) -> Run:
@@ -159,8 +159,8 @@ def report(results: Path = Path("docs/RESULTS.md")) -> str:
             lines.append(f"| {run_label(seed)} | {trained} | {which} | " + " | ".join(cells) + " |")
     table = "\n".join(lines) if len(lines) > 2 else "No run has been evaluated yet."
     body = ("## Openings no agent trained on\n\n"
-            f"Commands: `{COMMAND} --seed S` (training), `{COMMAND} --seed S --evaluate`, `{COMMAND} --imitation`, "
-            f"`{COMMAND} --report` (`--learner sac`: SAC's run). The from-scratch recipe, SAC and the imitation recipe, "
+            f"Commands: `{COMMAND} --seed S` (training SAC; `--learner ppo`: PPO's recipe), `{COMMAND} --seed S "
+            f"--evaluate`, `{COMMAND} --imitation`, `{COMMAND} --report`. The from-scratch recipe, SAC and the imitation recipe, "
             "their training never drawing the held-out goal opening of any task type; the "
             f"paper's protocol ({EVAL_STEPS:,} env steps per task, cp4, test seeds) on each set of openings.\n\n"
             f"{table}\n")
@@ -182,8 +182,8 @@ class Args:
     """write RESULTS' section from the evaluations there are, and exit."""
     imitation: bool = False
     """run (or resume) the imitation twin (`imitation`) and evaluate its policy, then exit."""
-    learner: str = "ppo"
-    """with --seed: `ppo` (the from-scratch recipe) or `sac` (`sac_run`)."""
+    learner: str = LEARNER
+    """with --seed: `sac` (the recipe's learner: `sac_run`) or `ppo` (PPO's recipe: `seed_run`)."""
 
 
 def main(args: Args) -> None:
@@ -199,6 +199,8 @@ def main(args: Args) -> None:
         return
     if args.seed is None:
         raise SystemExit("give --seed S (to train, or --evaluate its run), --imitation or --report")
+    if args.learner not in LEARNERS:
+        raise SystemExit(f"--learner {args.learner}: use one of {', '.join(LEARNERS)}")
     if args.learner == "sac":
         run = sac_run(args.seed)
         if args.evaluate:
@@ -206,8 +208,6 @@ def main(args: Args) -> None:
         else:
             transfer.train(run, args.dry_run, stop_at_target=True)
         return
-    if args.learner != "ppo":
-        raise SystemExit(f"--learner {args.learner}: use ppo or sac")
     run = seed_run(args.seed, args.num_envs)
     print(describe(run))
     print("as one ppo.py command: python baselines/ppo/ppo.py " + shlex.join(command_line(run.args)))

@@ -347,8 +347,8 @@ def test_sac_on_a_mixed_scene_is_its_own_run_unchanged_but_for_the_share_and_ref
     command) of its own; PPO's recipe has no such option, and a share outside (0, 1] is refused."""
     from experiments import obstacles
 
-    full, mixed = obstacles.training_run("nothing", learner="sac"), obstacles.training_run("nothing", learner="sac",
-                                                                                             share=0.5)
+    full, mixed = obstacles.training_run("nothing"), obstacles.training_run("nothing", share=0.5)  # SAC by default
+    assert full == obstacles.training_run("nothing", learner="sac") and full.name == "obstacles_moving_sac_s1"
     changed = {k for k, v in vars(mixed.args).items() if v != vars(full.args)[k]}
     assert changed == {"obstacle_share", "exp_name"} and mixed.args.obstacle_share == 0.5
     assert mixed.name == "obstacles_moving_share50_sac_s1" != full.name
@@ -356,5 +356,7 @@ def test_sac_on_a_mixed_scene_is_its_own_run_unchanged_but_for_the_share_and_ref
     assert "in 50% of its training episodes" in mixed.what
     with pytest.raises(SystemExit, match="SAC's option"):
         obstacles.training_run("shipped", share=0.5)
+    with pytest.raises(SystemExit, match="SAC's option"):
+        obstacles.training_run("nothing", learner="ppo", share=0.5)
     with pytest.raises(SystemExit, match=r"in \(0, 1\]"):
         obstacles.training_run("nothing", learner="sac", share=0.0)

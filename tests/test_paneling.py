@@ -204,7 +204,7 @@ def test_the_recipe_trains_on_paneling_from_the_shipped_weights_and_from_nothing
     assert paneling.training_run("shipped", seed=2).command == "python -m experiments.paneling --train shipped --train-seed 2"
     recipe = from_scratch.scratch_args(2, seed=1)
     for start, init in (("shipped", "assets/checkpoints/scratch_general_agent.pt"), ("nothing", None)):
-        run = paneling.training_run(start, num_envs=2)
+        run = paneling.training_run(start, num_envs=2, learner="ppo")
         changed = {k for k, v in vars(run.args).items() if v != vars(recipe)[k]}
         assert changed <= {"env_id", "total_timesteps", "exp_name", "checkpoint"} and run.args.checkpoint == init
         tiny = run.args.replace(total_timesteps=40, num_steps=20, num_minibatches=2, update_epochs=1, num_eval_envs=1,
@@ -302,7 +302,7 @@ def test_the_training_section_reads_each_run_s_progress_and_evaluation(tmp_path,
     body = paneling.training_report(tmp_path / "RESULTS.md", tmp_path / "images" / "curve.png")
     # the 50-iteration mean first reaches 90% 45 iterations into the ones: 290,000 env steps
     assert "scratch_general_agent.pt, seed 1 | 400,000 | 290,000 | 0.1 | 95.0 [90.0, 97.0] | 100 / 90 / 95 |" in body
-    assert "| not run: `python -m experiments.paneling --train nothing --train-seed 1` |" in body
+    assert "| not run: `python -m experiments.paneling --train nothing --train-seed 1 --learner ppo` |" in body
     assert "| SAC on paneling from nothing, seed 1 | not run: `python -m experiments.paneling --train nothing " \
            "--learner sac --train-seed 1` |" in body
     assert "| SAC on paneling from nothing, seed 2 | not run: `python -m experiments.paneling --train nothing " \
@@ -321,7 +321,7 @@ def test_a_run_that_used_its_whole_budget_short_of_the_target_says_so(tmp_path, 
     monkeypatch.chdir(tmp_path)
     monkeypatch.setattr(paneling, "TRAIN_BUDGET", 20_000)
     for start, iterations in (("shipped", 10), ("nothing", 5)):
-        progress = checkpoint_of(paneling.training_run(start)).parent / "progress.csv"
+        progress = checkpoint_of(paneling.training_run(start, learner="ppo")).parent / "progress.csv"
         progress.parent.mkdir(parents=True)
         progress.write_text("global_step,ordinary_place_success,sps\n"
                             + "".join(f"{2000 * (i + 1)},0.5,1000\n" for i in range(iterations)))
@@ -342,6 +342,11 @@ def test_sac_on_paneling_is_the_recipe_s_sac_but_for_the_env_and_budget_from_not
         paneling.training_run("nothing", learner="td3")
     run = paneling.training_run("nothing", seed=2, learner="sac")
     assert run.command == "python -m experiments.paneling --train nothing --learner sac --train-seed 2"
+    # SAC is the recipe's learner: the default from nothing; from the shipped weights (PPO's), PPO
+    assert paneling.training_run("nothing", seed=2) == run and paneling.Args().learner is None
+    assert paneling.training_run("shipped").command == "python -m experiments.paneling --train shipped --train-seed 1"
+    assert paneling.training_run("nothing", learner="ppo").command == \
+        "python -m experiments.paneling --train nothing --train-seed 1 --learner ppo"
     assert paneling.train_eval_json(run) == Path("docs/data/paneling/train_sac_s2_eval50k.json")
     changed = {k for k, v in vars(run.args).items() if v != vars(sac_recipe.sac_args(2))[k]}
     assert changed == {"env_id", "total_timesteps", "exp_name"} and run.args.env_id == paneling.ENV_ID

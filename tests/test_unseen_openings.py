@@ -36,7 +36,7 @@ def test_the_run_is_the_recipe_with_the_held_out_openings_never_drawn_in_trainin
 
 
 def test_sac_s_run_is_the_recipe_s_sac_with_the_held_out_openings_never_drawn_in_training():
-    """`--learner sac`: experiments/sac_recipe.py's SAC but for its name and the goal slots its training envs draw (its
+    """`--seed S` (SAC, the default learner): experiments/sac_recipe.py's SAC but for its name and the goal slots its training envs draw (its
     evaluations during training draw every slot: tests/test_sac.py)."""
     from experiments import sac_recipe
 
@@ -45,7 +45,9 @@ def test_sac_s_run_is_the_recipe_s_sac_with_the_held_out_openings_never_drawn_in
     assert changed == {"exp_name", "goal_slots"} and run.args.goal_slots == uo.TRAINED
     assert run.command == "python -m experiments.unseen_openings --seed 2 --learner sac"
     assert run.method == sac_recipe.METHOD  # its campaign record says SAC, not the paper setting
-    with pytest.raises(SystemExit, match="--learner td3: use ppo or sac"):
+    assert uo.Args().learner == fs.LEARNER == "sac", "the recipe's learner unless --learner ppo"
+    assert uo.seed_run(2).command == "python -m experiments.unseen_openings --seed 2 --learner ppo"
+    with pytest.raises(SystemExit, match="--learner td3: use one of sac, ppo"):
         uo.main(uo.Args(seed=1, learner="td3", dry_run=True))
 
 
