@@ -67,7 +67,7 @@ from experiments import sac_recipe
 from experiments.campaign import (CAMPAIGN_DIR, SHIPPED_DIR, Run, checkpoint_of, describe, policy_only, ship,
                                  training_wall_s)
 from experiments.expert_modes import placed_per_slot
-from experiments.refine import (CONFIRMATION_SEED, VALIDATION_SEED, best_snapshot, ranked_snapshots,
+from experiments.refine import (CONFIRMATION_SEED, TIEBREAK_SEED, VALIDATION_SEED, best_snapshot, ranked_snapshots,
                                validate)
 from ms_construction.parameters import PAPER_KINDS
 from ms_construction.reporting import update_section
@@ -297,9 +297,10 @@ def rule_table() -> list[str]:
     """Per seed, the snapshot rule's work: snapshots screened, the candidates' confirmation, the choice."""
     lines = [f"The snapshot rule (`screen_snapshot`, `choose_snapshot`): every snapshot screened on {VALIDATION_EPISODES} "
              f"validation episodes per task as the run makes it, the {CONFIRM_TOP} best of them validated again on "
-             f"{CONFIRM_EPISODES} fresh episodes per task, the one that places most there on its worst task chosen, a tie "
-             "going to the better screened, then the earliest (validation seeds only; the test seeds judge the "
-             "choice above):", "",
+             f"{CONFIRM_EPISODES} fresh episodes per task, the one that places most there on its worst task chosen; "
+             f"candidates tied there validated again on {TIEBREAK_EPISODES} more per task and ranked on all "
+             f"{CONFIRM_EPISODES + TIEBREAK_EPISODES} (placed there in brackets), a tie still going to the better "
+             "screened, then the earliest (validation seeds only; the test seeds judge the choice above):", "",
              "| learner | seed | snapshots screened | candidates: env steps (placed on confirmation, ceiling / window "
              "/ flooring %) | chosen |", "|---|---|---|---|---|"]
     for learner, seed in ((learner, seed) for learner in LEARNERS for seed in SEEDS):
@@ -308,8 +309,10 @@ def rule_table() -> list[str]:
             lines.append(f"| {learner.upper()} | {seed} | {len(screened)} | (chosen at the end of its run) | - |")
             continue
         chosen = json.loads(chosen_json(seed, learner).read_text())
+        tied = chosen.get("tie broken", {})
         lines.append(f"| {learner.upper()} | {seed} | {chosen['screened']} | " + "; ".join(
-            f"{int(step):,} ({' / '.join(f'{100 * v:.0f}' for v in placed.values())})"
+            f"{int(step):,} ({' / '.join(f'{100 * v:.0f}' for v in placed.values())}"
+            + (f"; [{' / '.join(f'{100 * v:.2f}' for v in tied[step].values())}]" if step in tied else "") + ")"
             for step, placed in chosen["confirmed"].items()) + f" | {chosen['step']:,} |")
     return lines
 
@@ -418,6 +421,36 @@ among them: 30 episodes chose the snapshot at 9,250,000 env steps for its 70% of
 half that on the test seeds (a winner on few episodes is most often a lucky one)."""
 CONFIRM_EPISODES = 100
 """episodes per task (CONFIRMATION_SEED on: neither the screening's nor the test seeds) that choose the snapshot."""
+TIEBREAK_EPISODES = 300
+"""episodes per task (TIEBREAK_SEED on: none of the others) that validate again the candidates tied on the
+confirmation, which then choose among them on all CONFIRM_EPISODES + TIEBREAK_EPISODES: SAC's candidates all placed
+every one of the 100 per task on both seeds, and the tie went to the earliest, whatever it placed on the test seeds."""
+
+
+def break_tie(confirmed: dict, candidate: Callable[[object], Path], out: Callable[[object], Path]) -> tuple[object, dict]:
+    """The best of `confirmed` (key -> placed per task on the confirmation; `refine.best_snapshot`), where several
+    are tied at its top those only validated again on TIEBREAK_EPISODES per task from TIEBREAK_SEED (`candidate(key)`:
+    the policy, `out(key)`: its JSON) and ranked on the confirmation's and these episodes pooled, a tie still going
+    to the first in `confirmed`'s order. (the best key, the tied keys' pooled placed per task)."""
+    def score(placed: dict) -> tuple:
+        return min(placed.values()), sum(placed.values())
+
+    top = score(confirmed[best_snapshot(confirmed)])
+    tied = [key for key in confirmed if score(confirmed[key]) == top]
+    if len(tied) < 2:
+        return tied[0], {}
+    pooled = {}
+    for key in tied:
+        more = validate(candidate(key), out(key), TIEBREAK_EPISODES, seed=TIEBREAK_SEED)
+        pooled[key] = {env: (CONFIRM_EPISODES * confirmed[key][env] + TIEBREAK_EPISODES * more[env])
+                       / (CONFIRM_EPISODES + TIEBREAK_EPISODES) for env in confirmed[key]}
+    return best_snapshot(pooled), pooled
+
+
+def seed_tiebreak_json(seed: int, step: int, learner: str = LEARNER) -> Path:
+    """A seed's candidate validated on TIEBREAK_EPISODES per task from TIEBREAK_SEED (committed, as the others)."""
+    return (SEED_EVAL_DIR / "validation"
+            / f"{run_name(seed, learner)}_val{TIEBREAK_EPISODES}_{step}_tiebreak.json")
 
 
 def train(run: Run, snapshots: Path, every: int = SNAPSHOT_EVERY,
@@ -504,11 +537,19 @@ def screen_snapshot(seed: int, step: int, snapshot: Path, learner: str = LEARNER
     return placed
 
 
+RULE = (f"screened on {VALIDATION_EPISODES} episodes per task (seeds {VALIDATION_SEED:,} on) as made; the {CONFIRM_TOP} "
+        f"best confirmed on {CONFIRM_EPISODES} (seeds {CONFIRMATION_SEED:,} on); most placed on the worst task, then on "
+        f"average; candidates tied there validated again on {TIEBREAK_EPISODES} (seeds {TIEBREAK_SEED:,} on) and "
+        f"ranked on all {CONFIRM_EPISODES + TIEBREAK_EPISODES}")
+"""the snapshot rule in a line, as each seed's chosen.json records it."""
+
+
 def choose_snapshot(seed: int, learner: str = LEARNER) -> int:
     """The snapshot rule's second half, at the end of the seed's run: screen any snapshot on this machine not
     screened yet (a run from before the rule), validate the CONFIRM_TOP candidates again on CONFIRM_EPISODES fresh
     episodes per task from CONFIRMATION_SEED, and choose the one that places most there on its worst task, then
-    on average, a tie to the better screened, then the earliest (`refine.best_snapshot`), written to the seed's chosen.json. Its env steps."""
+    on average; candidates tied there are validated again and ranked on all their episodes (`break_tie`), a tie
+    still going to the better screened, then the earliest; written to the seed's chosen.json. Its env steps."""
     for path in sorted(seed_snapshots(seed, learner).glob("checkpoint_*.pt"), key=lambda p: int(p.stem.split("_")[1])):
         if int(path.stem.split("_")[1]) not in seed_screening(seed, learner):
             screen_snapshot(seed, int(path.stem.split("_")[1]), path, learner)
@@ -520,13 +561,13 @@ def choose_snapshot(seed: int, learner: str = LEARNER) -> int:
                                 seed_validation_json(seed, step, confirm=True, learner=learner), CONFIRM_EPISODES,
                                 seed=CONFIRMATION_SEED)
                  for step in top}
-    best = best_snapshot(confirmed)
+    best, pooled = break_tie(confirmed, lambda step: seed_candidates(seed, learner) / f"candidate_{step}.pt",
+                             lambda step: seed_tiebreak_json(seed, step, learner))
     chosen_json(seed, learner).write_text(json.dumps(dict(
         step=best, screened=len(seed_screening(seed, learner)),
         confirmed={str(k): confirmed[k] for k in sorted(confirmed)},
-        rule=f"screened on {VALIDATION_EPISODES} episodes per task (seeds {VALIDATION_SEED:,} on) as made; the "
-             f"{CONFIRM_TOP} best confirmed on {CONFIRM_EPISODES} (seeds {CONFIRMATION_SEED:,} on); most placed on "
-             "the worst task, then on average"), indent=1))
+        **({"tie broken": {str(k): pooled[k] for k in sorted(pooled)}} if pooled else {}),
+        rule=RULE), indent=1))
     return best
 
 
@@ -564,9 +605,10 @@ def recipe_commit(learner: str = LEARNER) -> str:
 def ship_seeds(shipped: Path = SHIPPED, learner: str = LEARNER) -> Optional[Path]:
     """Ship the better seed's chosen snapshot of the recipe with `learner` as the general agent learnt from reward
     alone, once every seed of SEEDS has run to its end (its snapshot chosen and evaluated with the paper's protocol). The better seed is the
-    one whose choice confirmed best on the validation seeds (most placed on its worst task, then on average); it
-    ships only if it places at least what the policy shipped now does on every task on the test seeds (EVAL_JSON),
-    and its evaluation then becomes EVAL_JSON. The path shipped, or None."""
+    one whose choice confirmed best on the validation seeds (most placed on its worst task, then on average; seeds
+    tied there validated again as a seed's tied candidates are, `break_tie`); it ships only if it places at least what
+    the policy shipped now does on every task on the test seeds (EVAL_JSON), and its evaluation then becomes
+    EVAL_JSON. The path shipped, or None."""
     waiting = [seed for seed in SEEDS if chosen_step(seed, learner) is None
                or not seed_evaluation_json(seed, chosen_step(seed, learner), learner).is_file()]
     if waiting:
@@ -574,7 +616,8 @@ def ship_seeds(shipped: Path = SHIPPED, learner: str = LEARNER) -> Optional[Path
                          + ", ".join(f"`{seed_run(s, learner=learner).command}`" for s in waiting))
     confirmed = {seed: json.loads(chosen_json(seed, learner).read_text())["confirmed"][str(chosen_step(seed, learner))]
                  for seed in SEEDS}
-    seed = best_snapshot(confirmed)
+    seed, pooled = break_tie(confirmed, lambda s: seed_candidates(s, learner) / f"candidate_{chosen_step(s, learner)}.pt",
+                        lambda s: seed_tiebreak_json(s, chosen_step(s, learner), learner))
     step = chosen_step(seed, learner)
     tested = json.loads(seed_evaluation_json(seed, step, learner).read_text())["tasks"]
     now = json.loads(EVAL_JSON.read_text())["tasks"] if EVAL_JSON.is_file() else {}
@@ -586,9 +629,13 @@ def ship_seeds(shipped: Path = SHIPPED, learner: str = LEARNER) -> Optional[Path
         return None
     run = dataclasses.replace(seed_run(seed, learner=learner), shipped=shipped)
     recipe = ("sac_args of experiments/sac_recipe.py" if learner == "sac" else "scratch_args of experiments/from_scratch.py")
+    tie = (f"; tied, then on all {CONFIRM_EPISODES + TIEBREAK_EPISODES}: "
+           + ", ".join(f"seed {s} {min(c.values()):.3f}" for s, c in pooled.items())
+           + (", a tie to the first" if len({(min(c.values()), sum(c.values())) for c in pooled.values()}) == 1 else "")) if pooled else ""
     chosen = (f"seed {seed} of {len(SEEDS)} (the better on validation: placed on its worst task "
               + ", ".join(f"seed {s} {min(c.values()):.2f}" for s, c in confirmed.items())
-              + f"), its snapshot at {step:,} env steps chosen by the snapshot rule; the recipe: {learner.upper()}, "
+              + f" of {CONFIRM_EPISODES}{tie}), its snapshot at {step:,} env steps chosen by the snapshot rule; the "
+              f"recipe: {learner.upper()}, "
               f"{recipe} at commit {recipe_commit(learner)}, unchanged from step 0; demonstrations: none")
     out = ship(run, snapshot=seed_candidates(seed, learner) / f"candidate_{step}.pt", chosen=chosen)
     # the shipped policy is the snapshot's, weight for weight: its evaluation is the snapshot's, written down as the

@@ -2,8 +2,8 @@
 
     python -m experiments.obstacles                       # every row; then the RESULTS section and its JSON
     python -m experiments.obstacles --episodes 20 --workers 1
-    python -m experiments.obstacles --train shipped      # PPO's recipe among obstacles from the shipped reward-only
-                                                         # agent's weights (or: nothing, SAC's), resumable
+    python -m experiments.obstacles --train shipped      # PPO's recipe among obstacles from the weights of the
+                                                         # reward-only agent PPO made (or: nothing, SAC's), resumable
     python -m experiments.obstacles --train shipped --evaluate   # that run's rows beside the zero-shot ones
     python -m experiments.obstacles --share 0.5 --train nothing   # SAC on a mixed scene: half of its training
                                                                   # episodes among obstacles, half without
@@ -15,7 +15,7 @@ Protocol, per task (ceiling, window, flooring), on evaluation seeds (from 1,000,
 3. each shipped agent on those seeds, without obstacles, static and moving. The agents were trained on a site
    without obstacles and meet them blind (no obstacle entry in their observation): zero-shot.
 4. with `--train S --evaluate`: the from-scratch recipe's run among obstacles (experiments/transfer.py: TRAIN_SCENE,
-   TRAIN_BUDGET env steps, from nothing or from the shipped reward-only agent's weights, the obstacles' entry in its
+   TRAIN_BUDGET env steps, from nothing or from the PPO reward-only agent's weights, the obstacles' entry in its
    observation) on the same seeds and scenes.
 
 An episode with obstacles ends, failed, at the first touch of the arm or the element on one. Every seed draws the
@@ -44,11 +44,13 @@ from baselines.ppo.checkpoints import load_checkpoint
 from experiments.campaign import Run, checkpoint_of, policy_only
 from ms_construction.curriculum import FINAL_STAGE
 from ms_construction.envs import PAPER_TASK_ENV_IDS
+from ms_construction.assets import sha256
 from ms_construction.reporting import update_section
 
 AGENTS = {
     "general agent (imitation: clone + residual PPO)": "assets/checkpoints/general_agent.pt",
     "scratch general agent (reward alone, shipped)": "assets/checkpoints/scratch_general_agent.pt",
+    "scratch general agent, PPO's (reward alone, before SAC's)": "assets/checkpoints/scratch_general_agent_ppo.pt",
 }
 SCENES = ("none", "static", "moving")
 RESULTS_PATH = Path("docs/RESULTS.md")
@@ -149,11 +151,15 @@ def _agent_episode(job: tuple[str, str, str, int]) -> dict:
     return episode_job((checkpoint, env_id, FINAL_STAGE, seed, None, False, None, 1.0, obstacles, ()))
 
 
-def run_row(pool, path: Path, fn, jobs: list[tuple], seeds: list[int], desc: str) -> list[dict]:
-    """The episodes of one row and task: read from `path` when it holds these seeds, else run and written there."""
+def run_row(pool, path: Path, fn, jobs: list[tuple], seeds: list[int], desc: str,
+            checkpoint: Optional[str] = None) -> list[dict]:
+    """The episodes of one row and task: read from `path` when it holds these seeds (and, for an agent's row, the
+    episodes of this `checkpoint`'s weights: a file shipped again under the same name is run again), else run and
+    written there."""
+    digest = sha256(checkpoint) if checkpoint is not None else None
     if path.exists():
         saved = json.loads(path.read_text())
-        if saved["seeds"] == seeds:
+        if saved["seeds"] == seeds and saved.get("checkpoint_sha256") == digest:
             return saved["episodes"]
     episodes = []
     bar = tqdm(total=len(jobs), desc=desc, unit="ep", dynamic_ncols=True)
@@ -163,7 +169,8 @@ def run_row(pool, path: Path, fn, jobs: list[tuple], seeds: list[int], desc: str
         bar.set_postfix(placed=f"{sum(x['placed'] for x in episodes)}/{len(episodes)}")
     bar.close()
     path.parent.mkdir(parents=True, exist_ok=True)
-    path.write_text(json.dumps({"seeds": seeds, "episodes": episodes}, indent=0) + "\n")
+    path.write_text(json.dumps({"seeds": seeds, **({"checkpoint_sha256": digest} if digest else {}),
+                                "episodes": episodes}, indent=0) + "\n")
     return episodes
 
 
@@ -244,7 +251,8 @@ def main(args: Args) -> dict:
                 name = row_name(checkpoint)
                 for scene in SCENES:
                     episodes = run_row(pool, args.out / f"{name}_{scene}_{kind}.json", _agent_episode,
-                                       [(checkpoint, env_id, scene, s) for s in seeds], seeds, f"{name} {scene} {kind}")
+                                       [(checkpoint, env_id, scene, s) for s in seeds], seeds, f"{name} {scene} {kind}",
+                                       checkpoint)
                     rows.setdefault((label, scene + " (solvable seeds)"), {})[env_id] = summarize(episodes, False)
     body = ("## A site that changes: obstacles, zero-shot\n\n"
             f"Command: `{command}`\n\n{table(rows)}\n\n"

@@ -5,7 +5,7 @@ from-scratch recipe learning it.
     python -m experiments.paneling --episodes 20 --workers 1
     python -m experiments.paneling --train nothing       # the recipe (SAC) on paneling from nothing, resumable
                                                          # (--train-seed S: another seed; --learner ppo: PPO's;
-                                                         # --train shipped: PPO from the reward-only agent's weights)
+                                                         # --train shipped: PPO from the PPO reward-only agent's)
     python -m experiments.paneling --train shipped --evaluate   # the paper's protocol on that run's policy
     python -m experiments.paneling --training-report     # RESULTS' section on the training runs there are
 
@@ -17,7 +17,8 @@ row is written to --out as it finishes and skipped when the file is there with t
 run goes on where it stopped.
 
 Training (`--train`): the from-scratch recipe on PanelInstallation-v1 with the task's own dense reward, from nothing
-(SAC, the recipe's learner; `--learner ppo`: PPO's) or from the shipped reward-only agent's weights (PPO)
+(SAC, the recipe's learner; `--learner ppo`: PPO's) or from the weights of the reward-only agent PPO's recipe made
+(PPO)
 (experiments/transfer.py), in campaign/paneling_<start>_s<seed>/ (SAC's: paneling_sac_s<seed>/):
 TRAIN_BUDGET env steps at most, ending at the first 250,000-step mark by which its training episodes placed 90%
 (`transfer.steps_to`: the env steps to 90% placed, what the run measures), then confirmed with the paper's protocol
@@ -54,6 +55,7 @@ ENV_ID = "PanelInstallation-v1"
 AGENTS = {
     "general agent (imitation: clone + residual PPO)": "assets/checkpoints/general_agent.pt",
     "scratch general agent (reward alone, shipped)": "assets/checkpoints/scratch_general_agent.pt",
+    "scratch general agent, PPO's (reward alone, before SAC's)": "assets/checkpoints/scratch_general_agent_ppo.pt",
     "paper setting (sparse reward, ICM, Table I stages)": "assets/checkpoints/paper_general_agent.pt",
 }
 
@@ -194,8 +196,8 @@ def training_report(results: Path = RESULTS_PATH, curve: Path = TRAIN_CURVE) -> 
             "experiments.paneling --training-report`. The from-scratch recipe unchanged but for the env "
             "(PanelInstallation-v1, its dense reward from the same rule as the paper's tasks) and the budget "
             f"({TRAIN_BUDGET:,} env steps at most, ending at the first {transfer.STOP_EVERY:,}-step mark by which its "
-            f"training episodes placed {transfer.TARGET:.0%}), from nothing or from the shipped reward-only agent's "
-            "weights; SAC on the same envs, reward and near-goal starts, from nothing. Env steps to 90%: the first at which its "
+            f"training episodes placed {transfer.TARGET:.0%}), from nothing or from the weights of the reward-only "
+            "agent PPO's recipe made (scratch_general_agent_ppo.pt); SAC on the same envs, reward and near-goal starts, from nothing. Env steps to 90%: the first at which its "
             f"training episodes from ordinary resets placed {transfer.TARGET:.0%} (their mean over the last "
             f"{transfer.STEPS_WINDOW} iterations); the paper's protocol: 50,000 env steps, cp4, test seeds, the "
             "policy's mean.\n\n" + "\n".join(lines) + "\n"
@@ -245,7 +247,7 @@ def main(args: Args) -> dict:
         for label, checkpoint in args.agents.items():
             name = row_name(checkpoint)
             episodes = run_row(pool, args.out / f"{name}.json", _agent_episode, [(checkpoint, s) for s in seeds], seeds,
-                               f"{name} paneling")
+                               f"{name} paneling", checkpoint)
             rows[f"{label}, zero-shot"] = summarize(episodes, False)
     none_place = all(r["place_success"] == 0 for label, r in rows.items() if label != "planning expert")
     body = ("## Paneling, a fourth task: zero-shot\n\n"
@@ -253,8 +255,10 @@ def main(args: Args) -> dict:
             f"{ENV_ID}: a 15 kg wall panel into one of three open bays of an interior partition's board layer, standing, "
             "flush with the boards around it (cp4 tolerances; seeds "
             f"{args.seed}..{args.seed + args.episodes - 1}, never trained on; the policies' mean). The agents were "
-            "trained on the paper's three task types only; their task input is all zeros here (they read the task "
-            "one-hot's new slot with zero weights)" + (", and none places a panel: what they learnt does not carry over "
+            "trained on the paper's three task types only: those made before paneling existed read the task one-hot's "
+            "new slot with zero weights (their task input is all zeros here); SAC's reward-only agent, trained after, "
+            "saw that slot at 0 throughout and meets a 1 there, far outside its observation statistics (its "
+            "normalization clips it at 10 standard deviations)" + (", and none places a panel: what they learnt does not carry over "
                                                         "to a fourth task without training on it" if none_place else "")
             + ".\n\n"
             f"The expert's failures: {failures or 'none'}. The dense reward for paneling comes from the same rule as "

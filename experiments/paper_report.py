@@ -186,11 +186,12 @@ def table_ii_rows(campaign_dir: Path, eval_dir: Path = EVAL_DIR) -> list[TableRo
 
 def scratch_row(eval_dir: Path = EVAL_DIR) -> TableRow:
     """The general agent learnt from reward alone (experiments/from_scratch.py): the better seed's choice, once shipped."""
-    from experiments.from_scratch import COMMAND, SHIPPED
+    from experiments.from_scratch import COMMAND, SHIPPED, shipped_how
 
     pending = f"not shipped yet: `{COMMAND} --ship-seeds`" if not SHIPPED.is_file() else "not evaluated yet"
-    return _evaluation_row("ours: from reward alone", "PPO from nothing on the default dense reward, near-goal and reach starts, one "
-                           "recipe unchanged from step 0, the better of two seeds; no demonstrations (its section)", SHIPPED, SHIPPED.stem,
+    how = (f"{shipped_how(SHIPPED)}, the better of two seeds (its section)" if SHIPPED.is_file() else
+           "the recipe from nothing on the default dense reward, the better of two seeds; no demonstrations")
+    return _evaluation_row("ours: from reward alone", how, SHIPPED, SHIPPED.stem,
                            tuple(PAPER_TASK_ENV_IDS.values()), pending, eval_dir)
 
 

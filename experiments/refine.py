@@ -52,6 +52,8 @@ VALIDATION_SEED = 500_000
 CONFIRMATION_SEED = 600_000
 """fresh episodes for the best snapshot and the clone: choosing the best of several snapshots on the same
 validation episodes favours a lucky one (docs/experiments/general_agent.md: one won on validation and lost on the test seeds)."""
+TIEBREAK_SEED = 800_000
+"""fresh episodes again, for candidates tied on the confirmation (experiments/from_scratch.py `break_tie`)."""
 
 
 @dataclass

@@ -31,6 +31,7 @@ GENERALIZATION = (  # label, the agent's label in the obstacle and paneling tabl
     ("planning expert", "planning expert"),
     ("imitation general agent", "general agent (imitation: clone + residual PPO)"),
     ("reward-only general agent", "scratch general agent (reward alone, shipped)"),
+    ("reward-only general agent of PPO's recipe", "scratch general agent, PPO's (reward alone, before SAC's)"),
     ("the paper's setting", "paper setting (sparse reward, ICM, Table I stages)"),
 )
 OBSTACLES = Path("docs/data/obstacles/summary.json")

@@ -1,6 +1,7 @@
 """The from-scratch recipe on a setting it was not made for (a fourth task, a site with obstacles), from nothing or
 from the weights of the shipped general agent learnt from reward alone, with no reward code of the setting's own:
-the test of the dense reward's rule and of what the recipe's policy carries over. experiments/paneling.py and
+the test of the dense reward's rule and of what the recipe's policy carries over (the shipped weights: the
+reward-only agent PPO's recipe made, scratch_general_agent_ppo.pt). experiments/paneling.py and
 experiments/obstacles.py run it (`--train nothing|shipped`) with the recipe's learner (`learner_for`): SAC from
 nothing (experiments/sac_recipe.py `sac_args`, on the same envs, reward and near-goal starts), PPO from the shipped
 weights (a PPO policy: SAC's critics have none); `--learner ppo` runs PPO's recipe from nothing. Each run is
@@ -24,9 +25,10 @@ from experiments.sac_recipe import METHOD as SAC_METHOD, run_sac, sac_args
 
 LEARNERS = ("ppo", "sac")
 """the learners a run may take: PPO (the from-scratch recipe) or SAC (experiments/learners.py)."""
-STARTS = {"nothing": None, "shipped": "assets/checkpoints/scratch_general_agent.pt"}
-"""where a run starts: fresh weights, or the shipped reward-only general agent's (whose network the recipe shares;
-the imitation agent's residual network is another)."""
+STARTS = {"nothing": None, "shipped": "assets/checkpoints/scratch_general_agent_ppo.pt"}
+"""where a run starts: fresh weights, or the weights of the reward-only general agent PPO's recipe made (shipped
+beside SAC's, which replaced it as scratch_general_agent.pt: a PPO policy and value network, whose network PPO's recipe
+shares; the imitation agent's residual network is another, SAC's has no value network)."""
 TARGET = 0.9
 """the place success whose first crossing `steps_to` reports."""
 STEPS_WINDOW = 50

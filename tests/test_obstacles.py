@@ -332,6 +332,37 @@ def test_the_recipe_trains_among_obstacles_from_the_shipped_weights_unchanged_bu
         obstacles.trained_policy(dataclasses.replace(run, args=tiny.replace(log_dir=str(tmp_path / "none"))))
 
 
+def test_a_row_on_file_is_read_only_for_the_same_seeds_and_the_same_weights(tmp_path):
+    """An agent's row is kept for the checkpoint's weights, not its name: a policy shipped again under the same file
+    name (scratch_general_agent.pt, PPO's and then SAC's) is run again, the same one is read back."""
+    from experiments import obstacles
+
+    class Pool:  # the episodes in this process, counted
+        def __init__(self):
+            self.ran = 0
+
+        def imap(self, fn, jobs):
+            self.ran += len(jobs)
+            return map(fn, jobs)
+
+    checkpoint, row = tmp_path / "agent.pt", tmp_path / "agent_none_ceiling.json"
+    checkpoint.write_bytes(b"PPO's weights")
+    pool = Pool()
+
+    def episode(job):
+        return dict(seed=job[1], placed=checkpoint.read_bytes() == b"SAC's weights")
+
+    def run(seeds):
+        return obstacles.run_row(pool, row, episode, [(str(checkpoint), s) for s in seeds], seeds, "row", str(checkpoint))
+
+    assert [e["placed"] for e in run([1, 2])] == [False, False] and pool.ran == 2
+    assert run([1, 2]) and pool.ran == 2, "the same seeds and weights: read from the file"
+    assert run([1, 2, 3]) and pool.ran == 5, "other seeds: run again"
+    checkpoint.write_bytes(b"SAC's weights")
+    assert [e["placed"] for e in run([1, 2, 3])] == [True] * 3 and pool.ran == 8, "other weights: run again"
+    assert json.loads(row.read_text())["checkpoint_sha256"] == obstacles.sha256(checkpoint)
+
+
 def test_more_agents_join_the_shipped_ones_and_a_bad_one_is_refused():
     from experiments import obstacles
 

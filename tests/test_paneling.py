@@ -31,7 +31,7 @@ episodes of the general task, the policy's own first 12 steps), computed by the 
 paneling: the observations there have the three-slot task one-hot."""
 BEFORE_PANELING = {"scratch_general_agent": Path(__file__).parent / "data" / "scratch_general_agent_before_paneling.pt"}
 """checkpoints of SHIPPED_OUTPUTS kept here: the first campaign's reward-only agent, the from-scratch agent from before
-paneling, which assets/checkpoints/scratch_general_agent.pt holds until `experiments.from_scratch --ship-seeds` ships
+paneling, which assets/checkpoints/scratch_general_agent.pt held until `experiments.from_scratch --ship-seeds` shipped
 the recipe's better seed there."""
 
 
@@ -203,7 +203,7 @@ def test_the_recipe_trains_on_paneling_from_the_shipped_weights_and_from_nothing
         paneling.training_run("imitation")
     assert paneling.training_run("shipped", seed=2).command == "python -m experiments.paneling --train shipped --train-seed 2"
     recipe = from_scratch.scratch_args(2, seed=1)
-    for start, init in (("shipped", "assets/checkpoints/scratch_general_agent.pt"), ("nothing", None)):
+    for start, init in (("shipped", "assets/checkpoints/scratch_general_agent_ppo.pt"), ("nothing", None)):
         run = paneling.training_run(start, num_envs=2, learner="ppo")
         changed = {k for k, v in vars(run.args).items() if v != vars(recipe)[k]}
         assert changed <= {"env_id", "total_timesteps", "exp_name", "checkpoint"} and run.args.checkpoint == init
@@ -301,7 +301,7 @@ def test_the_training_section_reads_each_run_s_progress_and_evaluation(tmp_path,
                                      "place_success_by_goal_slot": {"0": 1.0, "1": 0.9, "2": 0.95}}))
     body = paneling.training_report(tmp_path / "RESULTS.md", tmp_path / "images" / "curve.png")
     # the 50-iteration mean first reaches 90% 45 iterations into the ones: 290,000 env steps
-    assert "scratch_general_agent.pt, seed 1 | 400,000 | 290,000 | 0.1 | 95.0 [90.0, 97.0] | 100 / 90 / 95 |" in body
+    assert "scratch_general_agent_ppo.pt, seed 1 | 400,000 | 290,000 | 0.1 | 95.0 [90.0, 97.0] | 100 / 90 / 95 |" in body
     assert "| not run: `python -m experiments.paneling --train nothing --train-seed 1 --learner ppo` |" in body
     assert "| SAC on paneling from nothing, seed 1 | not run: `python -m experiments.paneling --train nothing " \
            "--learner sac --train-seed 1` |" in body
@@ -326,7 +326,7 @@ def test_a_run_that_used_its_whole_budget_short_of_the_target_says_so(tmp_path, 
         progress.write_text("global_step,ordinary_place_success,sps\n"
                             + "".join(f"{2000 * (i + 1)},0.5,1000\n" for i in range(iterations)))
     body = paneling.training_report(tmp_path / "RESULTS.md", tmp_path / "images" / "curve.png")
-    assert "scratch_general_agent.pt, seed 1 | 20,000 | not within 20,000 | 0.0 | not yet: `" in body
+    assert "scratch_general_agent_ppo.pt, seed 1 | 20,000 | not within 20,000 | 0.0 | not yet: `" in body
     assert "from nothing, seed 1 | 10,000 | not yet | 0.0 | not yet: `python -m experiments.paneling --train nothing" in body
 
 
