@@ -13,13 +13,13 @@ from __future__ import annotations
 import csv
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Optional
+from typing import Callable, Optional
 
 import numpy as np
 
 from baselines.ppo.args import command_line
 from baselines.sac import sac
-from experiments.campaign import Run, checkpoint_of, describe, run_or_resume
+from experiments.campaign import Run, checkpoint_of, checkpoint_step, describe, run_or_resume
 from experiments.from_scratch import LEARNER, METHOD, csv_column, moving_mean, scratch_args, train as train_in_parts
 from experiments.sac_recipe import METHOD as SAC_METHOD, run_sac, sac_args
 
@@ -113,11 +113,14 @@ def samples_per_row(run: Run) -> int:
     return run.args.log_freq if isinstance(run.args, sac.Args) else run.args.num_envs * run.args.num_steps
 
 
-def train(run: Run, dry_run: bool = False, stop_at_target: bool = False) -> None:
+def train(run: Run, dry_run: bool = False, stop_at_target: bool = False,
+          snapshots: Optional[tuple[int, Callable[[int, Path], None]]] = None) -> None:
     """Print the plan and where `run` stands; unless `dry_run`, train (or resume) it to its budget and say when its
     training episodes first placed TARGET. With `stop_at_target` it trains in parts of STOP_EVERY env steps and ends
     after the first part by whose end they have: what such an experiment measures (`steps_to`) is known then, and
-    the rest of the budget would only train past it."""
+    the rest of the budget would only train past it. With `snapshots` = (every, keep) (SAC), its parts are `every`
+    env steps (a divisor of STOP_EVERY: it still stops at a STOP_EVERY mark), `keep(env steps, checkpoint)` called at
+    each part's end."""
     progress = checkpoint_of(run).parent / "progress.csv"
     print(describe(run))
     if not isinstance(run.args, sac.Args):
@@ -128,7 +131,12 @@ def train(run: Run, dry_run: bool = False, stop_at_target: bool = False) -> None
         return
     reached = lambda: progress.is_file() and steps_to(progress) is not None  # noqa: E731
     if isinstance(run.args, sac.Args):
-        run_sac(run.args, every=STOP_EVERY if stop_at_target else None, stop=reached if stop_at_target else None)
+        every, keep = snapshots or (STOP_EVERY if stop_at_target else None, None)
+        if every is not None and STOP_EVERY % every:
+            raise ValueError(f"snapshots every {every:,} env steps: use a divisor of {STOP_EVERY:,}")
+        at_mark = lambda: checkpoint_step(checkpoint_of(run)) % STOP_EVERY == 0  # noqa: E731
+        run_sac(run.args, every=every, stop=(lambda: at_mark() and reached()) if stop_at_target else None,
+                after_part=keep)
     elif not stop_at_target:
         run_or_resume(run)
     else:

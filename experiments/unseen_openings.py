@@ -8,6 +8,8 @@ held out of training, evaluated with the paper's protocol on the openings it nev
     python -m experiments.unseen_openings --imitation --dry-run  # its plan, and how far it has come
     python -m experiments.unseen_openings --imitation            # the imitation twin: demonstrations -> clone ->
                                                                  # residual PPO on the trained openings, then evaluated
+    python -m experiments.unseen_openings --seed 1 --curve       # the held-out and trained openings placed at each
+                                                                 # snapshot the run kept (30 episodes per task)
     python -m experiments.unseen_openings --report               # RESULTS' section from the evaluations
 
 The recipe is experiments/from_scratch.py's, unchanged, but for the goal openings its training envs draw (HELD_OUT
@@ -17,8 +19,11 @@ the recipe's policy meets as one (`mirror_twins`): only the middle one is unseen
 
 Its learner is the recipe's, SAC (experiments/sac_recipe.py `sac_args`, its training envs drawing TRAINED only:
 `goal_slots`), in parts of 250,000 env steps to at most sac_recipe.BUDGET, ending at the first mark by which its
-training episodes placed 90% (experiments/transfer.py `steps_to`), as the runs on paneling do. With `--learner ppo`,
-PPO's recipe (`--goal-slot-weights`) to its budget.
+training episodes placed 90% (experiments/transfer.py `steps_to`), as the runs on paneling do, its checkpoint kept
+every CURVE_EVERY env steps (runs/unseen_snapshots/<run>/, not committed) for the curve (`--curve`): what carries over
+to an opening never trained on comes and goes as the policy trains (seed 1's floor panels: 96.7% placed at the
+middle recess at 328,578 env steps, none at 500,000). With `--learner ppo`, PPO's recipe (`--goal-slot-weights`) to
+its budget.
 
 The imitation twin (`--imitation`) is the shipped imitation agent's recipe, its two commands as their records name
 them (IMITATION_CLONE: experiments/general_agent.py's direct-path demonstrations and behaviour clone;
@@ -32,6 +37,7 @@ from __future__ import annotations
 
 import json
 import shlex
+import shutil
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Optional
@@ -43,7 +49,8 @@ from baselines.ppo.args import command_line
 from baselines.ppo.evaluation import pct, training_slot_weights
 from baselines.ppo.start_states import GOAL_SLOTS
 from experiments import sac_recipe, transfer
-from experiments.campaign import Run, checkpoint_of, describe, record_checkpoint_step, run_or_resume
+from experiments.campaign import (Run, checkpoint_of, checkpoint_step, describe, record_checkpoint_step,
+                                 run_or_resume)
 from experiments.from_scratch import LEARNER, LEARNERS, METHOD, scratch_args
 from ms_construction.envs import PAPER_TASK_ENV_IDS
 from ms_construction.reporting import update_section
@@ -81,6 +88,86 @@ IMITATION_REFINE = dict(reward_mode="sparse", reward_scale=1.0, gamma=0.999, boo
                         task_weights=(0.5, 0.25, 0.25), bank_episodes=3000, bank_offsets=(-40, -25, -10),
                         validation_episodes=1000, confirmation_episodes=1000, total_timesteps=600_000)
 """experiments/refine.py's settings of the shipped imitation agent (general_agent.pt's record)."""
+
+
+SNAPSHOT_DIR = Path("runs/unseen_snapshots")
+"""a SAC run's checkpoint at every CURVE_EVERY env steps: <SNAPSHOT_DIR>/<run>/checkpoint_<env steps>.pt."""
+CURVE_EVERY = 50_000
+"""env steps between the kept snapshots (the run's checkpoint interval, where its episodes restart anyway)."""
+CURVE_EPISODES = 30
+"""episodes per task and set of openings that measure a snapshot for the curve."""
+CURVE_SEED = 500_000
+"""the curve's first seed: validation seeds (the paper's protocol keeps the test seeds, from 1,000,000)."""
+CURVE_PLOT = Path("docs/images/unseen_openings_curve.png")
+
+
+def keep_snapshot(run: Run, step: int, checkpoint: Path) -> None:
+    """The run's checkpoint at `step` env steps copied to its snapshots (`transfer.train`'s `keep`)."""
+    out = SNAPSHOT_DIR / run.name / f"checkpoint_{step}.pt"
+    out.parent.mkdir(parents=True, exist_ok=True)
+    shutil.copyfile(checkpoint, out)
+
+
+def curve_json(seed: int, step: int, seen: bool) -> Path:
+    """A SAC seed's snapshot at `step` env steps on the held-out or the trained openings (CURVE_EPISODES per task)."""
+    return EVAL_DIR / "curve" / f"unseen_sac_s{seed}_{step}_{'seen' if seen else 'unseen'}.json"
+
+
+def evaluate_curve(seed: int, workers: int = 2) -> dict[int, dict[bool, Path]]:
+    """Each snapshot the SAC seed's run kept, measured on the held-out and the trained openings (CURVE_EPISODES per
+    task from CURVE_SEED), each JSON written once; env steps -> {seen: JSON} of every snapshot measured so far."""
+    for path in sorted((SNAPSHOT_DIR / sac_run(seed).name).glob("checkpoint_*.pt")):
+        step = checkpoint_step(path)
+        for seen, slots in ((False, HELD_OUT), (True, TRAINED)):
+            out = curve_json(seed, step, seen)
+            if not out.is_file():
+                evaluation.main(evaluation.Args(checkpoint=path, all=True, episodes=CURVE_EPISODES, seed=CURVE_SEED,
+                                                goal_slots=slots, workers=workers, json=out))
+                record_checkpoint_step(out, path)
+    return curve_points(seed)
+
+
+def curve_points(seed: int) -> dict[int, dict[bool, Path]]:
+    """env steps -> {seen: JSON} of the seed's snapshots measured for the curve."""
+    points: dict[int, dict[bool, Path]] = {}
+    for path in (EVAL_DIR / "curve").glob(f"unseen_sac_s{seed}_*.json"):
+        step, which = path.stem.removeprefix(f"unseen_sac_s{seed}_").split("_")
+        points.setdefault(int(step), {})[which == "seen"] = path
+    return dict(sorted(points.items()))
+
+
+def plot_curve(out: Optional[Path] = None) -> Optional[Path]:
+    """Per task type, each SAC seed's snapshots placed on the held-out openings (solid) and the trained ones (dashed)
+    against env steps, to `out` (default CURVE_PLOT); None where no snapshot is measured."""
+    out = out or CURVE_PLOT
+    curves = {seed: curve_points(seed) for seed in SEEDS}
+    if not any(curves.values()):
+        return None
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, axes = plt.subplots(1, len(PAPER_TASK_ENV_IDS), figsize=(11, 3.4), sharey=True)
+    for ax, (kind, env) in zip(axes, PAPER_TASK_ENV_IDS.items()):
+        for (seed, points), color in zip(curves.items(), ("tab:blue", "tab:red")):
+            for seen, style in ((False, "-"), (True, "--")):
+                xs = [step for step, p in points.items() if seen in p]
+                ys = [100 * json.loads(points[x][seen].read_text())["tasks"][env]["place_success"] for x in xs]
+                if xs:
+                    ax.plot([x / 1e6 for x in xs], ys, style, marker="o", ms=3, color=color,
+                            label=f"seed {seed}, {'trained' if seen else 'held-out'} openings")
+        ax.set_title(kind)
+        ax.set_xlabel("env steps (millions)")
+        ax.set_ylim(-2, 102)
+    axes[0].set_ylabel(f"placed, % of {CURVE_EPISODES} episodes")
+    axes[-1].legend(fontsize=7, loc="center right")
+    fig.suptitle("SAC from nothing with the middle opening of every task held out", fontsize=10)
+    fig.tight_layout()
+    out.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(out, dpi=100)
+    plt.close(fig)
+    return out
 
 
 def evaluation_json(seed, seen: bool) -> Path:
@@ -164,6 +251,11 @@ def report(results: Path = Path("docs/RESULTS.md")) -> str:
             "their training never drawing the held-out goal opening of any task type; the "
             f"paper's protocol ({EVAL_STEPS:,} env steps per task, cp4, test seeds) on each set of openings.\n\n"
             f"{table}\n")
+    if any(curve_points(seed) for seed in SEEDS):
+        body += (f"\n![the openings over training]({CURVE_PLOT.relative_to('docs')})\n\n*Made by `{COMMAND} --seed S "
+                 f"--curve`: each snapshot the SAC run kept (every {CURVE_EVERY:,} env steps) on {CURVE_EPISODES} "
+                 f"episodes per task from seed {CURVE_SEED:,} (validation seeds), on the held-out openings (solid) and "
+                 "the trained ones (dashed).*\n")
     update_section(results, "unseen-openings", title="Results", body=body)
     return body
 
@@ -184,6 +276,9 @@ class Args:
     """run (or resume) the imitation twin (`imitation`) and evaluate its policy, then exit."""
     learner: str = LEARNER
     """with --seed: `sac` (the recipe's learner: `sac_run`) or `ppo` (PPO's recipe: `seed_run`)."""
+    curve: bool = False
+    """with --seed (SAC): measure each snapshot its run kept on the held-out and the trained openings
+    (`evaluate_curve`), plot every seed's (CURVE_PLOT), and exit."""
 
 
 def main(args: Args) -> None:
@@ -205,8 +300,12 @@ def main(args: Args) -> None:
         run = sac_run(args.seed)
         if args.evaluate:
             evaluate(checkpoint_of(run), f"sac_s{args.seed}")
+        elif args.curve:
+            evaluate_curve(args.seed)
+            print(f"wrote {plot_curve()}")
         else:
-            transfer.train(run, args.dry_run, stop_at_target=True)
+            transfer.train(run, args.dry_run, stop_at_target=True,
+                           snapshots=(CURVE_EVERY, lambda step, ckpt: keep_snapshot(run, step, ckpt)))
         return
     run = seed_run(args.seed, args.num_envs)
     print(describe(run))

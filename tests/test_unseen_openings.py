@@ -1,6 +1,8 @@
 """experiments/unseen_openings.py: the recipe with goal openings held out of training, and its report."""
 
+import dataclasses
 import json
+from pathlib import Path
 
 import gymnasium as gym
 import pytest
@@ -131,3 +133,47 @@ def test_the_expert_s_demonstrations_draw_the_goal_slots_their_kwargs_allow():
         drawn.add(int(collector.env.unwrapped.goal_slot[0]))
     collector.close()
     assert drawn == set(uo.TRAINED)
+
+
+def test_a_sac_run_keeps_its_snapshots_and_the_curve_measures_each_once_on_both_sets_of_openings(tmp_path,
+                                                                                                  monkeypatch):
+    """`--seed S` (SAC) keeps its checkpoint at each part's end (parts of CURVE_EVERY, still stopping only at a
+    STOP_EVERY mark by which its training episodes placed 90%); `--curve` measures each kept snapshot on the held-out
+    and the trained openings from the validation seeds, once, and plots them; the report shows the plot."""
+    from experiments import transfer
+
+    monkeypatch.setattr(uo, "SNAPSHOT_DIR", tmp_path / "snaps")
+    monkeypatch.setattr(uo, "EVAL_DIR", tmp_path / "evals")
+    monkeypatch.setattr(uo, "CURVE_PLOT", tmp_path / "docs" / "images" / "curve.png")
+    monkeypatch.setattr(transfer, "STOP_EVERY", 200)
+    monkeypatch.setattr(transfer, "steps_to", lambda progress, *a, **k: 50)  # placed 90% from the start
+    run = uo.sac_run(2)
+    run = dataclasses.replace(run, args=dataclasses.replace(
+        run.args, num_envs=1, hidden_size=32, num_layers=1, batch_size=32, learning_starts=50, buffer_size=1000,
+        utd=1.0, log_freq=50, eval_freq=0, total_timesteps=1000, checkpoint_freq=100,
+        log_dir=str(tmp_path / "campaign"), env_id="Flooring-v1"))
+    monkeypatch.setattr(uo, "sac_run", lambda seed: run)
+    with pytest.raises(ValueError, match="a divisor of 200"):
+        transfer.train(run, stop_at_target=True, snapshots=(150, None))
+    transfer.train(run, stop_at_target=True, snapshots=(100, lambda step, ckpt: uo.keep_snapshot(run, step, ckpt)))
+    kept = sorted(p.name for p in (tmp_path / "snaps" / run.name).glob("*.pt"))
+    assert kept == ["checkpoint_100.pt", "checkpoint_200.pt"], "a snapshot per part; no stop at 100, between marks"
+    measured = []
+
+    def fake_evaluation(args):
+        measured.append((args.checkpoint.name, args.goal_slots, args.episodes, args.seed))
+        placed = 0.2 if args.goal_slots == uo.HELD_OUT else 0.9
+        args.json.parent.mkdir(parents=True, exist_ok=True)
+        args.json.write_text(json.dumps({"tasks": {e: dict(place_success=placed) for e in TASK_ENV_IDS.values()}}))
+
+    monkeypatch.setattr(uo.evaluation, "main", fake_evaluation)
+    uo.main(uo.Args(seed=2, curve=True))
+    assert measured == [(f"checkpoint_{s}.pt", slots, uo.CURVE_EPISODES, uo.CURVE_SEED)
+                        for s in (100, 200) for slots in (uo.HELD_OUT, uo.TRAINED)]
+    points = uo.curve_points(2)
+    assert list(points) == [100, 200] and json.loads(points[200][False].read_text())["checkpoint_step"] == 200
+    uo.main(uo.Args(seed=2, curve=True))
+    assert len(measured) == 4, "a snapshot measured is not measured again"
+    assert uo.CURVE_PLOT.is_file()
+    monkeypatch.setattr(uo, "CURVE_PLOT", Path("docs/images/unseen_openings_curve.png"))
+    assert "![the openings over training](images/unseen_openings_curve.png)" in uo.report(tmp_path / "RESULTS.md")
