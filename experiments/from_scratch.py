@@ -67,8 +67,8 @@ from experiments import sac_recipe
 from experiments.campaign import (CAMPAIGN_DIR, SHIPPED_DIR, Run, checkpoint_of, describe, policy_only, ship,
                                  training_wall_s)
 from experiments.expert_modes import placed_per_slot
-from experiments.refine import (CONFIRMATION_SEED, TIEBREAK_SEED, VALIDATION_SEED, best_snapshot, ranked_snapshots,
-                               validate)
+from experiments.refine import (CONFIRMATION_SEED, TIEBREAK_SEED, VALIDATION_SEED, best_snapshot, placed_score,
+                               ranked_snapshots, validate)
 from ms_construction.parameters import PAPER_KINDS
 from ms_construction.reporting import update_section
 from ms_construction.curriculum import FINAL_STAGE
@@ -432,11 +432,8 @@ def break_tie(confirmed: dict, candidate: Callable[[object], Path], out: Callabl
     are tied at its top those only validated again on TIEBREAK_EPISODES per task from TIEBREAK_SEED (`candidate(key)`:
     the policy, `out(key)`: its JSON) and ranked on the confirmation's and these episodes pooled, a tie still going
     to the first in `confirmed`'s order. (the best key, the tied keys' pooled placed per task)."""
-    def score(placed: dict) -> tuple:
-        return min(placed.values()), sum(placed.values())
-
-    top = score(confirmed[best_snapshot(confirmed)])
-    tied = [key for key in confirmed if score(confirmed[key]) == top]
+    top = placed_score(confirmed[best_snapshot(confirmed)])
+    tied = [key for key in confirmed if placed_score(confirmed[key]) == top]
     if len(tied) < 2:
         return tied[0], {}
     pooled = {}
@@ -631,7 +628,7 @@ def ship_seeds(shipped: Path = SHIPPED, learner: str = LEARNER) -> Optional[Path
     recipe = ("sac_args of experiments/sac_recipe.py" if learner == "sac" else "scratch_args of experiments/from_scratch.py")
     tie = (f"; tied, then on all {CONFIRM_EPISODES + TIEBREAK_EPISODES}: "
            + ", ".join(f"seed {s} {min(c.values()):.3f}" for s, c in pooled.items())
-           + (", a tie to the first" if len({(min(c.values()), sum(c.values())) for c in pooled.values()}) == 1 else "")) if pooled else ""
+           + (", a tie to the first" if len({placed_score(c) for c in pooled.values()}) == 1 else "")) if pooled else ""
     chosen = (f"seed {seed} of {len(SEEDS)} (the better on validation: placed on its worst task "
               + ", ".join(f"seed {s} {min(c.values()):.2f}" for s, c in confirmed.items())
               + f" of {CONFIRM_EPISODES}{tie}), its snapshot at {step:,} env steps chosen by the snapshot rule; the "

@@ -42,9 +42,9 @@ from baselines.ppo.evaluation import episode_job, pct, wilson
 from experiments import transfer
 from baselines.ppo.checkpoints import load_checkpoint
 from experiments.campaign import Run, checkpoint_of, policy_only
+from ms_construction.assets import sha256
 from ms_construction.curriculum import FINAL_STAGE
 from ms_construction.envs import PAPER_TASK_ENV_IDS
-from ms_construction.assets import sha256
 from ms_construction.reporting import update_section
 
 AGENTS = {

@@ -234,10 +234,15 @@ def shipped_refinement(clone: Path) -> bool:
     return SHIPPED.is_file() and not (clone.is_file() and SHIPPED.read_bytes() == clone.read_bytes())
 
 
+def placed_score(placed: dict) -> tuple:
+    """How a snapshot's placed per task ranks: most placed on the worst task, then on average."""
+    return min(placed.values()), sum(placed.values())
+
+
 def ranked_snapshots(validated: dict) -> list:
-    """The snapshots (their env steps), best first: most placed on the worst task, then on average; ties keep
-    `validated`'s order (the recipe's screenings are ordered by env steps: a tie there goes to the earliest)."""
-    return sorted(validated, key=lambda k: (min(validated[k].values()), sum(validated[k].values())), reverse=True)
+    """The snapshots (their env steps), best first (`placed_score`); ties keep `validated`'s order (the recipe's
+    screenings are ordered by env steps: a tie there goes to the earliest)."""
+    return sorted(validated, key=lambda k: placed_score(validated[k]), reverse=True)
 
 
 def best_snapshot(validated: dict) -> int:

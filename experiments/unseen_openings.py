@@ -116,7 +116,8 @@ def curve_json(seed: int, step: int, seen: bool) -> Path:
 def evaluate_curve(seed: int, workers: int = 2) -> dict[int, dict[bool, Path]]:
     """Each snapshot the SAC seed's run kept, measured on the held-out and the trained openings (CURVE_EPISODES per
     task from CURVE_SEED), each JSON written once; env steps -> {seen: JSON} of every snapshot measured so far."""
-    for path in sorted((SNAPSHOT_DIR / sac_run(seed).name).glob("checkpoint_*.pt")):
+    for path in sorted((SNAPSHOT_DIR / sac_run(seed).name).glob("checkpoint_*.pt"),
+                       key=lambda p: int(p.stem.split("_")[1])):
         step = checkpoint_step(path)
         for seen, slots in ((False, HELD_OUT), (True, TRAINED)):
             out = curve_json(seed, step, seen)
