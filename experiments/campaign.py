@@ -79,7 +79,10 @@ def describe(run: Run) -> str:
     a, ckpt = run.args, checkpoint_of(run)
     done = checkpoint_step(ckpt) if ckpt.is_file() else 0
     if isinstance(a, sac.Args):
-        return (f"{run.name}: {run.what}; {a.env_id}, {a.total_timesteps:,} env steps, seed {a.seed}, {a.num_envs} envs; "
+        stages = (f", stages {' '.join(a.curriculum)} ({a.stage_timesteps:,} env steps each)"
+                  if len(a.curriculum) > 1 else "")
+        return (f"{run.name}: {run.what}; {a.env_id}{stages}, {a.total_timesteps:,} env steps, seed {a.seed}, "
+                f"{a.num_envs} envs; "
                 f"{'resumes at step ' + format(done, ',') if done else 'starts fresh'} ({ckpt})")
     return (f"{run.name}: {run.what}; {a.env_id}, stages {' '.join(a.stages.curriculum)} ({a.stages.stage_timesteps:,} steps each), "
             f"{a.total_timesteps:,} steps, curiosity {a.icm.curiosity}, seed {a.seed}, {a.num_envs} envs x {a.num_steps} steps "

@@ -92,6 +92,41 @@ def test_a_run_resumed_halfway_ends_with_the_uninterrupted_run_s_weights(tmp_pat
     assert [int(r["global_step"]) for r in rows] == list(range(100, 601, 100)), "the resumed run appends its rows"
 
 
+def test_table_i_s_stages_follow_env_steps_in_the_envs_and_the_csv_and_a_resume_mid_curriculum_is_exact(tmp_path,
+                                                                                                       monkeypatch):
+    """--curriculum cp1 cp2 cp4 with 200-step stages: the envs (training and evaluation) are set to each stage where
+    the run's env steps enter it, progress.csv names the stage of each row, and a run resumed at 300 (inside cp2)
+    is set to cp2 at once and ends with the uninterrupted run's weights."""
+    calls = []
+    call = sac.CPUVectorEnv.call
+
+    def spy(self, name, *args, **kwargs):
+        if name == "set_curriculum_stage":
+            calls.append((id(self), args[0]))
+        return call(self, name, *args, **kwargs)
+
+    monkeypatch.setattr(sac.CPUVectorEnv, "call", spy)
+    common = dict(checkpoint_freq=300, curriculum=("cp1", "cp2", "cp4"), stage_timesteps=200, eval_freq=300,
+                  num_eval_envs=1, num_eval_steps=5)
+    u = sac.setup(tiny_args(tmp_path, total_timesteps=600, exp_name="u", **common))
+    sac.train(u)
+    stages = [stage for _, stage in calls]
+    assert stages == ["cp1", "cp1", "cp2", "cp2", "cp4", "cp4"], "training and evaluation envs, at 0, 200 and 400"
+    assert len({env for env, _ in calls}) == 2
+    rows = read_csv(tmp_path / "u" / "progress.csv")
+    assert [r["stage"] for r in rows] == ["cp1", "cp1", "cp2", "cp2", "cp4", "cp4"]
+    assert [sac.stage_at(u.args, s) for s in (0, 199, 200, 399, 400, 10_000)] == ["cp1", "cp1", "cp2", "cp2", "cp4",
+                                                                                   "cp4"]
+    i = sac.setup(tiny_args(tmp_path, total_timesteps=300, exp_name="i", **common))
+    sac.train(i)
+    calls.clear()
+    resumed = sac.setup(sac.Args(resume=str(tmp_path / "i" / "checkpoint.pt"), extend=True, total_timesteps=600))
+    sac.train(resumed)
+    assert [stage for _, stage in calls] == ["cp2", "cp2", "cp4", "cp4"]
+    wu, wi = weights(u), weights(resumed)
+    assert not [k for k in wu if not torch.equal(wu[k], wi[k])], "the resumed run is the uninterrupted one"
+
+
 def test_resume_refuses_a_checkpoint_without_its_buffer_and_a_ppo_checkpoint(tmp_path):
     run = sac.setup(tiny_args(tmp_path, total_timesteps=100, exp_name="b", learning_starts=50))
     sac.train(run)
@@ -123,6 +158,9 @@ def test_resume_refuses_a_checkpoint_without_its_buffer_and_a_ppo_checkpoint(tmp
     (dict(log_std_min=2.0), "--log-std-min"),
     (dict(goal_slots=(0, 3)), "--goal-slots 0 3: give distinct indices in 0..2"),
     (dict(goal_slots=(1, 1)), "--goal-slots 1 1"),
+    (dict(curriculum=("cp1", "cp5")), "--curriculum cp1 cp5: give stages among cp1, cp2, cp3, cp4"),
+    (dict(curriculum=()), "--curriculum"),
+    (dict(stage_timesteps=0), "--stage-timesteps 0"),
 ])
 def test_bad_args_are_refused_with_a_message(change, message):
     with pytest.raises(SystemExit, match=message):

@@ -72,7 +72,7 @@ from baselines.ppo.networks import RunningMeanStd, layer_init, mlp, rotation_fea
 from baselines.ppo.ppo import EPISODE_STATS
 from baselines.ppo.start_states import GOAL_SLOTS, widen_near_goal
 from baselines.ppo.update import adam
-from ms_construction.curriculum import FINAL_STAGE
+from ms_construction.curriculum import FINAL_STAGE, STAGE_NAMES
 from ms_construction.envs import ENV_IDS
 from ms_construction.envs.start_states import NearGoalTimeLimit
 from ms_construction.envs.state_layout import STATE_QUATERNION_STARTS
@@ -139,6 +139,14 @@ class Args:
     """training envs, one per process (physx_cpu): one per core of the 2-core machine."""
     total_timesteps: int = 2_000_000
     """env steps of training (all envs together)."""
+
+    # ---- Table I's tolerances ----
+    curriculum: tuple[str, ...] = (FINAL_STAGE,)
+    """the tolerance stages (Table I: cp1 .. cp4) the training and evaluation envs go through in order,
+    `stage_timesteps` env steps each, the last to the end (default: cp4, the tasks' own, from the first step). The
+    stage moves on by env steps alone, as the paper's did; the replay buffer keeps what earlier stages paid."""
+    stage_timesteps: int = 500_000
+    """env steps of each stage of `curriculum` but the last."""
 
     # ---- where training episodes start (PPO's recipe) ----
     near_goal_share: float = 0.8
@@ -246,7 +254,7 @@ CSV_FIELDS = [
 ]
 """progress.csv's columns: ppo.py's (the same names, so experiments/from_scratch.py's and scripts/plot_training.py's
 readers read them; `place_success` is the place success of the training episodes that ended since the last row,
-`stage` always cp4, the tasks' default), then SAC's: `sps` env steps per second of wall time since the last row,
+`stage` the tolerance stage of --curriculum, cp4 by default), then SAC's: `sps` env steps per second of wall time since the last row,
 `wall_s` the run's wall time so far (resumes added up), `env_s`, `update_s`, `eval_s`, `checkpoint_s` its parts in
 env steps (with the actor's actions and the buffer), gradient steps, evaluations and checkpoints, `update_share`
 update_s / wall_s, `updates` gradient steps so far, `buffer_fill` transitions in the buffer; the losses are means
@@ -307,6 +315,10 @@ def validate(args: Args) -> None:
         raise SystemExit(f"--near-goal-step {args.near_goal_step} must lie in (0, 1]")
     if args.near_goal_max_steps is not None and args.near_goal_max_steps < 1:
         raise SystemExit(f"--near-goal-max-steps {args.near_goal_max_steps}: a positive step count or None")
+    if not args.curriculum or any(stage not in STAGE_NAMES for stage in args.curriculum):
+        raise SystemExit(f"--curriculum {' '.join(args.curriculum)}: give stages among {', '.join(STAGE_NAMES)}")
+    if args.stage_timesteps < 1:
+        raise SystemExit(f"--stage-timesteps {args.stage_timesteps} must be positive")
     if not 0 < args.obstacle_share <= 1 or (args.obstacle_share < 1 and args.obstacles is None):
         raise SystemExit(f"--obstacle-share {args.obstacle_share}: the share of training episodes with obstacles, in "
                          "(0, 1], below 1 only with --obstacles static or moving")
@@ -334,6 +346,12 @@ def make_envs(args: Args, num_envs: int, train: bool = True) -> CPUVectorEnv:
     --near-goal-max-steps (NearGoalTimeLimit; the starts themselves are set by `set_near_goal_starts`)."""
     wrappers = (NearGoalTimeLimit,) if train and args.near_goal_share > 0 and args.near_goal_max_steps else ()
     return CPUVectorEnv(args.env_id, num_envs, env_kwargs(args, train), device="cpu", wrappers=wrappers)
+
+
+def stage_at(args: Args, global_step: int) -> str:
+    """The tolerance stage of --curriculum the run is in at `global_step`: by env steps alone, so a resumed run is in
+    the stage the uninterrupted one was."""
+    return args.curriculum[min(global_step // args.stage_timesteps, len(args.curriculum) - 1)]
 
 
 def set_near_goal_starts(args: Args, envs: CPUVectorEnv, progress: Progress) -> None:
@@ -800,12 +818,13 @@ def episode_columns(args: Args, progress: Progress, episodes: dict) -> dict:
     return row
 
 
-def progress_row(run: Run, since: dict, episodes: dict, losses: dict) -> dict:
+def progress_row(run: Run, since: dict, episodes: dict, losses: dict, stage: str) -> dict:
     """progress.csv's row: where the run is, its pace since the last row (`since`: that row's step and wall time) and
-    where its wall time went, the means of the losses and the episodes' columns since then."""
+    where its wall time went, the means of the losses and the episodes' columns since then (at `stage`'s
+    tolerances, the stage the run is in)."""
     progress, clock = run.progress, run.clock
     sps = (progress.global_step - since["step"]) / max(clock.wall_s - since["wall"], 1e-9)
-    row = dict(global_step=progress.global_step, iteration=progress.iteration, stage=FINAL_STAGE,
+    row = dict(global_step=progress.global_step, iteration=progress.iteration, stage=stage,
                episodes=len(episodes["success"]), updates=clock.updates, buffer_fill=run.buffer.count,
                sps=round(sps, 1), update_share=round(clock.update_s / max(clock.wall_s, 1e-9), 3))
     row.update({k: round(getattr(clock, k), 2) for k in ("wall_s", "env_s", "update_s", "eval_s", "checkpoint_s")})
@@ -822,7 +841,8 @@ def crossed(step: int, before: int, every: int) -> bool:
 def train(run: Run) -> Progress:
     """SAC from where `run` is to --total-timesteps; where the run ended.
 
-    Each iteration: `steps_per_env_per_iteration` steps of every env, then the gradient steps due (`utd` per env step
+    Each iteration: the envs in the tolerance stage of --curriculum for its env steps (`stage_at`), then
+    `steps_per_env_per_iteration` steps of every env, then the gradient steps due (`utd` per env step
     since --learning-starts), the start-state curriculum, a progress.csv row every --log-freq env steps, an
     evaluation every --eval-freq, a checkpoint every --checkpoint-freq (where the envs restart their episodes).
     Ctrl-C or SIGTERM ends the run after the iteration in progress with a checkpoint (SystemExit, status 128 + the
@@ -836,6 +856,10 @@ def train(run: Run) -> Progress:
             progress.near_goal_recent = [[] for _ in ELEMENT_KINDS]
         set_near_goal_starts(args, envs, progress)
     log = CSVLog(run.path.with_name("progress.csv"), progress.global_step if args.resume else None, fields=CSV_FIELDS)
+    stage = stage_at(args, progress.global_step)
+    for e in (envs, eval_envs):
+        if e is not None:
+            e.call("set_curriculum_stage", stage)
 
     stop: list[int] = []
 
@@ -854,6 +878,11 @@ def train(run: Run) -> Progress:
         while progress.global_step < args.total_timesteps and not stop:
             progress.iteration += 1
             before = progress.global_step
+            if stage_at(args, before) != stage:
+                stage = stage_at(args, before)
+                for e in (envs, eval_envs):
+                    if e is not None:
+                        e.call("set_curriculum_stage", stage)
             t0 = time.perf_counter()
             new = defaultdict(list)
             torch.set_num_threads(1)  # env 0 runs in this process: its small tensor ops gain nothing from threads
@@ -883,7 +912,7 @@ def train(run: Run) -> Progress:
             if crossed(progress.global_step, before, args.log_freq) or done or row:
                 t = time.perf_counter()
                 clock.wall_s += t - t2
-                row.update(progress_row(run, logged, episodes, losses))
+                row.update(progress_row(run, logged, episodes, losses, stage))
                 log.append(row)
                 bar.set_postfix(sps=row["sps"], updates=f"{row['update_share']:.0%}",
                                 place=row.get("place_success", float("nan")),
