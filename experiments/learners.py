@@ -56,6 +56,8 @@ MOVING_WINDOW = 100_000
 """env steps over which the training episodes' place success is averaged."""
 CURVES = Path("docs/images/learners_curves.png")
 COMMAND = "python -m experiments.learners"
+PAGE = Path("docs/experiments/learners.md")
+"""the experiment's page: every evaluation with the paper's protocol goes there (`evaluations_table`)."""
 EVAL_DIR = Path("docs/data/learners")
 """the curiosity arm's evaluation with the paper's protocol (`--evaluate icm`): icm_s<seed>_eval50k.json (the PPO
 and SAC arms' are the recipe's runs' own, in experiments/from_scratch.py's SEED_EVAL_DIR)."""
@@ -133,6 +135,17 @@ def met(tasks: dict[str, dict]) -> bool:
     return all(r["place_success"] >= TARGET and r["pick_success"] >= PICK_TARGET for r in tasks.values())
 
 
+def first_met(arm: str, seed: int, whole: Optional[dict], eval_dir: Path = EVAL_DIR) -> str:
+    """The first of an arm's evaluations with the paper's protocol on `seed` that meets the target: its env steps
+    and the training wall time its run had taken by then (from its whole curve `whole`), or why there is none."""
+    done = evaluated(arm, seed, eval_dir)
+    for step, data in done:
+        if met(evaluation.task_results(data)):
+            hours = hours_at(whole, step) if whole is not None else None
+            return f"{step:,}" + ("" if hours is None else f" ({hours:.1f} h)")
+    return f"none of {len(done)}" if done else "not evaluated"
+
+
 def evaluations_table(eval_dir: Path = EVAL_DIR, log_dir: Path = CAMPAIGN_DIR) -> list[str]:
     """A row per evaluation with the paper's protocol of an arm on a seed (`evaluated`), with the training wall time
     its run had taken by then; nothing where none is."""
@@ -188,7 +201,10 @@ def first_reaching(c: dict, axis: str, level: float) -> Optional[float]:
     return float(c[axis][hit[0]]) if len(hit) else None
 
 
-def report(results: Path = Path("docs/RESULTS.md"), log_dir: Path = CAMPAIGN_DIR, eval_dir: Path = EVAL_DIR) -> str:
+def report(results: Path = Path("docs/RESULTS.md"), log_dir: Path = CAMPAIGN_DIR, eval_dir: Path = EVAL_DIR,
+           page: Path = PAGE) -> str:
+    """RESULTS' section `learners` (each arm's training against env steps and wall time, its first evaluation that
+    met the target, the curves) and on `page` every evaluation with the paper's protocol; the section's body."""
     import matplotlib
 
     matplotlib.use("Agg")
@@ -199,15 +215,16 @@ def report(results: Path = Path("docs/RESULTS.md"), log_dir: Path = CAMPAIGN_DIR
     fmt = lambda v, f="{:.0%}": "-" if v is None else f.format(v)  # noqa: E731
     lines = [f"| learner | seed | env steps done (of {BUDGET:,}) | training wall time (h) | worst task placed at 1M / "
              f"2M env steps | at {' / '.join(map(str, AT_HOURS))} h of training | env steps to 50% / 90% (its whole run) | "
-             f"wall time to 50% / 90% (h) | each task placed at its last env step ({' / '.join(PAPER_KINDS)}) |",
-             "|---|---|---|---|---|---|---|---|---|"]
+             f"wall time to 50% / 90% (h) | each task placed at its last env step ({' / '.join(PAPER_KINDS)}) | "
+             f"first evaluated snapshot meeting the target: env steps (training wall time) |",
+             "|---|---|---|---|---|---|---|---|---|---|"]
     fig, axes = plt.subplots(1, 2, figsize=(10, 3.8), sharey=True)
     for colour, (arm, label) in enumerate(ARMS.items()):
         for seed in PLANNED[arm]:
             if (arm, seed) not in curves:
                 command = (seed_run(seed, learner=arm).command if arm in from_scratch.LEARNERS
                            else f"{COMMAND} --arm {arm} --seed {seed}")
-                lines.append(f"| {label} | {seed} | not run: `{command}` | | | | | | |")
+                lines.append(f"| {label} | {seed} | not run: `{command}` | | | | | | | |")
                 continue
             c, whole = curves[arm, seed], curve(progress_csv(arm, log_dir, seed), until=None)
             lines.append(f"| {label} | {seed} | {int(c['steps'][-1]):,} | {c['hours'][-1]:.1f} | "
@@ -215,7 +232,8 @@ def report(results: Path = Path("docs/RESULTS.md"), log_dir: Path = CAMPAIGN_DIR
                          + " / ".join(fmt(value_at(c, "hours", h)) for h in AT_HOURS)
                          + " | " + " / ".join(fmt(first_reaching(whole, "steps", v), "{:,.0f}") for v in LEVELS)
                          + " | " + " / ".join(fmt(first_reaching(whole, "hours", v), "{:.1f}") for v in LEVELS) + " | "
-                         + " / ".join(fmt(None if np.isnan(v) else float(v)) for v in c["last"].values()) + " |")
+                         + " / ".join(fmt(None if np.isnan(v) else float(v)) for v in c["last"].values())
+                         + f" | {first_met(arm, seed, whole, eval_dir)} |")
             for ax, axis, scale in ((axes[0], "steps", 1e6), (axes[1], "hours", 1.0)):
                 ax.plot(c[axis] / scale, 100 * c["worst"], color=f"C{colour}", linestyle=("-", "--")[seed != 1],
                         label=f"{label}, seed {seed}")
@@ -240,10 +258,15 @@ def report(results: Path = Path("docs/RESULTS.md"), log_dir: Path = CAMPAIGN_DIR
         "## Which learner, and curiosity", "",
         f"Commands: `{from_scratch.COMMAND} --seed S [--learner ppo]` (the SAC and PPO arms on a seed are the "
         f"recipe's runs on it), `{COMMAND} --arm icm`, `{COMMAND} --report`. Each from nothing on the same envs, dense reward, near-goal starts and seeds; "
-        "the training episodes from ordinary resets, the worst of the three task types placed.", "", *lines,
-        *evaluations_table(eval_dir, log_dir), "",
+        "the training episodes from ordinary resets, the worst of the three task types placed; the target: every task "
+        f"placed >= {TARGET:.0%} and picked >= {PICK_TARGET:.0%} with the paper's protocol (every evaluation: "
+        f"[the experiment page]({Path(*page.parts[1:])}#every-evaluation-with-the-papers-protocol)).", "", *lines, "",
         f"![learners]({Path(*CURVES.parts[1:])})"])
     update_section(results, "learners", body, "Results")
+    table = evaluations_table(eval_dir, log_dir)
+    update_section(page, "learners-evaluations", "\n".join(
+        ["## Every evaluation with the paper's protocol", "", f"Command: `{COMMAND} --report`.", *table]
+        if table else ["## Every evaluation with the paper's protocol", "", "None yet."]), "Which learner")
     return body
 
 

@@ -51,14 +51,15 @@ def test_the_report_rows_each_arm_and_says_how_to_run_those_not_run(tmp_path, mo
     log_dir = tmp_path / "campaign"
     # the PPO arm: nothing placed for 60 rows of 2,000 env steps (4 s each), then 90% of its worst task
     _write(ln.progress_csv("ppo", log_dir), _rows(100, lambda i: 0.0 if i < 60 else 0.9))
-    body = ln.report(tmp_path / "RESULTS.md", log_dir=log_dir)
+    body = ln.report(tmp_path / "RESULTS.md", log_dir=log_dir, page=tmp_path / "page.md")
     row = next(line for line in body.splitlines() if line.startswith("| PPO (the recipe"))
     # its worst task's mean over the last 50 rows (100,000 env steps) first reaches 50% 28 rows after the jump: at
     # 176,000 env steps, 88 rows of 4 s; 90% it would reach only 50 rows after the jump, beyond the run
     assert row.startswith("| PPO (the recipe's run) | 1 | 200,000 | 0.1 | - / - | - / - / - |")  # 0.1 h: short of 0.5
     # each task's mean over its last 50 rows (100,000 env steps), 40 of them after the jump: ceiling 0.9 x 40 / 50,
     # window (0.1 x 10 + 1.0 x 40) / 50, flooring 1.0
-    assert row.endswith("| 176,000 / - | 0.1 / - | 72% / 82% / 100% |")
+    assert row.endswith("| 176,000 / - | 0.1 / - | 72% / 82% / 100% | not evaluated |")
+    assert "None yet." in (tmp_path / "page.md").read_text(), "no evaluation: the page's table says so"
     # each planned run not yet run says how: the SAC and PPO arms are the recipe's runs (SAC its learner)
     for seed, command in ((2, f"{from_scratch.COMMAND} --seed 2 --learner ppo"), (1, f"{from_scratch.COMMAND} --seed 1"),
                           (2, f"{from_scratch.COMMAND} --seed 2"), (1, f"{ln.COMMAND} --arm icm --seed 1")):
@@ -69,7 +70,7 @@ def test_the_report_rows_each_arm_and_says_how_to_run_those_not_run(tmp_path, mo
     sac_checkpoint = ln.arm_checkpoint("sac", log_dir, seed=2)
     sac_checkpoint.parent.mkdir(parents=True)
     torch.save({"clock": {"refilled_at": [1_250_000]}}, sac_checkpoint)  # the part of a SAC checkpoint read here
-    body = ln.report(tmp_path / "RESULTS.md", log_dir=log_dir)
+    body = ln.report(tmp_path / "RESULTS.md", log_dir=log_dir, page=tmp_path / "page.md")
     assert "SAC seed 2's replay buffer was lost between sessions and refilled by its actor at 1,250,000 env steps" \
         in body, "an inexact resume is said"
 
@@ -121,6 +122,14 @@ def test_each_paper_protocol_evaluation_is_rowed_with_its_wall_time_and_whether_
     assert "| PPO (the recipe's run) | 1 | 3,000,000 | - | 99.0 [94.0, 99.0] | 95.0 [90.0, 95.0] | 99.0 [94.0, 99.0] | " \
            "no |" in table, "picked 90%: short of the target; no progress.csv: no wall time"
     assert "| PPO + ICM (the recipe with curiosity) | 1 | 40 | - | 50.0 [45.0, 50.0] |" in table
+    sac_curve = ln.curve(ln.progress_csv("sac", log_dir, seed=2), until=None)
+    assert ln.first_met("sac", 2, sac_curve, tmp_path) == "350,000 (1.8 h)"
+    assert ln.first_met("ppo", 1, None, tmp_path) == "none of 1" and ln.first_met("ppo", 2, None, tmp_path) == \
+        "not evaluated"
+    monkeypatch.setattr(ln, "CURVES", tmp_path / "images" / "learners.png")
+    body = ln.report(tmp_path / "RESULTS.md", log_dir=log_dir, eval_dir=tmp_path, page=tmp_path / "page.md")
+    assert "| 350,000 (1.8 h) |" in body and "yes |" not in body, "RESULTS: the first met, not every evaluation"
+    assert table in (tmp_path / "page.md").read_text(), "every evaluation on the experiment's page"
     with pytest.raises(SystemExit, match="no checkpoint at .*--arm icm --seed 1"):
         ln.evaluate_arm("icm", log_dir=tmp_path)
     with pytest.raises(SystemExit, match="use one of ppo, icm, sac"):
