@@ -114,19 +114,24 @@ def samples_per_row(run: Run) -> int:
 
 
 def train(run: Run, dry_run: bool = False, stop_at_target: bool = False,
-          snapshots: Optional[tuple[int, Callable[[int, Path], None]]] = None) -> None:
+          snapshots: Optional[tuple[int, Callable[[int, Path], None]]] = None, until: int = 0) -> None:
     """Print the plan and where `run` stands; unless `dry_run`, train (or resume) it to its budget and say when its
     training episodes first placed TARGET. With `stop_at_target` it trains in parts of STOP_EVERY env steps and ends
     after the first part by whose end they have: what such an experiment measures (`steps_to`) is known then, and
     the rest of the budget would only train past it. With `snapshots` = (every, keep) (SAC), its parts are `every`
     env steps (a divisor of STOP_EVERY: it still stops at a STOP_EVERY mark), `keep(env steps, checkpoint)` called at
-    each part's end."""
+    each part's end. With `until` (SAC), it stops at no mark before `until` env steps: a run that reached its target
+    goes on to see whether what it measures stays."""
+    if until and (until % STOP_EVERY or until > run.args.total_timesteps):
+        raise SystemExit(f"--until {until:,}: a multiple of {STOP_EVERY:,} env steps, at most the run's budget "
+                         f"({run.args.total_timesteps:,})")
     progress = checkpoint_of(run).parent / "progress.csv"
     print(describe(run))
     if not isinstance(run.args, sac.Args):
         print("as one ppo.py command: python baselines/ppo/ppo.py " + " ".join(command_line(run.args)))
     if stop_at_target:
-        print(f"it stops at the first {STOP_EVERY:,}-env-step mark by which its training episodes placed >= {TARGET:.0%}")
+        print(f"it stops at the first {STOP_EVERY:,}-env-step mark" + (f" from {until:,} on" if until else "")
+              + f" by which its training episodes placed >= {TARGET:.0%}")
     if dry_run:
         return
     reached = lambda: progress.is_file() and steps_to(progress) is not None  # noqa: E731
@@ -134,7 +139,7 @@ def train(run: Run, dry_run: bool = False, stop_at_target: bool = False,
         every, keep = snapshots or (STOP_EVERY if stop_at_target else None, None)
         if every is not None and STOP_EVERY % every:
             raise ValueError(f"snapshots every {every:,} env steps: use a divisor of {STOP_EVERY:,}")
-        at_mark = lambda: checkpoint_step(checkpoint_of(run)) % STOP_EVERY == 0  # noqa: E731
+        at_mark = lambda: (step := checkpoint_step(checkpoint_of(run))) % STOP_EVERY == 0 and step >= until  # noqa: E731
         run_sac(run.args, every=every, stop=(lambda: at_mark() and reached()) if stop_at_target else None,
                 after_part=keep)
     elif not stop_at_target:

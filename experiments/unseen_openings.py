@@ -3,6 +3,7 @@ held out of training, evaluated with the paper's protocol on the openings it nev
 
     python -m experiments.unseen_openings --seed 1 --dry-run     # the plan, and where that seed's run stands
     python -m experiments.unseen_openings --seed 1               # train (or resume) the recipe (SAC), to 90% placed
+    python -m experiments.unseen_openings --seed 2 --until 500000    # on past that, to 500,000 env steps
     python -m experiments.unseen_openings --seed 1 --evaluate    # the paper's protocol, unseen and seen openings
     python -m experiments.unseen_openings --seed 1 --learner ppo # PPO's recipe instead, to its budget
     python -m experiments.unseen_openings --imitation --dry-run  # its plan, and how far it has come
@@ -177,11 +178,27 @@ def evaluation_json(seed, seen: bool) -> Path:
     return EVAL_DIR / f"unseen_{'s' if isinstance(seed, int) else ''}{seed}_{'seen' if seen else 'unseen'}.json"
 
 
+def earlier_json(latest: Path, step: int) -> Path:
+    """Where a run's evaluation at `step` goes once a later one of the same run takes `latest`'s place."""
+    return latest.with_name(f"{latest.stem}_{step}.json")
+
+
+def evaluations_of(seed, seen: bool) -> list[dict]:
+    """A run's evaluations on the unseen or the seen openings, the earlier ones (`earlier_json`) then the latest."""
+    latest = evaluation_json(seed, seen)
+    paths = sorted(latest.parent.glob(f"{latest.stem}_*.json"), key=lambda p: int(p.stem.rsplit("_", 1)[1]))
+    return [json.loads(p.read_text()) for p in [*paths, latest] if p.is_file()]
+
+
 def evaluate(checkpoint: Path, seed, steps: int = EVAL_STEPS, workers: int = 2) -> None:
     """The paper's protocol (test seeds, `steps` per task, cp4) on the held-out openings, then on the trained ones;
-    each JSON records the env steps the checkpoint had trained (`checkpoint_step`) where the checkpoint says."""
+    each JSON records the env steps the checkpoint had trained (`checkpoint_step`) where the checkpoint says. An
+    evaluation of the run at other env steps is kept beside it (`earlier_json`)."""
     for seen, slots in ((False, HELD_OUT), (True, TRAINED)):
         out = evaluation_json(seed, seen)
+        if out.is_file() and (before := json.loads(out.read_text()).get("checkpoint_step")) is not None \
+                and before != checkpoint_step(checkpoint):
+            out.rename(earlier_json(out, before))
         evaluation.main(evaluation.Args(checkpoint=checkpoint, all=True, steps=steps, goal_slots=slots,
                                         workers=workers, json=out))
         record_checkpoint_step(out, checkpoint)
@@ -234,11 +251,8 @@ def report(results: Path = Path("docs/RESULTS.md")) -> str:
     lines = ["| run | its env steps | openings | " + " | ".join(f"{k}: placed % [95% CI]" for k in PAPER_TASK_ENV_IDS)
              + " |", "|---|---|---|" + "---|" * len(PAPER_TASK_ENV_IDS)]
     for seed in EVALUATED:
-        for seen in (False, True):
-            path = evaluation_json(seed, seen)
-            if not path.is_file():
-                continue
-            data = json.loads(path.read_text())
+        rows = [(d.get("checkpoint_step", 0), seen, d) for seen in (False, True) for d in evaluations_of(seed, seen)]
+        for _, seen, data in sorted(rows, key=lambda r: r[:2]):  # a row per evaluation, in order of env steps
             tasks = data["tasks"]
             cells = [pct(tasks[e]["place_success"], tasks[e]["place_success_ci95"]) for e in PAPER_TASK_ENV_IDS.values()]
             slots = ", ".join(map(str, TRAINED if seen else HELD_OUT))
@@ -277,6 +291,9 @@ class Args:
     """run (or resume) the imitation twin (`imitation`) and evaluate its policy, then exit."""
     learner: str = LEARNER
     """with --seed: `sac` (the recipe's learner: `sac_run`) or `ppo` (PPO's recipe: `seed_run`)."""
+    until: Optional[int] = None
+    """with --seed (SAC): go on past the first mark by which its training episodes placed 90%, to this many env steps
+    (a multiple of 250,000): whether what carries over stays (seed 1's floor panels did not)."""
     curve: bool = False
     """with --seed (SAC): measure each snapshot its run kept on the held-out and the trained openings
     (`evaluate_curve`), plot every seed's (CURVE_PLOT), and exit."""
@@ -305,7 +322,7 @@ def main(args: Args) -> None:
             evaluate_curve(args.seed)
             print(f"wrote {plot_curve()}")
         else:
-            transfer.train(run, args.dry_run, stop_at_target=True,
+            transfer.train(run, args.dry_run, stop_at_target=True, until=args.until or 0,
                            snapshots=(CURVE_EVERY, lambda step, ckpt: keep_snapshot(run, step, ckpt)))
         return
     run = seed_run(args.seed, args.num_envs)

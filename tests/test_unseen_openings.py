@@ -155,9 +155,16 @@ def test_a_sac_run_keeps_its_snapshots_and_the_curve_measures_each_once_on_both_
     monkeypatch.setattr(uo, "sac_run", lambda seed: run)
     with pytest.raises(ValueError, match="a divisor of 200"):
         transfer.train(run, stop_at_target=True, snapshots=(150, None))
+    with pytest.raises(SystemExit, match="--until 300: a multiple of 200"):
+        transfer.train(run, stop_at_target=True, until=300)
     transfer.train(run, stop_at_target=True, snapshots=(100, lambda step, ckpt: uo.keep_snapshot(run, step, ckpt)))
     kept = sorted(p.name for p in (tmp_path / "snaps" / run.name).glob("*.pt"))
     assert kept == ["checkpoint_100.pt", "checkpoint_200.pt"], "a snapshot per part; no stop at 100, between marks"
+    # --until: the same run, its target long reached, goes on past the mark at 200 to the one at 400
+    transfer.train(run, stop_at_target=True, until=400,
+                   snapshots=(100, lambda step, ckpt: uo.keep_snapshot(run, step, ckpt)))
+    kept = sorted(p.name for p in (tmp_path / "snaps" / run.name).glob("*.pt"))
+    assert kept == [f"checkpoint_{s}.pt" for s in (100, 200, 300, 400)]
     measured = []
 
     def fake_evaluation(args):
@@ -169,11 +176,30 @@ def test_a_sac_run_keeps_its_snapshots_and_the_curve_measures_each_once_on_both_
     monkeypatch.setattr(uo.evaluation, "main", fake_evaluation)
     uo.main(uo.Args(seed=2, curve=True))
     assert measured == [(f"checkpoint_{s}.pt", slots, uo.CURVE_EPISODES, uo.CURVE_SEED)
-                        for s in (100, 200) for slots in (uo.HELD_OUT, uo.TRAINED)]
+                        for s in (100, 200, 300, 400) for slots in (uo.HELD_OUT, uo.TRAINED)]
     points = uo.curve_points(2)
-    assert list(points) == [100, 200] and json.loads(points[200][False].read_text())["checkpoint_step"] == 200
+    assert list(points) == [100, 200, 300, 400]
+    assert json.loads(points[200][False].read_text())["checkpoint_step"] == 200
     uo.main(uo.Args(seed=2, curve=True))
-    assert len(measured) == 4, "a snapshot measured is not measured again"
+    assert len(measured) == 8, "a snapshot measured is not measured again"
     assert uo.CURVE_PLOT.is_file()
     monkeypatch.setattr(uo, "CURVE_PLOT", Path("docs/images/unseen_openings_curve.png"))
     assert "![the openings over training](images/unseen_openings_curve.png)" in uo.report(tmp_path / "RESULTS.md")
+
+    # the paper's protocol at 200, then at 400: the evaluation at 200 is kept beside the latest, both rowed
+    def fake_protocol(args):
+        placed = 0.2 if args.goal_slots == uo.HELD_OUT else 0.9
+        args.json.write_text(json.dumps({"tasks": {e: dict(place_success=placed, place_success_ci95=(placed, placed))
+                                                   for e in TASK_ENV_IDS.values()}}))
+
+    monkeypatch.setattr(uo.evaluation, "main", fake_protocol)
+    snaps = tmp_path / "snaps" / run.name
+    uo.evaluate(snaps / "checkpoint_200.pt", "sac_s2")
+    uo.evaluate(snaps / "checkpoint_200.pt", "sac_s2")  # the same env steps again: replaced, not kept twice
+    uo.evaluate(snaps / "checkpoint_400.pt", "sac_s2")
+    assert sorted(p.name for p in (tmp_path / "evals").glob("unseen_sac_s2_*.json")) == [
+        "unseen_sac_s2_seen.json", "unseen_sac_s2_seen_200.json", "unseen_sac_s2_unseen.json",
+        "unseen_sac_s2_unseen_200.json"]
+    rows = [line for line in uo.report(tmp_path / "RESULTS.md").splitlines() if "seed 2" in line]
+    assert [row.split(" | ")[1:3] for row in rows] == [["200", "never trained on (1)"], ["200", "trained on (0, 2)"],
+                                                       ["400", "never trained on (1)"], ["400", "trained on (0, 2)"]]
