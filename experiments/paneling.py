@@ -62,7 +62,8 @@ AGENTS = {
 
 TRAIN_BUDGET = 3_000_000
 """env steps of a training run on paneling at most (it ends once its training episodes place 90%)."""
-TRAIN_PLAN = (("ppo", "nothing", 1), ("ppo", "shipped", 1), ("sac", "nothing", 1), ("sac", "nothing", 2))
+TRAIN_PLAN = (("ppo", "nothing", 1), ("ppo", "shipped", 1), ("sac", "nothing", 1), ("sac", "nothing", 2),
+              ("sac", "shipped", 1))
 """the (learner, start, seed) of the training runs that the training section reports."""
 TRAIN_CURVE = Path("docs/images/paneling_training.png")
 

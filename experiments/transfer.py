@@ -4,7 +4,8 @@ the test of the dense reward's rule and of what the recipe's policy carries over
 reward-only agent PPO's recipe made, scratch_general_agent_ppo.pt). experiments/paneling.py and
 experiments/obstacles.py run it (`--train nothing|shipped`) with the recipe's learner (`learner_for`): SAC from
 nothing (experiments/sac_recipe.py `sac_args`, on the same envs, reward and near-goal starts), PPO from the shipped
-weights (a PPO policy: SAC's critics have none); `--learner ppo` runs PPO's recipe from nothing. Each run is
+PPO agent's weights; `--learner sac --train shipped` runs SAC from the shipped SAC agent's networks, `--learner ppo
+--train nothing` PPO's recipe from nothing. Each run is
 resumable in campaign/<name>/ (commit its checkpoint and CSV to go on in another session), and `steps_to` reads
 from its training episodes the env steps it took to place TARGET of them."""
 
@@ -26,9 +27,12 @@ from experiments.sac_recipe import METHOD as SAC_METHOD, run_sac, sac_args
 LEARNERS = ("ppo", "sac")
 """the learners a run may take: PPO (the from-scratch recipe) or SAC (experiments/learners.py)."""
 STARTS = {"nothing": None, "shipped": "assets/checkpoints/scratch_general_agent_ppo.pt"}
-"""where a run starts: fresh weights, or the weights of the reward-only general agent PPO's recipe made (shipped
+"""where a PPO run starts: fresh weights, or the weights of the reward-only general agent PPO's recipe made (shipped
 beside SAC's, which replaced it as scratch_general_agent.pt: a PPO policy and value network, whose network PPO's recipe
 shares; the imitation agent's residual network is another, SAC's has no value network)."""
+SAC_STARTS = {"nothing": None, "shipped": "assets/checkpoints/scratch_general_agent.pt"}
+"""where a SAC run starts: fresh networks, or those of the shipped reward-only general agent, SAC's (sac.py
+--init-from: actor, critics, entropy coefficient)."""
 TARGET = 0.9
 """the place success whose first crossing `steps_to` reports."""
 STEPS_WINDOW = 50
@@ -50,8 +54,9 @@ class TrainOptions:
     train_seed: int = 1
     """with --train: the training run's seed (--seed is the first evaluation seed)."""
     learner: Optional[str] = None
-    """with --train: `sac` (on the same envs, reward and starts; from nothing only) or `ppo` (the from-scratch recipe
-    as PPO runs it); default: `learner_for` the start (SAC from nothing, PPO from the shipped weights)."""
+    """with --train: `sac` (on the same envs, reward and starts; from the shipped weights: SAC's agent's) or `ppo` (the
+    from-scratch recipe as PPO runs it; from the shipped weights: PPO's agent's); default: `learner_for` the start
+    (SAC from nothing, PPO from the shipped weights, as the runs made before SAC's agent shipped)."""
     num_envs: Optional[int] = None
     """with --train: env processes (default: one per CPU core); a resumed run keeps its own."""
     evaluate: bool = False
@@ -62,7 +67,8 @@ class TrainOptions:
 
 def learner_for(start: str, learner: Optional[str] = None) -> str:
     """`learner`, checked, or the default for `start`: the recipe's learner (experiments/from_scratch.py LEARNER)
-    from nothing; PPO from the shipped agent's weights, which are a PPO policy and value network."""
+    from nothing; PPO from the shipped weights (the runs from them began before SAC's agent shipped: `--learner sac`
+    starts SAC from SAC's)."""
     if start not in STARTS:
         raise SystemExit(f"--train {start}: use one of {', '.join(STARTS)}")
     if learner is None:
@@ -76,20 +82,20 @@ def transfer_run(name: str, start: str, seed: int, num_envs: Optional[int], budg
                  learner: Optional[str] = None, **setting) -> Run:
     """The recipe (experiments/from_scratch.py's `scratch_args`) from `start` (STARTS) to `budget` env steps on
     seed `seed`, unchanged but for the `setting` (Args fields of both learners: an env, a scene), in
-    campaign/<name>_<start>_s<seed>/; with `learner` "sac", SAC's (experiments/sac_recipe.py `sac_args`) from nothing,
-    in campaign/<name>_sac_s<seed>/ (`learner` None: `learner_for` the start). Its command names the learner,
-    but for PPO from the shipped weights (the one learner that start allows)."""
+    campaign/<name>_<start>_s<seed>/; with `learner` "sac", SAC's (experiments/sac_recipe.py `sac_args`) from
+    SAC_STARTS[start], in campaign/<name>_sac_s<seed>/ (from nothing) or <name>_shipped_sac_s<seed>/ (`learner` None:
+    `learner_for` the start). Its command names the learner, but for PPO from the shipped weights (the default
+    there)."""
     learner = learner_for(start, learner)
     if learner == "sac":
-        if STARTS[start] is not None:
-            raise SystemExit(f"--learner sac --train {start}: SAC trains from nothing only (the shipped agent is PPO's "
-                             "policy and value network; SAC's critics would start from nothing)")
-        exp_name = f"{name}_sac_s{seed}"
-        args = sac_args(seed, exp_name=exp_name, total_timesteps=budget, **({"num_envs": num_envs} if num_envs else {}),
-                        **setting)
-        return Run(exp_name, args, f"SAC on {what} from nothing, seed {seed}",
-                   f"{command} --train nothing --learner sac --train-seed {seed}", None,
-                   method=SAC_METHOD)
+        init = SAC_STARTS[start]
+        exp_name = f"{name}_sac_s{seed}" if init is None else f"{name}_{start}_sac_s{seed}"
+        args = sac_args(seed, exp_name=exp_name, total_timesteps=budget, init_from=init,
+                        **({"num_envs": num_envs} if num_envs else {}), **setting)
+        how = "from nothing" if init is None else f"from the weights of {init}"
+        return Run(exp_name, args, f"SAC on {what} {how}, seed {seed}",
+                   f"{command} --train {start} --learner sac --train-seed {seed}", None,
+                   method=SAC_METHOD if init is None else SAC_METHOD.replace("SAC from nothing", f"SAC from {init}"))
     exp_name = f"{name}_{start}_s{seed}"
     args = scratch_args(num_envs, seed=seed, exp_name=exp_name, total_timesteps=budget, checkpoint=STARTS[start], **setting)
     how = "from nothing" if STARTS[start] is None else f"from the weights of {STARTS[start]}"

@@ -307,7 +307,9 @@ def test_the_training_section_reads_each_run_s_progress_and_evaluation(tmp_path,
            "--learner sac --train-seed 1` |" in body
     assert "| SAC on paneling from nothing, seed 2 | not run: `python -m experiments.paneling --train nothing " \
            "--learner sac --train-seed 2` |" in body  # SAC's two seeds, PPO's one from each start
-    assert body.count("| not run: ") == 3
+    assert "| SAC on paneling from the weights of assets/checkpoints/scratch_general_agent.pt, seed 1 | not run: " \
+           "`python -m experiments.paneling --train shipped --learner sac --train-seed 1` |" in body
+    assert body.count("| not run: ") == 4
     assert (tmp_path / "images" / "curve.png").stat().st_size > 0 and "](images/curve.png)" in body
     assert "<!-- begin paneling-training (generated) -->" in (tmp_path / "RESULTS.md").read_text()
 
@@ -331,13 +333,17 @@ def test_a_run_that_used_its_whole_budget_short_of_the_target_says_so(tmp_path, 
 
 
 def test_sac_on_paneling_is_the_recipe_s_sac_but_for_the_env_and_budget_from_nothing_only_and_trains_there(tmp_path):
-    """`--learner sac`: experiments/sac_recipe.py's SAC arguments, but for the env, the budget and the run's name; it
-    starts from nothing only (SAC has no shipped critics); a tiny run on PanelInstallation-v1 trains its actor."""
+    """`--learner sac`: experiments/sac_recipe.py's SAC arguments, but for the env, the budget and the run's name;
+    from the shipped weights, those of SAC's shipped agent (--init-from); a tiny run on PanelInstallation-v1 trains
+    its actor."""
     from baselines.sac import sac
     from experiments import paneling, sac_recipe
 
-    with pytest.raises(SystemExit, match="SAC trains from nothing only"):
-        paneling.training_run("shipped", learner="sac")
+    warm = paneling.training_run("shipped", learner="sac")
+    assert warm.args.init_from == "assets/checkpoints/scratch_general_agent.pt" and warm.name == "paneling_shipped_sac_s1"
+    assert warm.command == "python -m experiments.paneling --train shipped --learner sac --train-seed 1"
+    assert {k for k, v in vars(warm.args).items() if v != vars(sac_recipe.sac_args(1))[k]} == {
+        "env_id", "total_timesteps", "exp_name", "init_from"}
     with pytest.raises(SystemExit, match="--learner td3: use one of ppo, sac"):
         paneling.training_run("nothing", learner="td3")
     run = paneling.training_run("nothing", seed=2, learner="sac")

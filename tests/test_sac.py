@@ -127,6 +127,45 @@ def test_table_i_s_stages_follow_env_steps_in_the_envs_and_the_csv_and_a_resume_
     assert not [k for k in wu if not torch.equal(wu[k], wi[k])], "the resumed run is the uninterrupted one"
 
 
+def test_a_run_from_a_checkpoint_s_networks_acts_and_values_as_it_did_and_among_obstacles_reads_them_with_zeros(
+        tmp_path):
+    """--init-from: a run among obstacles from a checkpoint trained without them starts with its actor, critics,
+    target critics, entropy coefficient and statistics, the obstacles' inputs weighted zero: the same actions and Q
+    values on the same state, whatever the obstacles say; it acts with the actor from its first step. Networks of
+    another shape, a PPO checkpoint, and --resume with it are refused."""
+    from baselines.ppo.evaluation import reset
+
+    source = tiny_args(tmp_path, total_timesteps=200, exp_name="source", checkpoint_freq=200)
+    trained = sac.setup(source)
+    sac.train(trained)
+    ckpt = str(tmp_path / "source" / "checkpoint.pt")
+    warm = sac.setup(tiny_args(tmp_path, total_timesteps=200, exp_name="warm", init_from=ckpt, obstacles="static"))
+    try:
+        obs = reset(warm.envs, 7)
+    finally:
+        sac.close(warm.envs, warm.eval_envs)
+    assert obs.shape[-1] == trained.obs_dim + 11, "the obstacles' entry ends the observation"
+    assert torch.equal(warm.learner.log_alpha, trained.learner.log_alpha)
+    for shift in (0.0, 3.0):  # whatever the obstacles' entry says
+        seen = obs.clone()
+        seen[:, trained.obs_dim:] += shift
+        z_old, z_new = trained.learner.actor.normalize(obs[:, :trained.obs_dim]), warm.learner.actor.normalize(seen)
+        assert torch.allclose(trained.learner.actor.get_action(obs[:, :trained.obs_dim], deterministic=True),
+                              warm.learner.actor.get_action(seen, deterministic=True), atol=1e-6)
+        a = torch.zeros(len(obs), warm.act_dim)
+        for old_nets, new_nets in ((trained.learner.critics, warm.learner.critics),
+                                   (trained.learner.critics_target, warm.learner.critics_target)):
+            for q_old, q_new in zip(old_nets(z_old, a), new_nets(z_new, a)):
+                assert torch.allclose(q_old, q_new, atol=1e-5)
+    assert not sac.acts_at_random(warm.args, 0) and sac.acts_at_random(source, 0)
+    with pytest.raises(SystemExit, match="not this run's shape"):
+        sac.setup(tiny_args(tmp_path, exp_name="wide", init_from=ckpt, hidden_size=16))
+    with pytest.raises(SystemExit, match="its networks read"):  # new inputs other than the obstacles' are refused
+        sac.setup(tiny_args(tmp_path, exp_name="path", init_from=ckpt, obs_path_offset=False))
+    with pytest.raises(SystemExit, match="--init-from starts a run"):
+        sac.validate(dataclasses.replace(sac.Args(), init_from=ckpt, resume=ckpt))
+
+
 def test_resume_refuses_a_checkpoint_without_its_buffer_and_a_ppo_checkpoint(tmp_path):
     run = sac.setup(tiny_args(tmp_path, total_timesteps=100, exp_name="b", learning_starts=50))
     sac.train(run)

@@ -103,6 +103,12 @@ class Args:
     """only evaluate --checkpoint (deterministic actions, tanh of the actor's mean) and exit."""
     checkpoint: Optional[str] = None
     """the checkpoint --evaluate evaluates."""
+    init_from: Optional[str] = None
+    """start from the networks of this SAC checkpoint (actor, critics, target critics, entropy coefficient and
+    observation statistics; optimizers, replay buffer and progress fresh), the actor acting from the first step (no
+    random actions first): a trained agent on a new setting. Where this run's observation ends with the obstacles'
+    entry and the checkpoint's did not, its networks get zero weights there: they act and value as before until
+    they learn to read it."""
     resume: Optional[str] = None
     """continue the run of this checkpoint exactly: its args, networks, optimizers, replay buffer, progress, RNG."""
     extend: bool = False
@@ -278,6 +284,8 @@ def validate(args: Args) -> None:
         raise SystemExit("--checkpoint is what --evaluate evaluates; to continue a run use --resume")
     if args.extend and not args.resume:
         raise SystemExit("--extend continues a run: give --resume")
+    if args.init_from and args.resume:
+        raise SystemExit("--init-from starts a run from a checkpoint's networks, --resume continues a run: give one")
     if args.utd <= 0:
         raise SystemExit(f"--utd {args.utd}: gradient steps per env step must be > 0")
     if args.batch_size < 1 or args.buffer_size < 1:
@@ -728,6 +736,12 @@ def setup(args: Args) -> Run:
     torch.set_num_threads(args.torch_threads)
 
     learner = Learner.make(args, obs_dim, act_dim)
+    if args.init_from and resume is None:
+        try:
+            start_from(learner, load_sac_checkpoint(args.init_from, "--init-from"), args)
+        except SystemExit:
+            close(envs, eval_envs)
+            raise
     run = Run(args, envs, eval_envs, obs_dim, act_dim, learner, ReplayBuffer(args.buffer_size, obs_dim, act_dim),
               Progress(), Clock())
     if resume is not None:
@@ -743,6 +757,54 @@ def setup(args: Args) -> Run:
             run.buffer_file = resume["replay_buffer"]
         restore_rng(resume["rng"])
     return run
+
+
+def _insert_zero_columns(w: torch.Tensor, at: int, n: int) -> torch.Tensor:
+    return torch.cat([w[:, :at], torch.zeros(w.shape[0], n, dtype=w.dtype), w[:, at:]], 1)
+
+
+def start_from(learner: Learner, ckpt: dict, args: Args) -> None:
+    """`learner`'s networks, entropy coefficient and observation statistics from the SAC checkpoint `ckpt`
+    (--init-from). A run among obstacles from a checkpoint trained without them: the obstacles' entry ends the
+    observation, so its OBSTACLE_OBS_SIZE features follow the checkpoint's; the actor's and the critics' first layers
+    get zero weights on them (the critics' before the action's columns) and the statistics a mean of 0 and a variance
+    of 1, so the networks compute what the checkpoint's did, whatever the obstacles' entry says."""
+    from ms_construction.envs.obstacles import OBSTACLE_OBS_SIZE
+
+    state, saved = ckpt["sac"], ckpt["args"]
+    old, new = state["actor"]["obs_rms.mean"].shape[0], learner.actor.obs_rms.mean.shape[0]
+    if ckpt["act_dim"] != learner.actor.act_dim or saved["control_mode"] != args.control_mode:
+        raise SystemExit(f"--init-from {args.init_from}: its actions ({ckpt['act_dim']}, {saved['control_mode']}) are "
+                         f"not this run's ({learner.actor.act_dim}, {args.control_mode})")
+    gained = new - old
+    if gained and not (gained == OBSTACLE_OBS_SIZE and args.obstacles and not saved.get("obstacles")):
+        raise SystemExit(f"--init-from {args.init_from}: its networks read {old} features, this run's {new}; only the "
+                         f"obstacles' entry ({OBSTACLE_OBS_SIZE}) may be new (a run with --obstacles from a checkpoint "
+                         "trained without them)")
+    actor = dict(state["actor"])
+    critics = {key: dict(state[key]) for key in ("critics", "critics_target")}
+    if gained:
+        for key, fill in (("obs_rms.mean", 0.0), ("obs_rms.var", 1.0)):
+            actor[key] = torch.cat([actor[key], torch.full((gained,), fill, dtype=actor[key].dtype)])
+        actor["net.0.weight"] = _insert_zero_columns(actor["net.0.weight"], old, gained)
+        for nets in critics.values():
+            for q in ("q1", "q2"):
+                nets[f"{q}.0.weight"] = _insert_zero_columns(nets[f"{q}.0.weight"], old, gained)
+    try:
+        learner.actor.load_state_dict(actor)
+        learner.critics.load_state_dict(critics["critics"])
+        learner.critics_target.load_state_dict(critics["critics_target"])
+    except RuntimeError as e:
+        raise SystemExit(f"--init-from {args.init_from}: its networks are not this run's shape (--hidden-size, "
+                         f"--num-layers, --q-layer-norm): {e}") from None
+    with torch.no_grad():
+        learner.log_alpha.copy_(state["log_alpha"])
+
+
+def acts_at_random(args: Args, global_step: int) -> bool:
+    """Whether the run's actions at `global_step` are uniform random (before --learning-starts, unless the actor
+    starts trained: --init-from)."""
+    return global_step < args.learning_starts and not args.init_from
 
 
 def close(*envs: Optional[CPUVectorEnv]) -> None:
@@ -762,7 +824,7 @@ def collect(run: Run, envs: CPUVectorEnv, obs: torch.Tensor, episodes: dict) -> 
     args, actor, progress = run.args, run.learner.actor, run.progress
     seen = []
     for _ in range(args.steps_per_env_per_iteration):
-        if progress.global_step < args.learning_starts:
+        if acts_at_random(args, progress.global_step):
             actions = torch.rand(args.num_envs, run.act_dim) * 2 - 1
         else:
             with torch.no_grad():
