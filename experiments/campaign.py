@@ -143,11 +143,13 @@ def hardware(how: str = "physx_cpu") -> str:
 
 
 def policy_only(ckpt: dict) -> dict:
-    """A checkpoint's policy (weights, Args, progress) without what only resumes its run (optimizers, RNG states; a
-    SAC run's critics and the name of its replay buffer's file: its actor stays)."""
+    """A checkpoint's policy (weights, Args, progress) without what only resumes its run (optimizers, RNG states, the
+    name of a SAC run's replay buffer's file). A SAC run's critics, target critics and entropy coefficient stay
+    beside its actor: a new run starts from all of them (sac.py --init-from). Policies shipped before 2026-12-05 kept
+    the actor alone."""
     policy = {k: v for k, v in ckpt.items() if k not in ("optimizer", "icm_optimizer", "rng", "replay_buffer")}
     if ckpt.get("sac") is not None:
-        policy["sac"] = {"actor": ckpt["sac"]["actor"]}
+        policy["sac"] = {k: v for k, v in ckpt["sac"].items() if not k.endswith("optimizer")}
     return policy
 
 

@@ -307,7 +307,7 @@ def test_the_training_section_reads_each_run_s_progress_and_evaluation(tmp_path,
            "--learner sac --train-seed 1` |" in body
     assert "| SAC on paneling from nothing, seed 2 | not run: `python -m experiments.paneling --train nothing " \
            "--learner sac --train-seed 2` |" in body  # SAC's two seeds, PPO's one from each start
-    assert "| SAC on paneling from the weights of assets/checkpoints/scratch_general_agent.pt, seed 1 | not run: " \
+    assert "| SAC on paneling from the weights of campaign/sac_s1/checkpoint.pt, seed 1 | not run: " \
            "`python -m experiments.paneling --train shipped --learner sac --train-seed 1` |" in body
     assert body.count("| not run: ") == 4
     assert (tmp_path / "images" / "curve.png").stat().st_size > 0 and "](images/curve.png)" in body
@@ -340,7 +340,7 @@ def test_sac_on_paneling_is_the_recipe_s_sac_but_for_the_env_and_budget_from_not
     from experiments import paneling, sac_recipe
 
     warm = paneling.training_run("shipped", learner="sac")
-    assert warm.args.init_from == "assets/checkpoints/scratch_general_agent.pt" and warm.name == "paneling_shipped_sac_s1"
+    assert warm.args.init_from == "campaign/sac_s1/checkpoint.pt" and warm.name == "paneling_shipped_sac_s1"
     assert warm.command == "python -m experiments.paneling --train shipped --learner sac --train-seed 1"
     assert {k for k, v in vars(warm.args).items() if v != vars(sac_recipe.sac_args(1))[k]} == {
         "env_id", "total_timesteps", "exp_name", "init_from"}

@@ -162,6 +162,19 @@ def test_a_run_from_a_checkpoint_s_networks_acts_and_values_as_it_did_and_among_
         sac.setup(tiny_args(tmp_path, exp_name="wide", init_from=ckpt, hidden_size=16))
     with pytest.raises(SystemExit, match="its networks read"):  # new inputs other than the obstacles' are refused
         sac.setup(tiny_args(tmp_path, exp_name="path", init_from=ckpt, obs_path_offset=False))
+    actor_only = tmp_path / "actor_only.pt"
+    saved = torch.load(ckpt, weights_only=False)
+    torch.save({**saved, "sac": {"actor": saved["sac"]["actor"]}}, actor_only)
+    with pytest.raises(SystemExit, match="it keeps the actor alone"):
+        sac.setup(tiny_args(tmp_path, exp_name="alone", init_from=str(actor_only)))
+    from experiments.campaign import policy_only
+
+    shipped = tmp_path / "shipped.pt"  # a policy as it ships keeps what a new run starts from, not the optimizers
+    torch.save(policy_only(saved), shipped)
+    assert set(torch.load(shipped, weights_only=False)["sac"]) == {"actor", "critics", "critics_target", "log_alpha"}
+    again = sac.setup(tiny_args(tmp_path, exp_name="again", init_from=str(shipped)))
+    sac.close(again.envs, again.eval_envs)
+    assert torch.equal(again.learner.critics.q1[0].weight, trained.learner.critics.q1[0].weight)
     with pytest.raises(SystemExit, match="--init-from starts a run"):
         sac.validate(dataclasses.replace(sac.Args(), init_from=ckpt, resume=ckpt))
 

@@ -772,6 +772,9 @@ def start_from(learner: Learner, ckpt: dict, args: Args) -> None:
     from ms_construction.envs.obstacles import OBSTACLE_OBS_SIZE
 
     state, saved = ckpt["sac"], ckpt["args"]
+    if "critics" not in state:
+        raise SystemExit(f"--init-from {args.init_from}: it keeps the actor alone (a policy shipped before its critics "
+                         "were kept with it); give a run's checkpoint, which keeps them")
     old, new = state["actor"]["obs_rms.mean"].shape[0], learner.actor.obs_rms.mean.shape[0]
     if ckpt["act_dim"] != learner.actor.act_dim or saved["control_mode"] != args.control_mode:
         raise SystemExit(f"--init-from {args.init_from}: its actions ({ckpt['act_dim']}, {saved['control_mode']}) are "
