@@ -390,7 +390,9 @@ def test_sac_is_the_recipe_s_learner_and_its_run_keeps_screens_chooses_and_ships
     assert sorted(p.name for p in fs.seed_snapshots(1).glob("*.pt")) == ["checkpoint_150.pt", "checkpoint_300.pt"]
     assert fs.seed_screening(1) == {150: dict.fromkeys(envs, 0.4), 300: dict.fromkeys(envs, 0.7)}
     candidate = torch.load(fs.seed_candidates(1) / "candidate_300.pt", weights_only=False)
-    assert set(candidate["sac"]) == {"actor"} and "replay_buffer" not in candidate and "rng" not in candidate
+    # a candidate keeps what a new run starts from (sac.py --init-from), not what only resumes its run
+    assert set(candidate["sac"]) == {"actor", "critics", "critics_target", "log_alpha"}
+    assert "replay_buffer" not in candidate and "rng" not in candidate
     assert fs.chosen_step(1) == 300 and evaluated == [fs.seed_snapshots(1) / "checkpoint_300.pt"]
     assert fs.seed_evaluations(1) == {300: fs.seed_evaluation_json(1, 300)}
     # seed 2 as seed 1 (a copy), then the better on validation ships: it places what the shipped policy does
@@ -404,5 +406,5 @@ def test_sac_is_the_recipe_s_learner_and_its_run_keeps_screens_chooses_and_ships
     assert record["chosen"].startswith("seed 1 of 2") and "the recipe: SAC, sac_args of experiments/sac_recipe.py" \
         in record["chosen"] and "demonstrations: none" in record["chosen"]
     assert record["method"] == sac_recipe.METHOD and "h of training iterations" in record["wall time"]
-    assert set(policy["sac"]) == {"actor"}
+    assert set(policy["sac"]) == {"actor", "critics", "critics_target", "log_alpha"}, "a new run can start from it"
     assert fs.shipped_how(shipped).startswith("SAC on the dense reward, no demonstrations; the recipe unchanged")
