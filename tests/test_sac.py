@@ -131,8 +131,8 @@ def test_a_run_from_a_checkpoint_s_networks_acts_and_values_as_it_did_and_among_
         tmp_path):
     """--init-from: a run among obstacles from a checkpoint trained without them starts with its actor, critics,
     target critics, entropy coefficient and statistics, the obstacles' inputs weighted zero: the same actions and Q
-    values on the same state, whatever the obstacles say; it acts with the actor from its first step. Networks of
-    another shape, a PPO checkpoint, and --resume with it are refused."""
+    values on the same state, whatever the obstacles say; it acts with the actor from its first step, and resumes
+    from its own checkpoint. Networks of another shape and a policy that kept its actor alone are refused."""
     from baselines.ppo.evaluation import reset
 
     source = tiny_args(tmp_path, total_timesteps=200, exp_name="source", checkpoint_freq=200)
@@ -175,8 +175,12 @@ def test_a_run_from_a_checkpoint_s_networks_acts_and_values_as_it_did_and_among_
     again = sac.setup(tiny_args(tmp_path, exp_name="again", init_from=str(shipped)))
     sac.close(again.envs, again.eval_envs)
     assert torch.equal(again.learner.critics.q1[0].weight, trained.learner.critics.q1[0].weight)
-    with pytest.raises(SystemExit, match="--init-from starts a run"):
-        sac.validate(dataclasses.replace(sac.Args(), init_from=ckpt, resume=ckpt))
+    # a run started so resumes from its own checkpoint (its args keep --init-from: where it started)
+    sac.train(sac.setup(tiny_args(tmp_path, exp_name="part", init_from=ckpt, total_timesteps=100, checkpoint_freq=100)))
+    resumed = sac.setup(sac.Args(resume=str(tmp_path / "part" / "checkpoint.pt"), extend=True, total_timesteps=200))
+    assert resumed.args.init_from == ckpt and resumed.progress.global_step == 100
+    sac.train(resumed)
+    assert resumed.progress.global_step == 200
 
 
 def test_resume_refuses_a_checkpoint_without_its_buffer_and_a_ppo_checkpoint(tmp_path):

@@ -108,7 +108,7 @@ class Args:
     observation statistics; optimizers, replay buffer and progress fresh), the actor acting from the first step (no
     random actions first): a trained agent on a new setting. Where this run's observation ends with the obstacles'
     entry and the checkpoint's did not, its networks get zero weights there: they act and value as before until
-    they learn to read it."""
+    they learn to read it. A run started so resumes from its own checkpoint (--resume), which records it."""
     resume: Optional[str] = None
     """continue the run of this checkpoint exactly: its args, networks, optimizers, replay buffer, progress, RNG."""
     extend: bool = False
@@ -284,8 +284,6 @@ def validate(args: Args) -> None:
         raise SystemExit("--checkpoint is what --evaluate evaluates; to continue a run use --resume")
     if args.extend and not args.resume:
         raise SystemExit("--extend continues a run: give --resume")
-    if args.init_from and args.resume:
-        raise SystemExit("--init-from starts a run from a checkpoint's networks, --resume continues a run: give one")
     if args.utd <= 0:
         raise SystemExit(f"--utd {args.utd}: gradient steps per env step must be > 0")
     if args.batch_size < 1 or args.buffer_size < 1:
