@@ -919,10 +919,7 @@ def train(run: Run) -> Progress:
             progress.near_goal_recent = [[] for _ in ELEMENT_KINDS]
         set_near_goal_starts(args, envs, progress)
     log = CSVLog(run.path.with_name("progress.csv"), progress.global_step if args.resume else None, fields=CSV_FIELDS)
-    stage = stage_at(args, progress.global_step)
-    for e in (envs, eval_envs):
-        if e is not None:
-            e.call("set_curriculum_stage", stage)
+    stage = None  # the tolerance stage the envs are in: set before the first step, again where it changes
 
     stop: list[int] = []
 
