@@ -299,7 +299,9 @@ def sac_steps_per_second(rows: int, num_envs: int) -> dict:
     """SAC as the recipe trains it (experiments/sac_recipe.py `sac_args`) on `num_envs` env processes: the median env
     steps/s of `rows` progress rows (log_freq env steps each, its gradient steps included) once its buffer holds
     learning_starts transitions; the rows of its random-action start, and the one that straddles it, left out. No
-    checkpoints, no evaluations."""
+    checkpoints, no evaluations. Over the same rows, where its time went (progress.csv's clock): `env_ms` per env
+    step (the env steps with the actor's actions and the replay buffer), `update_ms` per gradient step, and `utd`
+    its gradient steps per env step."""
     import csv
 
     from baselines.sac import sac
@@ -311,8 +313,32 @@ def sac_steps_per_second(rows: int, num_envs: int) -> dict:
         a.total_timesteps = first + rows * a.log_freq
         sac.main(a)
         with open(Path(log_dir) / "benchmark" / "progress.csv") as f:
-            sps = [float(row["sps"]) for row in csv.DictReader(f) if int(row["global_step"]) > first]
-    return dict(sps=statistics.median(sps), num_envs=num_envs)
+            log = list(csv.DictReader(f))
+    timed = [row for row in log if int(row["global_step"]) > first]
+    start, end = log[len(log) - len(timed) - 1], log[-1]  # the clock where the timed rows begin and end
+    change = {k: float(end[k]) - float(start[k]) for k in ("global_step", "env_s", "update_s", "updates")}
+    return dict(sps=statistics.median(float(row["sps"]) for row in timed), num_envs=num_envs,
+                env_ms=1e3 * change["env_s"] / change["global_step"],
+                update_ms=1e3 * change["update_s"] / max(change["updates"], 1),
+                utd=change["updates"] / change["global_step"])
+
+
+def sac_table(parts: dict[int, list[dict]], alone: dict[int, list[float]]) -> str:
+    """Where SAC's training time goes per env step (`sac_steps_per_second`'s clock, per round) on each number of env
+    processes, and the most it could make of the env processes: with its env steps free (or hidden behind its
+    gradient steps), its gradient steps alone set its pace, 1 / (gradient steps per env step x a gradient step's
+    time); that ceiling over the same round's simulation alone (`alone`) is the share it could keep at most."""
+    lines = ["| env processes | env steps (actions, replay buffer), ms per env step | gradient step, ms | gradient "
+             "steps per env step | ms per env step | ceiling with env steps free, env steps/s | ceiling's share of "
+             "simulating alone |", "|---|---|---|---|---|---|---|"]
+    for n, rounds in parts.items():
+        med = {k: statistics.median(r[k] for r in rounds) for k in ("env_ms", "update_ms", "utd")}
+        ceiling = [1e3 / (r["utd"] * r["update_ms"]) for r in rounds]
+        share = [c / a for c, a in zip(ceiling, alone[n])]
+        lines.append(f"| {n} | {med['env_ms']:.2f} | {med['update_ms']:.1f} | {med['utd']:.2f} | "
+                     f"{med['env_ms'] + med['utd'] * med['update_ms']:.2f} | {statistics.median(ceiling):.0f} | "
+                     f"{statistics.median(share):.2f} ({min(share):.2f}-{max(share):.2f}) |")
+    return "\n".join(lines)
 
 
 START_UP = "start-up and shut-down"
@@ -437,7 +463,7 @@ def cpu_sections(args: Args) -> str:
     load_before = os.getloadavg()[0]
     one_env = one_env_table(args)
     rgb = rgb_table(args) if args.rgb_steps else None
-    processes, training, worker_rss = process_table(args)
+    processes, training, worker_rss, sac_split = process_table(args)
     split = split_table(args)
     learner_rss = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
     return "\n".join([
@@ -504,6 +530,20 @@ def cpu_sections(args: Args) -> str:
         "",
         split,
         "",
+        *([] if sac_split is None else [
+            "### Where SAC's training time goes",
+            "",
+            "SAC's training above (\"sac\"), its clock over the same progress rows (progress.csv's env_s, update_s and "
+            "updates): its env steps (with the actor's actions, the replay buffer, the start-state curriculum) per env "
+            "step, one gradient step (actor and twin critics, batch "
+            f"{sac_args().batch_size}, {sac_args().num_layers} x {sac_args().hidden_size}, "
+            f"{sac_args().torch_threads} thread), and the ceiling its gradient steps set: the env steps/s it would make "
+            "if its env steps cost nothing (or ran while it updates), and that ceiling's share of the same round's "
+            "simulation alone (the table above, free-running); medians (range) of the rounds.",
+            "",
+            sac_split,
+            "",
+        ]),
         f"Peak host memory (resident set): the benchmark's process (learner, its env 0 and the one-env runs) "
         f"{learner_rss:,.0f} MiB; "
         + (f"one env worker process {worker_rss:,.0f} MiB at most." if worker_rss else "no worker process (one env)."),
@@ -554,15 +594,18 @@ def rgb_table(args: Args) -> str:
     return "\n".join(rows)
 
 
-def process_table(args: Args) -> tuple[str, str, float]:
+def process_table(args: Args) -> tuple[str, str, float, Optional[str]]:
     """The env processes' steps/s simulating alone, and PPO's training steps/s on the same number of
-    processes, free-running and held, ICM off and on, with its share of the simulation alone."""
+    processes, free-running and held, ICM off and on, with its share of the simulation alone; the peak worker
+    memory; SAC's split (`sac_table`) where it is measured."""
     sim_rows = [f"| env processes | {REFERENCE} | {GENERAL} | {GENERAL}, held | {GENERAL}, every env in a worker | "
                 "gain: env 0 in the learner's process |", "|---|---|---|---|---|---|"]
     ppo_rows = ["| env processes | env steps | curiosity or recipe | learner | training, env steps/s | "
                 "simulating alone, env steps/s | share: training / simulating alone |", "|---|---|---|---|---|---|---|"]
     worker_rss = 0.0
     measured = trainings(args)
+    sac_parts: dict[int, list[dict]] = {}
+    alone: dict[int, list[float]] = {}
     for n in args.workers:
         ref = CPUVectorEnv(REFERENCE, n, dict(CPU_KWARGS, reward_mode="sparse"))
         ours = CPUVectorEnv(GENERAL, n, dict(CPU_KWARGS, reward_mode="sparse"), wrappers=[HoldElement])
@@ -578,10 +621,14 @@ def process_table(args: Args) -> tuple[str, str, float]:
             ours.call("set_hold", True)
             m["held"].append(vector_steps_per_second(ours, args.vector_steps, seed=r))
             for steps, curiosity, learner in measured:
-                m[steps, curiosity, learner].append(
-                    sac_steps_per_second(args.train_iterations, n)["sps"] if curiosity == "sac" else
-                    ppo_steps_per_second(args.train_iterations, "physx_cpu", n, held=steps == "held",
-                                         curiosity=curiosity, learner=learner)["sps"])
+                if curiosity == "sac":
+                    sac_parts.setdefault(n, []).append(sac_steps_per_second(args.train_iterations, n))
+                    m[steps, curiosity, learner].append(sac_parts[n][-1]["sps"])
+                else:
+                    m[steps, curiosity, learner].append(ppo_steps_per_second(
+                        args.train_iterations, "physx_cpu", n, held=steps == "held", curiosity=curiosity,
+                        learner=learner)["sps"])
+            alone.setdefault(n, []).append(m["free"][-1])
         worker_rss = max(worker_rss, worker_peak_rss_mib(ours))
         for envs in (ref, ours, apart):
             envs.close()
@@ -595,7 +642,8 @@ def process_table(args: Args) -> tuple[str, str, float]:
                             f"{med[steps]:.0f} | "
                             f"{statistics.median(share):.2f} ({min(share):.2f}-{max(share):.2f}) |")
         print("\n".join(sim_rows[-1:] + ppo_rows[-len(measured):]), flush=True)
-    return "\n".join(sim_rows), "\n".join(ppo_rows), worker_rss
+    return ("\n".join(sim_rows), "\n".join(ppo_rows), worker_rss,
+            sac_table(sac_parts, {n: alone[n] for n in sac_parts}) if sac_parts else None)
 
 
 # ------------------------------------------------------------------------------------------------- #

@@ -29,7 +29,7 @@ def test_a_learner_on_the_gpu_is_asked_for_with_cuda_and_refused_without_a_gpu(m
         bench.trainings(bench.Args(trainings=("free-recipe-cuda",)))
 
 
-def test_sac_s_speed_is_its_rows_with_gradient_steps_in_them_as_the_recipe_trains(monkeypatch):
+def test_sac_s_speed_and_split_are_its_rows_with_gradient_steps_in_them_as_the_recipe_trains(monkeypatch):
     from baselines.sac import sac
     from experiments.sac_recipe import sac_args
 
@@ -37,9 +37,13 @@ def test_sac_s_speed_is_its_rows_with_gradient_steps_in_them_as_the_recipe_train
 
     def main(a):
         seen.update(a=a)
-        # rows every log_freq env steps: random actions (fast) until learning_starts, then gradient steps (slow)
-        rows = ["global_step,sps"] + [f"{step},{1000 if step <= a.learning_starts else 50 + step // a.log_freq}"
-                                      for step in range(a.log_freq, a.total_timesteps + 1, a.log_freq)]
+        # rows every log_freq env steps: random actions (fast) until learning_starts, then gradient steps (slow); the
+        # clock: 4 ms per env step in the envs, one gradient step per two env steps after learning_starts, 13 ms each
+        rows = ["global_step,sps,env_s,update_s,updates"]
+        for step in range(a.log_freq, a.total_timesteps + 1, a.log_freq):
+            updates = max(0, step - a.learning_starts) // 2
+            rows.append(f"{step},{1000 if step <= a.learning_starts else 50 + step // a.log_freq},{0.004 * step},"
+                        f"{0.013 * updates},{updates}")
         path = bench.Path(a.log_dir) / a.exp_name / "progress.csv"
         path.parent.mkdir(parents=True)
         path.write_text("\n".join(rows) + "\n")
@@ -49,8 +53,19 @@ def test_sac_s_speed_is_its_rows_with_gradient_steps_in_them_as_the_recipe_train
     a, recipe = seen["a"], sac_args(1)
     assert (a.num_envs, a.eval_freq, a.save_model) == (2, 0, False)
     assert (a.utd, a.batch_size, a.reward_mode) == (recipe.utd, recipe.batch_size, recipe.reward_mode)
-    # learning_starts 5,000 of rows of 2,000: the row at 6,000 straddles it; then 3 rows, at 8,000 / 10,000 / 12,000
-    assert a.total_timesteps == 12_000 and out == dict(sps=55.0, num_envs=2)
+    # learning_starts 5,000 of rows of 2,000: the row at 6,000 straddles it; then 3 rows, at 8,000 / 10,000 / 12,000,
+    # whose clock runs from the row at 6,000's
+    assert a.total_timesteps == 12_000
+    assert out == pytest.approx(dict(sps=55.0, num_envs=2, env_ms=4.0, update_ms=13.0, utd=0.5))
+
+
+def test_sac_s_ceiling_is_its_gradient_steps_alone_and_its_share_is_of_the_same_round_s_simulation():
+    rounds = [dict(env_ms=4.0, update_ms=10.0, utd=0.5), dict(env_ms=6.0, update_ms=20.0, utd=0.5)]
+    table = bench.sac_table({2: rounds}, {2: [1000.0, 400.0]})
+    row = table.splitlines()[-1].split(" | ")
+    # ceilings 1 / (0.5 x 10 ms) = 200 and 1 / (0.5 x 20 ms) = 100 env steps/s; shares 200 / 1000 and 100 / 400
+    assert row[1:6] == ["5.00", "15.0", "0.50", "12.50", "150"]
+    assert row[6] == "0.23 (0.20-0.25) |"
 
 
 @pytest.mark.parametrize("backend, learner, cuda", [("physx_cpu", None, False), ("physx_cpu", "cuda", True),

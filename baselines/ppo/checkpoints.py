@@ -204,9 +204,11 @@ def check_fit(ckpt: dict, path, env_id: str, obs_dim: int, act_dim: int, control
                          f"not {control_mode}: use --control-mode {ckpt['args']['control_mode']}")
 
 
-def _insert(t: torch.Tensor, dim: int, at: int, fill: float) -> torch.Tensor:
+def insert_filled(t: torch.Tensor, dim: int, at: int, fill: float, n: int = 1) -> torch.Tensor:
+    """`t` with `n` slices of `fill` inserted before index `at` along `dim` (a network's input widened by new
+    observation entries: zero weights, neutral statistics)."""
     shape = list(t.shape)
-    shape[dim] = 1
+    shape[dim] = n
     return torch.cat([t.narrow(dim, 0, at), torch.full(shape, fill, dtype=t.dtype), t.narrow(dim, at, t.shape[dim] - at)], dim)
 
 
@@ -233,10 +235,10 @@ def _widen_policy(agent: dict, prefix: str, args: dict, base_args: Optional[dict
     else:
         at = _feature_index(args, obs_dim, index)
         for key, fill in (("obs_rms.mean", 0.0), ("obs_rms.var", 1.0)):
-            agent[prefix + key] = _insert(agent[prefix + key], 0, at, fill)
+            agent[prefix + key] = insert_filled(agent[prefix + key], 0, at, fill)
     for key in ("critic.0.weight", "actor_mean.0.weight", "residual_mean.0.weight"):
         if prefix + key in agent:
-            agent[prefix + key] = _insert(agent[prefix + key], 1, at, 0.0)
+            agent[prefix + key] = insert_filled(agent[prefix + key], 1, at, 0.0)
             widened[prefix + key] = at
     return at
 
@@ -249,7 +251,7 @@ def _widen_adam(state: dict, names: list[str], widened: dict) -> dict:
         if name in widened and i in state["state"]:
             moments = dict(state["state"][i])
             for key in ("exp_avg", "exp_avg_sq"):
-                moments[key] = _insert(moments[key], 1, widened[name], 0.0)
+                moments[key] = insert_filled(moments[key], 1, widened[name], 0.0)
             state["state"][i] = moments
     return state
 
@@ -291,7 +293,7 @@ def with_task_slots(ckpt: dict) -> dict:
     if ckpt.get("icm") is not None:
         icm = dict(ckpt["icm"])
         first = "encoder.0.0.weight"  # the encoder's first layer: the ICM's first parameter, as in its optimizer
-        icm[first] = _insert(icm[first], 1, index, 0.0)
+        icm[first] = insert_filled(icm[first], 1, index, 0.0)
         out["icm"] = icm
         if ckpt.get("icm_optimizer") is not None:
             out["icm_optimizer"] = _widen_adam(ckpt["icm_optimizer"], [first], {first: index})

@@ -65,8 +65,8 @@ import torch.nn.functional as F
 import tyro
 from tqdm import tqdm
 
-from baselines.ppo.checkpoints import (CSVLog, Progress, check_fit, load_checkpoint, make_agent, policy_env_kwargs,
-                                       restore_rng, save_checkpoint)
+from baselines.ppo.checkpoints import (CSVLog, Progress, check_fit, insert_filled, load_checkpoint, make_agent,
+                                       policy_env_kwargs, restore_rng, save_checkpoint)
 from baselines.ppo.evaluation import evaluate_envs, finished_episodes, reset, run_episodes, slot_weights, summarize
 from baselines.ppo.networks import RunningMeanStd, layer_init, mlp, rotation_features
 from baselines.ppo.ppo import EPISODE_STATS
@@ -757,10 +757,6 @@ def setup(args: Args) -> Run:
     return run
 
 
-def _insert_zero_columns(w: torch.Tensor, at: int, n: int) -> torch.Tensor:
-    return torch.cat([w[:, :at], torch.zeros(w.shape[0], n, dtype=w.dtype), w[:, at:]], 1)
-
-
 def start_from(learner: Learner, ckpt: dict, args: Args) -> None:
     """`learner`'s networks, entropy coefficient and observation statistics from the SAC checkpoint `ckpt`
     (--init-from). A run among obstacles from a checkpoint trained without them: the obstacles' entry ends the
@@ -786,11 +782,11 @@ def start_from(learner: Learner, ckpt: dict, args: Args) -> None:
     critics = {key: dict(state[key]) for key in ("critics", "critics_target")}
     if gained:
         for key, fill in (("obs_rms.mean", 0.0), ("obs_rms.var", 1.0)):
-            actor[key] = torch.cat([actor[key], torch.full((gained,), fill, dtype=actor[key].dtype)])
-        actor["net.0.weight"] = _insert_zero_columns(actor["net.0.weight"], old, gained)
+            actor[key] = insert_filled(actor[key], 0, old, fill, gained)
+        actor["net.0.weight"] = insert_filled(actor["net.0.weight"], 1, old, 0.0, gained)
         for nets in critics.values():
             for q in ("q1", "q2"):
-                nets[f"{q}.0.weight"] = _insert_zero_columns(nets[f"{q}.0.weight"], old, gained)
+                nets[f"{q}.0.weight"] = insert_filled(nets[f"{q}.0.weight"], 1, old, 0.0, gained)
     try:
         learner.actor.load_state_dict(actor)
         learner.critics.load_state_dict(critics["critics"])
