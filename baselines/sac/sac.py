@@ -28,11 +28,10 @@ recipe (experiments/from_scratch.py `scratch_args`):
     python baselines/sac/sac.py --evaluate --checkpoint runs/sac_scratch/checkpoint.pt --eval-episodes 50
     python scripts/evaluate.py --checkpoint runs/sac_scratch/checkpoint.pt --all      # the full evaluation
 
-Pace on this project's 2-core machine (measured 2026-11-28, other work sharing it at times): the envs alone step
-about 370-400 env steps/s on 2 processes; a gradient step of actor and twin critics (2 x 256, batch 256) takes about
-15-17 ms on one thread, so the updates set the pace. With the defaults (`--utd 0.5`: one gradient step per two env
-steps) a run steps about 80-90 env steps/s once learning has started, some 4-5 times slower than the envs alone, its
-updates about 60-65% of the wall time. progress.csv's env_s, update_s and update_share say where a run's wall time
+Pace on this project's 2-core machine: its gradient steps, not the simulator, set it. docs/BENCHMARKS.md ("Where
+SAC's training time goes", `python scripts/benchmark.py`) measures a gradient step of actor and twin critics (2 x 256,
+batch 256, one thread) against its env steps, and the ceiling the defaults' `--utd 0.5` sets: with env steps that
+cost nothing it could not step faster. progress.csv's env_s, update_s and update_share say where a run's wall time
 went; it prints the split at its end.
 
 Episodes restart at every checkpoint (every `--checkpoint-freq` env steps; the cut episodes are truncations, which
