@@ -5,6 +5,7 @@ time on this CPU.
     python -m experiments.from_scratch --seed 1          # the SAC arm: the recipe's run with SAC, to BUDGET, resumable
     python -m experiments.learners --arm icm --dry-run   # the plan, and where the curiosity arm's run stands
     python -m experiments.learners --arm icm             # PPO's recipe with curiosity (ICM), to BUDGET, resumable
+    python -m experiments.learners --arm sac_utd         # SAC at half the update ratio, a probe to PROBE_BUDGET
     python -m experiments.learners --evaluate sac        # the paper's protocol on the arm's latest checkpoint (--seed)
     python -m experiments.learners --report              # RESULTS' section and its curves, from the arms' progress.csv
 
@@ -19,6 +20,11 @@ The SAC arm on a seed is the recipe's run with SAC (experiments/sac_recipe.py; `
 (docs/data/from_scratch/sac_s<seed>_eval50k_<env steps>.json). What SAC shares with PPO's recipe: the envs, the
 reward, the observation, the near-goal starts. What it does not: the reach starts and the mirror of the twin openings
 (PPO's network options).
+
+The update-ratio arm (`sac_utd`) is SAC with half the recipe's gradient steps per env step (0.25 against 0.5), a
+probe on one seed: SAC's gradient steps, not its env steps, set its pace on this CPU (docs/BENCHMARKS.md, "Where
+SAC's training time goes"), so fewer of them make each env step cheaper; whether that reaches the target sooner in
+wall time is what the probe asks, before any recipe change.
 """
 
 from __future__ import annotations
@@ -39,7 +45,8 @@ from baselines.ppo.evaluation import pct
 from experiments import from_scratch
 from experiments.campaign import CAMPAIGN_DIR, Run, describe, record_checkpoint_step, run_or_resume
 from experiments.from_scratch import csv_column, moving_mean, scratch_args, seed_evaluations, seed_run
-from experiments.sac_recipe import BUDGET, sac_args
+from baselines.sac import sac
+from experiments.sac_recipe import BUDGET, run_sac, sac_args
 from ms_construction.parameters import PAPER_KINDS
 from ms_construction.reporting import update_section
 
@@ -59,8 +66,9 @@ COMMAND = "python -m experiments.learners"
 PAGE = Path("docs/experiments/learners.md")
 """the experiment's page: every evaluation with the paper's protocol goes there (`evaluations_table`)."""
 EVAL_DIR = Path("docs/data/learners")
-"""the curiosity arm's evaluation with the paper's protocol (`--evaluate icm`): icm_s<seed>_eval50k.json (the PPO
-and SAC arms' are the recipe's runs' own, in experiments/from_scratch.py's SEED_EVAL_DIR)."""
+"""the curiosity and update-ratio arms' evaluations with the paper's protocol (`--evaluate icm|sac_utd`):
+<arm>_s<seed>_eval50k.json (the PPO and SAC arms' are the recipe's runs' own, in experiments/from_scratch.py's
+SEED_EVAL_DIR)."""
 
 
 def icm_run(num_envs: Optional[int] = None, seed: int = 1) -> Run:
@@ -71,15 +79,29 @@ def icm_run(num_envs: Optional[int] = None, seed: int = 1) -> Run:
                f"{COMMAND} --arm icm --seed {seed}", None)
 
 
+PROBE_UTD = 0.25
+"""the update-ratio arm's gradient steps per env step (the recipe's: sac.Args.utd)."""
+PROBE_BUDGET = 500_000
+"""env steps of the update-ratio probe: where the recipe's SAC runs were first judged (both met the target by then)."""
+
+
+def sac_utd_args(seed: int = 1) -> sac.Args:
+    """The recipe's SAC (experiments/sac_recipe.py) unchanged but for PROBE_UTD and the budget."""
+    return sac_args(seed, exp_name=f"sac_utd{str(PROBE_UTD).replace('.', '')}_s{seed}", utd=PROBE_UTD,
+                    total_timesteps=PROBE_BUDGET)
+
+
 ARMS = {"ppo": "PPO (the recipe's run)", "icm": "PPO + ICM (the recipe with curiosity)",
-        "sac": "SAC (replay, twin Q, tanh Gaussian, auto entropy)"}
-PLANNED = {"ppo": SEEDS, "icm": (1,), "sac": SEEDS}
-"""the seeds each arm runs on: curiosity is one probe (the issue), SAC and PPO both seeds."""
+        "sac": "SAC (replay, twin Q, tanh Gaussian, auto entropy)",
+        "sac_utd": f"SAC at {PROBE_UTD:g} gradient steps per env step (a probe)"}
+PLANNED = {"ppo": SEEDS, "icm": (1,), "sac": SEEDS, "sac_utd": SEEDS}
+"""the seeds each arm runs on: curiosity is one probe (the issue), the others both seeds."""
+BUDGETS = {"ppo": BUDGET, "icm": BUDGET, "sac": BUDGET, "sac_utd": PROBE_BUDGET}
 
 
 def progress_csv(arm: str, log_dir: Path = CAMPAIGN_DIR, seed: int = 1) -> Path:
     name = {"ppo": seed_run(seed, learner="ppo").args.exp_name, "icm": icm_run(seed=seed).args.exp_name,
-            "sac": sac_args(seed).exp_name}[arm]
+            "sac": sac_args(seed).exp_name, "sac_utd": sac_utd_args(seed).exp_name}[arm]
     return log_dir / name / "progress.csv"
 
 
@@ -165,7 +187,7 @@ def evaluations_table(eval_dir: Path = EVAL_DIR, log_dir: Path = CAMPAIGN_DIR) -
     names = " | ".join(f"{env_id}: placed % [95% CI]" for env_id in tasks)
     return ["", f"The paper's protocol (test seeds, 50,000 env steps per task, cp4, the policy's mean): the SAC and PPO "
             f"arms' snapshots as the recipe evaluated them (`{from_scratch.COMMAND} --seed S [--learner ppo] --evaluate`), "
-            f"the curiosity arm's latest checkpoint (`{COMMAND} --evaluate icm --seed S`):", "", f"| learner | seed | its env steps | its training wall time (h) | {names} | target met "
+            f"the curiosity and update-ratio arms' latest checkpoints (`{COMMAND} --evaluate icm|sac_utd --seed S`):", "", f"| learner | seed | its env steps | its training wall time (h) | {names} | target met "
             f"(every task placed >= {TARGET:.0%}, picked >= {PICK_TARGET:.0%}) |",
             "|---|---|---|---|" + "---|" * len(tasks) + "---|", *rows]
 
@@ -213,7 +235,7 @@ def report(results: Path = Path("docs/RESULTS.md"), log_dir: Path = CAMPAIGN_DIR
     curves = {(arm, seed): curve(p) for arm in ARMS for seed in SEEDS
               if (p := progress_csv(arm, log_dir, seed)).is_file()}
     fmt = lambda v, f="{:.0%}": "-" if v is None else f.format(v)  # noqa: E731
-    lines = [f"| learner | seed | env steps done (of {BUDGET:,}) | training wall time (h) | worst task placed at 1M / "
+    lines = [f"| learner | seed | env steps done / its budget | training wall time (h) | worst task placed at 1M / "
              f"2M env steps | at {' / '.join(map(str, AT_HOURS))} h of training | env steps to 50% / 90% (its whole run) | "
              f"wall time to 50% / 90% (h) | each task placed at its last env step ({' / '.join(PAPER_KINDS)}) | "
              f"first evaluated snapshot meeting the target: env steps (training wall time) |",
@@ -227,7 +249,7 @@ def report(results: Path = Path("docs/RESULTS.md"), log_dir: Path = CAMPAIGN_DIR
                 lines.append(f"| {label} | {seed} | not run: `{command}` | | | | | | | |")
                 continue
             c, whole = curves[arm, seed], curve(progress_csv(arm, log_dir, seed), until=None)
-            lines.append(f"| {label} | {seed} | {int(c['steps'][-1]):,} | {c['hours'][-1]:.1f} | "
+            lines.append(f"| {label} | {seed} | {int(c['steps'][-1]):,} / {BUDGETS[arm]:,} | {c['hours'][-1]:.1f} | "
                          f"{fmt(value_at(c, 'steps', 1e6))} / {fmt(value_at(c, 'steps', 2e6))} | "
                          + " / ".join(fmt(value_at(c, "hours", h)) for h in AT_HOURS)
                          + " | " + " / ".join(fmt(first_reaching(whole, "steps", v), "{:,.0f}") for v in LEVELS)
@@ -254,10 +276,15 @@ def report(results: Path = Path("docs/RESULTS.md"), log_dir: Path = CAMPAIGN_DIR
         if refilled:  # an inexact resume: the reader should know where
             lines += ["", f"SAC seed {seed}'s replay buffer was lost between sessions and refilled by its actor at "
                       + ", ".join(f"{step:,}" for step in refilled) + " env steps (`--refill-lost-buffer`)."]
+    for seed in SEEDS:
+        if (probe := progress_csv("sac_utd", log_dir, seed)).is_file():
+            recipe = progress_csv("sac", log_dir, seed)
+            lines += ["", update_ratio_sentence(probe, curve(recipe, until=None) if recipe.is_file() else None, seed)]
     body = "\n".join([
         "## Which learner, and curiosity", "",
         f"Commands: `{from_scratch.COMMAND} --seed S [--learner ppo]` (the SAC and PPO arms on a seed are the "
-        f"recipe's runs on it), `{COMMAND} --arm icm`, `{COMMAND} --report`. Each from nothing on the same envs, dense reward, near-goal starts and seeds; "
+        f"recipe's runs on it), `{COMMAND} --arm icm`, `{COMMAND} --arm sac_utd --seed S` (a probe: the recipe's SAC "
+        f"at {PROBE_UTD:g} gradient steps per env step to {PROBE_BUDGET:,}), `{COMMAND} --report`. Each from nothing on the same envs, dense reward, near-goal starts and seeds; "
         "the training episodes from ordinary resets, the worst of the three task types placed; the target: every task "
         f"placed >= {TARGET:.0%} and picked >= {PICK_TARGET:.0%} with the paper's protocol (every evaluation: "
         f"[the experiment page]({Path(*page.parts[1:])}#every-evaluation-with-the-papers-protocol)).", "", *lines, "",
@@ -270,11 +297,34 @@ def report(results: Path = Path("docs/RESULTS.md"), log_dir: Path = CAMPAIGN_DIR
     return body
 
 
+def update_ratio_sentence(probe: Path, recipe: Optional[dict], seed: int = 1) -> str:
+    """What the update-ratio probe's own clock (its progress.csv's last row) says it saves per env step, and the env
+    steps it took to 90% against the recipe's SAC run on its seed (`recipe`, its whole curve; None: not there): the
+    probe wins in wall time where it needs fewer than the saving's factor times the recipe's env steps."""
+    with open(probe, newline="") as f:
+        last = list(csv.DictReader(f))[-1]
+    steps, updates = float(last["global_step"]), float(last["updates"])
+    env_ms, update_ms = 1e3 * float(last["env_s"]) / steps, 1e3 * float(last["update_s"]) / max(updates, 1.0)
+    recipe_utd = sac_args().utd
+    cost, recipe_cost = env_ms + PROBE_UTD * update_ms, env_ms + recipe_utd * update_ms
+    probe_90 = first_reaching(curve(probe, None), "steps", TARGET)
+    recipe_90 = None if recipe is None else first_reaching(recipe, "steps", TARGET)
+    reached = ("it has not reached 90% yet" if probe_90 is None else
+               f"it reached 90% at {probe_90:,.0f} env steps"
+               + ("" if recipe_90 is None else f", the recipe's run on its seed at {recipe_90:,.0f} "
+                                                f"({probe_90 / recipe_90:.2f}x)"))
+    return (f"The update-ratio probe's own clock on seed {seed} ({int(steps):,} env steps): its env steps took {env_ms:.2f} ms per env "
+            f"step and a gradient step {update_ms:.1f} ms, so an env step of training costs {cost:.2f} ms at "
+            f"{PROBE_UTD:g} gradient steps per env step against {recipe_cost:.2f} ms at the recipe's {recipe_utd:g} "
+            f"({recipe_cost / cost:.2f}x): it is sooner in wall time where it needs fewer than "
+            f"{recipe_cost / cost:.2f}x the recipe's env steps; {reached}.")
+
+
 @dataclass
 class Args:
     arm: Optional[str] = None
-    """train (or resume) this arm to BUDGET: `icm` (the SAC and PPO arms are the recipe's runs:
-    experiments/from_scratch.py)."""
+    """train (or resume) this arm to its budget: `icm` (to BUDGET) or `sac_utd` (to PROBE_BUDGET); the SAC and PPO
+    arms are the recipe's runs (experiments/from_scratch.py)."""
     seed: int = 1
     """the recipe's seed the arm runs (or is evaluated) on: one of SEEDS."""
     num_envs: Optional[int] = None
@@ -296,8 +346,15 @@ def main(args: Args) -> None:
     if args.evaluate is not None:
         print(f"wrote {evaluate_arm(args.evaluate, seed=args.seed)}")
         return
+    if args.arm == "sac_utd":
+        a = sac_utd_args(args.seed)
+        print(f"SAC at {a.utd:g} gradient steps per env step, seed {a.seed}, to {a.total_timesteps:,} env steps in "
+              f"{Path(a.log_dir) / a.exp_name}")
+        if not args.dry_run:
+            run_sac(a)
+        return
     if args.arm != "icm":
-        raise SystemExit(f"--arm {args.arm}: use icm (the SAC and PPO arms are the recipe's runs: "
+        raise SystemExit(f"--arm {args.arm}: use icm or sac_utd (the SAC and PPO arms are the recipe's runs: "
                          f"`{from_scratch.COMMAND} --seed {args.seed}` with SAC, `... --learner ppo` with PPO), or "
                          "--report")
     run = icm_run(args.num_envs, args.seed)

@@ -51,18 +51,19 @@ def test_the_report_rows_each_arm_and_says_how_to_run_those_not_run(tmp_path, mo
     log_dir = tmp_path / "campaign"
     # the PPO arm: nothing placed for 60 rows of 2,000 env steps (4 s each), then 90% of its worst task
     _write(ln.progress_csv("ppo", log_dir), _rows(100, lambda i: 0.0 if i < 60 else 0.9))
-    body = ln.report(tmp_path / "RESULTS.md", log_dir=log_dir, page=tmp_path / "page.md")
+    body = ln.report(tmp_path / "RESULTS.md", log_dir=log_dir, eval_dir=tmp_path / "learners", page=tmp_path / "page.md")
     row = next(line for line in body.splitlines() if line.startswith("| PPO (the recipe"))
     # its worst task's mean over the last 50 rows (100,000 env steps) first reaches 50% 28 rows after the jump: at
     # 176,000 env steps, 88 rows of 4 s; 90% it would reach only 50 rows after the jump, beyond the run
-    assert row.startswith("| PPO (the recipe's run) | 1 | 200,000 | 0.1 | - / - | - / - / - |")  # 0.1 h: short of 0.5
+    assert row.startswith("| PPO (the recipe's run) | 1 | 200,000 / 2,000,000 | 0.1 | - / - | - / - / - |")  # 0.1 h: short of 0.5
     # each task's mean over its last 50 rows (100,000 env steps), 40 of them after the jump: ceiling 0.9 x 40 / 50,
     # window (0.1 x 10 + 1.0 x 40) / 50, flooring 1.0
     assert row.endswith("| 176,000 / - | 0.1 / - | 72% / 82% / 100% | not evaluated |")
     assert "None yet." in (tmp_path / "page.md").read_text(), "no evaluation: the page's table says so"
     # each planned run not yet run says how: the SAC and PPO arms are the recipe's runs (SAC its learner)
     for seed, command in ((2, f"{from_scratch.COMMAND} --seed 2 --learner ppo"), (1, f"{from_scratch.COMMAND} --seed 1"),
-                          (2, f"{from_scratch.COMMAND} --seed 2"), (1, f"{ln.COMMAND} --arm icm --seed 1")):
+                          (2, f"{from_scratch.COMMAND} --seed 2"), (1, f"{ln.COMMAND} --arm icm --seed 1"),
+                          (1, f"{ln.COMMAND} --arm sac_utd --seed 1"), (2, f"{ln.COMMAND} --arm sac_utd --seed 2")):
         assert f"| {seed} | not run: `{command}` |" in body
     assert "--arm icm --seed 2" not in body, "curiosity is one probe, on seed 1"
     assert (tmp_path / "images" / "learners.png").stat().st_size > 0
@@ -70,14 +71,14 @@ def test_the_report_rows_each_arm_and_says_how_to_run_those_not_run(tmp_path, mo
     sac_checkpoint = ln.arm_checkpoint("sac", log_dir, seed=2)
     sac_checkpoint.parent.mkdir(parents=True)
     torch.save({"clock": {"refilled_at": [1_250_000]}}, sac_checkpoint)  # the part of a SAC checkpoint read here
-    body = ln.report(tmp_path / "RESULTS.md", log_dir=log_dir, page=tmp_path / "page.md")
+    body = ln.report(tmp_path / "RESULTS.md", log_dir=log_dir, eval_dir=tmp_path / "learners", page=tmp_path / "page.md")
     assert "SAC seed 2's replay buffer was lost between sessions and refilled by its actor at 1,250,000 env steps" \
         in body, "an inexact resume is said"
 
 
 def test_an_unknown_arm_is_refused_and_the_icm_arm_is_the_recipe_with_curiosity(tmp_path):
     for arm in ("ppo", "sac"):  # the recipe's runs: experiments/from_scratch.py runs them
-        with pytest.raises(SystemExit, match="use icm .the SAC and PPO arms are the recipe's runs: `python -m "
+        with pytest.raises(SystemExit, match="use icm or sac_utd .the SAC and PPO arms are the recipe's runs: `python -m "
                                              "experiments.from_scratch --seed 1` with SAC"):
             ln.main(ln.Args(arm=arm))
     with pytest.raises(SystemExit, match="--seed 3: use one of 1, 2"):
@@ -91,6 +92,39 @@ def test_an_unknown_arm_is_refused_and_the_icm_arm_is_the_recipe_with_curiosity(
     ppo.main(tiny)
     trained = load_checkpoint(tmp_path / run.args.exp_name / "checkpoint.pt")
     assert trained["icm"] is not None and trained["progress"]["global_step"] == 40
+
+
+def test_the_update_ratio_arm_is_the_recipe_s_sac_with_half_its_gradient_steps(tmp_path, monkeypatch):
+    a, recipe = ln.sac_utd_args(1), ln.sac_args(1)
+    changed = {k for k, v in vars(a).items() if v != vars(recipe)[k]}
+    assert changed == {"utd", "total_timesteps", "exp_name"}
+    assert a.utd == recipe.utd / 2 and a.total_timesteps == ln.PROBE_BUDGET
+    assert ln.progress_csv("sac_utd", tmp_path) == tmp_path / "sac_utd025_s1" / "progress.csv"
+    ran = []
+    monkeypatch.setattr(ln, "run_sac", ran.append)
+    ln.main(ln.Args(arm="sac_utd", dry_run=True))
+    assert ran == [], "a dry run runs nothing"
+    ln.main(ln.Args(arm="sac_utd"))
+    assert ran == [a], "the probe runs (or resumes) as the recipe's SAC runs do"
+
+
+def test_the_update_ratio_probe_is_judged_by_its_own_clock_against_the_recipe_s_env_steps(tmp_path):
+    """Its env steps 2 ms each and its gradient steps 12 ms each: 2 + 0.25 x 12 = 5 ms an env step against the
+    recipe's 2 + 0.5 x 12 = 8 ms, 1.6x; it reached 90% 100 rows (200,000 env steps) in, the recipe's run at 100,000."""
+    rows = _rows(150, lambda i: 0.0 if i < 50 else 0.95)
+    for i, row in enumerate(rows):
+        row.update(env_s=0.002 * row["global_step"], updates=0.25 * row["global_step"],
+                   update_s=0.012 * 0.25 * row["global_step"])
+    _write(tmp_path / "probe.csv", rows)
+    recipe = _rows(150, lambda i: 0.0 if i < 25 else 0.95, wall=8.0)
+    _write(tmp_path / "recipe.csv", recipe)
+    sentence = ln.update_ratio_sentence(tmp_path / "probe.csv", ln.curve(tmp_path / "recipe.csv", until=None), seed=2)
+    assert sentence.startswith("The update-ratio probe's own clock on seed 2 (300,000 env steps)")
+    assert "its env steps took 2.00 ms per env step and a gradient step 12.0 ms" in sentence
+    assert "costs 5.00 ms at 0.25 gradient steps per env step against 8.00 ms at the recipe's 0.5 (1.60x)" in sentence
+    # the worst task's mean over 50 rows crosses 90% 48 rows after the jump (0.95 x 48 / 50 = 0.912)
+    assert sentence.endswith("it reached 90% at 196,000 env steps, the recipe's run on its seed at 146,000 (1.34x).")
+    assert ln.update_ratio_sentence(tmp_path / "probe.csv", None).endswith("it reached 90% at 196,000 env steps.")
 
 
 def test_each_paper_protocol_evaluation_is_rowed_with_its_wall_time_and_whether_it_meets_the_target(tmp_path,
