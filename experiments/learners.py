@@ -22,7 +22,7 @@ reward, the observation, the near-goal starts. What it does not: the reach start
 (PPO's network options).
 
 The update-ratio arm (`sac_utd`) is SAC with half the recipe's gradient steps per env step (0.25 against 0.5), a
-probe on one seed: SAC's gradient steps, not its env steps, set its pace on this CPU (docs/BENCHMARKS.md, "Where
+probe on both seeds: SAC's gradient steps, not its env steps, set its pace on this CPU (docs/BENCHMARKS.md, "Where
 SAC's training time goes"), so fewer of them make each env step cheaper; whether that reaches the target sooner in
 wall time is what the probe asks, before any recipe change.
 """
