@@ -7,6 +7,7 @@
     python -m experiments.obstacles --train shipped --evaluate   # that run's rows beside the zero-shot ones
     python -m experiments.obstacles --share 0.5 --train nothing   # SAC on a mixed scene: half of its training
                                                                   # episodes among obstacles, half without
+    python -m experiments.obstacles --training-curve      # the training runs' curves (docs/images/)
 
 Protocol, per task (ceiling, window, flooring), on evaluation seeds (from 1,000,000: never trained on):
 1. the planning expert solves each seed's static scene (a material stack and a scaffold post, seeded per episode):
@@ -25,6 +26,7 @@ the file is there with the same seeds, so an interrupted run goes on where it st
 
 from __future__ import annotations
 
+import csv
 import json
 import multiprocessing as mp
 import shlex
@@ -42,6 +44,7 @@ from baselines.ppo.evaluation import episode_job, pct, wilson
 from experiments import transfer
 from baselines.ppo.checkpoints import load_checkpoint
 from experiments.campaign import Run, checkpoint_of, policy_only
+from experiments.from_scratch import csv_column, moving_mean
 from ms_construction.assets import sha256
 from ms_construction.curriculum import FINAL_STAGE
 from ms_construction.envs import PAPER_TASK_ENV_IDS
@@ -58,6 +61,14 @@ TRAIN_SCENE = "moving"
 """the scene a training run among obstacles draws: the stack and the post, and the worker walking across."""
 TRAIN_BUDGET = 3_000_000
 """env steps of each training run among obstacles."""
+TRAIN_RUNS = {
+    "PPO from PPO's reward-only agent": ("shipped", None, 1.0),
+    "SAC from nothing": ("nothing", "sac", 1.0),
+    "SAC from nothing, mixed scene (--share 0.5)": ("nothing", "sac", 0.5),
+    "SAC from SAC's reward-only agent, mixed scene (--share 0.5)": ("shipped", "sac", 0.5),
+}
+"""the runs among obstacles `--training-curve` draws, seed 1: label -> (--train, --learner, --share)."""
+TRAIN_CURVE = Path("docs/images/obstacles_training.png")
 TRAINED = " (trained among obstacles)"
 """what the label of an agent trained on the moving scene (`--train`) ends with in summary.json."""
 
@@ -125,6 +136,8 @@ class Args(transfer.TrainOptions):
     the site as built, in its own run (campaign/obstacles_moving_share<%>_sac_s<seed>/)."""
     write_results: bool = True
     """write the table into docs/RESULTS.md (section `obstacles-zero-shot`)."""
+    training_curve: bool = False
+    """draw the training runs among obstacles (TRAIN_RUNS, those with a progress.csv) to TRAIN_CURVE, and exit."""
 
 
 _experts: dict = {}
@@ -221,7 +234,31 @@ def scene_rows(summary: dict, scene: str) -> dict[str, dict]:
             for label, _, rest in [key.partition(" | ")] if rest.startswith(scene)}
 
 
+def training_curve(out: Path = TRAIN_CURVE) -> Path:
+    """Each run of TRAIN_RUNS that has a progress.csv: its training episodes from ordinary resets placed per task
+    type (their moving mean over transfer.STEPS_WINDOW rows) against env steps, one panel per task type. A mixed
+    run's curve counts its episodes on both scenes; a touch on an obstacle fails an episode."""
+    panels: dict[str, dict] = {kind: {} for kind in PAPER_TASK_ENV_IDS}
+    for label, (start, learner, share) in TRAIN_RUNS.items():
+        progress = checkpoint_of(training_run(start, 1, None, learner, share)).parent / "progress.csv"
+        if not progress.is_file():
+            continue
+        with open(progress, newline="") as f:
+            rows = list(csv.DictReader(f))
+        steps = csv_column(rows, "global_step")
+        for kind, curves in panels.items():
+            placed = moving_mean(csv_column(rows, f"ordinary_place_{kind}"), transfer.STEPS_WINDOW)
+            curves[f"{label}, {int(steps[-1]):,} env steps"] = (steps, placed)
+    if not panels[next(iter(panels))]:
+        raise SystemExit("--training-curve: no run among obstacles has a progress.csv yet; train one with --train")
+    transfer.plot_training(panels, out, f"Training among obstacles ({TRAIN_SCENE} scene), seed 1")
+    return out
+
+
 def main(args: Args) -> dict:
+    if args.training_curve:
+        print(f"wrote {training_curve()}")
+        return {}
     if args.episodes < 1 or args.workers < 1:
         raise SystemExit("--episodes and --workers must be positive")
     args.agents = with_more_agents(args.agents, args.more_agents)

@@ -190,7 +190,7 @@ def training_report(results: Path = RESULTS_PATH, curve: Path = TRAIN_CURVE) -> 
             to_target = f"not within {TRAIN_BUDGET:,}" if steps[-1] >= TRAIN_BUDGET else "not yet"
         lines.append(f"| {run.what} | {int(steps[-1]):,} | {to_target} | {wall_h:.1f} | {placed} | {bays} |")
     if curves:
-        plot_training(curves, curve)
+        transfer.plot_training({"": curves}, curve, "The from-scratch recipe learning paneling")
     body = ("## Paneling, trained\n\n"
             "Commands: `python -m experiments.paneling --train nothing` (SAC), `--train nothing --learner ppo`, "
             "`--train shipped` (PPO; each resumable), then `--evaluate` beside any; this section: `python -m "
@@ -205,28 +205,6 @@ def training_report(results: Path = RESULTS_PATH, curve: Path = TRAIN_CURVE) -> 
             + (f"\n![paneling, trained]({os.path.relpath(curve, results.parent)})\n" if curves else ""))
     update_section(results, "paneling-training", title="Results", body=body)
     return body
-
-
-def plot_training(curves: dict[str, tuple[np.ndarray, np.ndarray]], out: Path) -> None:
-    """Each run's training episodes placed (their moving mean) against env steps, and the 90% line."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    fig, ax = plt.subplots(figsize=(7, 3.5))
-    for label, (steps, placed) in curves.items():
-        ax.plot(steps / 1e6, 100 * placed, label=label)
-    ax.axhline(100 * transfer.TARGET, color="gray", ls="--", lw=1)
-    ax.set_xlabel("env steps (millions)")
-    ax.set_ylabel("training episodes placed, %\n(ordinary resets, cp4)")
-    ax.set_ylim(0, 102)
-    ax.set_title("The from-scratch recipe learning paneling")
-    ax.legend(fontsize=7, loc="lower right")
-    fig.tight_layout()
-    out.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(out, dpi=100)
-    plt.close(fig)
 
 
 def main(args: Args) -> dict:

@@ -157,3 +157,31 @@ def train(run: Run, dry_run: bool = False, stop_at_target: bool = False,
     reached = steps_to(progress)
     print(f"{run.name}: training episodes placed >= {TARGET:.0%} "
           + (f"from {reached:,} env steps" if reached is not None else "not yet"))
+
+
+def plot_training(panels: dict[str, dict[str, tuple[np.ndarray, np.ndarray]]], out: Path, title: str) -> None:
+    """One panel per key of `panels` (its title; "" for none): each run's training episodes placed from ordinary
+    resets (steps, their moving mean) against env steps, and the TARGET line; the legend below the panels."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, axes = plt.subplots(1, len(panels), figsize=(7 if len(panels) == 1 else 3.6 * len(panels), 4.2),
+                             sharey=True, squeeze=False)
+    for ax, (panel, curves) in zip(axes[0], panels.items()):
+        for label, (steps, placed) in curves.items():
+            ax.plot(steps / 1e6, 100 * placed, label=label)
+        ax.axhline(100 * TARGET, color="gray", ls="--", lw=1)
+        ax.set_xlabel("env steps (millions)")
+        ax.set_ylim(0, 102)
+        if panel:
+            ax.set_title(panel, fontsize=9)
+    axes[0][0].set_ylabel("training episodes placed, %\n(ordinary resets, cp4)")
+    handles, labels = axes[0][0].get_legend_handles_labels()
+    fig.legend(handles, labels, fontsize=7, loc="lower center", ncol=min(2, len(labels)))
+    fig.suptitle(title, fontsize=10)
+    fig.tight_layout(rect=(0, 0.06 * ((len(labels) + 1) // 2), 1, 1))
+    out.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(out, dpi=100)
+    plt.close(fig)

@@ -391,3 +391,29 @@ def test_sac_on_a_mixed_scene_is_its_own_run_unchanged_but_for_the_share_and_ref
         obstacles.training_run("nothing", learner="ppo", share=0.5)
     with pytest.raises(SystemExit, match=r"in \(0, 1\]"):
         obstacles.training_run("nothing", learner="sac", share=0.0)
+
+
+def test_the_training_curve_draws_every_run_with_a_progress_file_per_task_type(tmp_path, monkeypatch):
+    """`--training-curve`: one panel per task type, a curve per run of TRAIN_RUNS whose progress.csv is there (its
+    per-task moving mean of the training episodes placed), labelled with its env steps; with none there it says how
+    to start one."""
+    from experiments import obstacles
+    from experiments.campaign import checkpoint_of
+
+    monkeypatch.chdir(tmp_path)
+    with pytest.raises(SystemExit, match="train one with --train"):
+        obstacles.training_curve(tmp_path / "curve.png")
+    drawn = {}
+    monkeypatch.setattr(obstacles.transfer, "plot_training", lambda panels, out, title: drawn.update(panels))
+    progress = checkpoint_of(obstacles.training_run("nothing", share=0.5)).parent / "progress.csv"
+    progress.parent.mkdir(parents=True)
+    progress.write_text("global_step,ordinary_place_ceiling,ordinary_place_window,ordinary_place_flooring\n"
+                        + "".join(f"{2000 * (i + 1)},1.0,,0.0\n" for i in range(3)))
+    obstacles.training_curve(tmp_path / "curve.png")
+    assert list(drawn) == ["ceiling", "window", "flooring"]
+    label = "SAC from nothing, mixed scene (--share 0.5), 6,000 env steps"
+    assert all(list(curves) == [label] for curves in drawn.values()), "only the run with a progress.csv"
+    steps, placed = drawn["ceiling"][label]
+    assert list(steps) == [2000, 4000, 6000] and list(placed) == [1.0, 1.0, 1.0]
+    assert list(drawn["flooring"][label][1]) == [0.0] * 3
+    assert all(v != v for v in drawn["window"][label][1]), "no window episode ended: nothing to average"
