@@ -289,3 +289,23 @@ def test_a_run_whose_buffer_is_lost_goes_on_with_an_empty_one_refilled_before_an
     sac.train(again)
     assert again.clock.updates == 150 + 51 and again.clock.skipped_updates == 49, "from step 250 on, one a step"
     assert again.clock.refilled_at == [200]
+
+
+def test_among_obstacles_the_csv_counts_per_task_type_the_ordinary_episodes_that_touched_one():
+    """`episode_columns` with --obstacles: per task type, the share of the episodes from ordinary resets that ended
+    on a touch of an obstacle (near-goal starts not counted, as for placed); without obstacles no such column."""
+    from types import SimpleNamespace
+
+    from baselines.ppo.ppo import EPISODE_STATS
+    from ms_construction.parameters import ELEMENT_KINDS
+
+    assert all(f"ordinary_collided_{kind}" in sac.CSV_FIELDS for kind in ELEMENT_KINDS)
+    episodes = {key: [0.0] * 5 for key in EPISODE_STATS.values()}
+    episodes.update(task_id=[0, 0, 0, 1, 0], near_goal=[False, False, False, False, True],
+                    collided=[True, False, False, False, True], success=[0.0, 1.0, 1.0, 1.0, 0.0])
+    progress = SimpleNamespace(near_goal_radius=[0.1] * len(ELEMENT_KINDS))
+    row = sac.episode_columns(sac.Args(obstacles="moving"), progress, episodes)
+    ceiling, window = ELEMENT_KINDS[0], ELEMENT_KINDS[1]
+    assert row[f"ordinary_collided_{ceiling}"] == pytest.approx(1 / 3) and row[f"ordinary_collided_{window}"] == 0.0
+    assert row[f"ordinary_place_{ceiling}"] == pytest.approx(2 / 3)
+    assert not any(k.startswith("ordinary_collided") for k in sac.episode_columns(sac.Args(), progress, episodes))

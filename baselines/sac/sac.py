@@ -253,13 +253,15 @@ CSV_FIELDS = [
     "episode_length", "end_place_dist", "end_place_angle_deg", "held_at_end", "eval_pick_success", "eval_place_success",
     "eval_extrinsic_return", "near_goal_radius", "near_goal_episodes", "near_goal_place_success",
     "ordinary_place_success", *[f"ordinary_place_{kind}" for kind in ELEMENT_KINDS],
-    *[f"ordinary_pick_{kind}" for kind in ELEMENT_KINDS], *[f"near_goal_radius_{kind}" for kind in ELEMENT_KINDS],
+    *[f"ordinary_pick_{kind}" for kind in ELEMENT_KINDS], *[f"ordinary_collided_{kind}" for kind in ELEMENT_KINDS],
+    *[f"near_goal_radius_{kind}" for kind in ELEMENT_KINDS],
     "sps", "wall_s", "env_s", "update_s", "eval_s", "checkpoint_s", "update_share", "updates", "buffer_fill",
     "alpha", "entropy", "qf1_loss", "qf2_loss", "q_value", "actor_loss", "alpha_loss",
 ]
 """progress.csv's columns: ppo.py's (the same names, so experiments/from_scratch.py's and scripts/plot_training.py's
 readers read them; `place_success` is the place success of the training episodes that ended since the last row,
-`stage` the tolerance stage of --curriculum, cp4 by default), then SAC's: `sps` env steps per second of wall time since the last row,
+`stage` the tolerance stage of --curriculum, cp4 by default; `ordinary_collided_<kind>`, with --obstacles, the share
+of those episodes that ended on a touch of an obstacle), then SAC's: `sps` env steps per second of wall time since the last row,
 `wall_s` the run's wall time so far (resumes added up), `env_s`, `update_s`, `eval_s`, `checkpoint_s` its parts in
 env steps (with the actor's actions and the buffer), gradient steps, evaluations and checkpoints, `update_share`
 update_s / wall_s, `updates` gradient steps so far, `buffer_fill` transitions in the buffer; the losses are means
@@ -815,8 +817,8 @@ def close(*envs: Optional[CPUVectorEnv]) -> None:
 def collect(run: Run, envs: CPUVectorEnv, obs: torch.Tensor, episodes: dict) -> torch.Tensor:
     """`steps_per_env_per_iteration` steps of every env from `obs` into the replay buffer (uniform random actions
     before --learning-starts, the actor's draws after), the episodes that end added to `episodes` (EPISODE_STATS'
-    keys, near-goal start, task type); the observation statistics updated with the observations acted on. The
-    observation after."""
+    keys, near-goal start, task type, a touch of an obstacle); the observation statistics updated with the
+    observations acted on. The observation after."""
     args, actor, progress = run.args, run.learner.actor, run.progress
     seen = []
     for _ in range(args.steps_per_env_per_iteration):
@@ -837,6 +839,7 @@ def collect(run: Run, envs: CPUVectorEnv, obs: torch.Tensor, episodes: dict) -> 
                 episodes[key] += ep[key][ended].float().tolist()
             episodes["near_goal"] += ep["near_goal_start"][ended].tolist()
             episodes["task_id"] += ep["task_id"][ended].tolist()
+            episodes["collided"] += ep["collided"][ended].tolist()
         run.buffer.add(obs, final_obs, actions, reward * args.reward_scale, terminated)
         seen.append(obs)
         obs = next_obs
@@ -857,8 +860,8 @@ def widen_starts(run: Run, envs: CPUVectorEnv, episodes: dict) -> None:
 
 def episode_columns(args: Args, progress: Progress, episodes: dict) -> dict:
     """progress.csv's columns of the episodes that ended since the last row (ppo.py's names): EPISODE_STATS' means,
-    the place and pick success of ordinary resets (per task type), the place success of near-goal starts, and the
-    radii now."""
+    the place and pick success of ordinary resets (per task type; with --obstacles, the share that touched one too),
+    the place success of near-goal starts, and the radii now."""
     row = {}
     if episodes["success"]:
         row.update({column: float(np.mean(episodes[key])) for column, key in EPISODE_STATS.items()})
@@ -868,6 +871,8 @@ def episode_columns(args: Args, progress: Progress, episodes: dict) -> dict:
         if ((task == k) & ~near).any():
             row[f"ordinary_place_{kind}"] = float(placed[(task == k) & ~near].mean())
             row[f"ordinary_pick_{kind}"] = float(picked[(task == k) & ~near].mean())
+            if args.obstacles is not None:
+                row[f"ordinary_collided_{kind}"] = float(np.mean(np.asarray(episodes["collided"])[(task == k) & ~near]))
     if args.near_goal_share > 0:
         row.update(near_goal_radius=float(np.mean(progress.near_goal_radius)), near_goal_episodes=int(near.sum()),
                    near_goal_place_success=float(placed[near].mean()) if near.any() else float("nan"),
