@@ -236,9 +236,11 @@ def scene_rows(summary: dict, scene: str) -> dict[str, dict]:
 
 def training_curve(out: Path = TRAIN_CURVE) -> Path:
     """Each run of TRAIN_RUNS that has a progress.csv: its training episodes from ordinary resets placed per task
-    type (their moving mean over transfer.STEPS_WINDOW rows) against env steps, one panel per task type. A mixed
-    run's curve counts its episodes on both scenes; a touch on an obstacle fails an episode."""
+    type (their moving mean over transfer.STEPS_WINDOW rows) against env steps, one panel per task type, and below
+    them the share of those episodes that touched an obstacle where the run logged it. A mixed run's curves count
+    its episodes on both scenes; a touch on an obstacle fails an episode."""
     panels: dict[str, dict] = {kind: {} for kind in PAPER_TASK_ENV_IDS}
+    collided: dict[str, dict] = {kind: {} for kind in PAPER_TASK_ENV_IDS}
     for label, (start, learner, share) in TRAIN_RUNS.items():
         progress = checkpoint_of(training_run(start, 1, None, learner, share)).parent / "progress.csv"
         if not progress.is_file():
@@ -249,9 +251,13 @@ def training_curve(out: Path = TRAIN_CURVE) -> Path:
         for kind, curves in panels.items():
             placed = moving_mean(csv_column(rows, f"ordinary_place_{kind}"), transfer.STEPS_WINDOW)
             curves[f"{label}, {int(steps[-1]):,} env steps"] = (steps, placed)
+            touched = csv_column(rows, f"ordinary_collided_{kind}")
+            if np.isfinite(touched).any():  # logged by runs (or parts of runs) since SAC's CSV had the column
+                collided[kind][f"{label}, {int(steps[-1]):,} env steps"] = (steps, moving_mean(touched,
+                                                                                              transfer.STEPS_WINDOW))
     if not panels[next(iter(panels))]:
         raise SystemExit("--training-curve: no run among obstacles has a progress.csv yet; train one with --train")
-    transfer.plot_training(panels, out, f"Training among obstacles ({TRAIN_SCENE} scene), seed 1")
+    transfer.plot_training(panels, out, f"Training among obstacles ({TRAIN_SCENE} scene), seed 1", collided)
     return out
 
 

@@ -159,29 +159,40 @@ def train(run: Run, dry_run: bool = False, stop_at_target: bool = False,
           + (f"from {reached:,} env steps" if reached is not None else "not yet"))
 
 
-def plot_training(panels: dict[str, dict[str, tuple[np.ndarray, np.ndarray]]], out: Path, title: str) -> None:
+def plot_training(panels: dict[str, dict[str, tuple[np.ndarray, np.ndarray]]], out: Path, title: str,
+                  collided: Optional[dict[str, dict[str, tuple[np.ndarray, np.ndarray]]]] = None) -> None:
     """One panel per key of `panels` (its title; "" for none): each run's training episodes placed from ordinary
-    resets (steps, their moving mean) against env steps, and the TARGET line; the legend below the panels."""
+    resets (steps, their moving mean) against env steps, and the TARGET line; with `collided` (the same keys), a
+    second row of panels: the share of those episodes that touched an obstacle, for the runs that logged it. A run
+    keeps its colour in every panel; the legend below the panels."""
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    fig, axes = plt.subplots(1, len(panels), figsize=(7 if len(panels) == 1 else 3.6 * len(panels), 4.2),
-                             sharey=True, squeeze=False)
-    for ax, (panel, curves) in zip(axes[0], panels.items()):
-        for label, (steps, placed) in curves.items():
-            ax.plot(steps / 1e6, 100 * placed, label=label)
-        ax.axhline(100 * TARGET, color="gray", ls="--", lw=1)
+    rows = [("training episodes placed, %\n(ordinary resets, cp4)", panels)]
+    if collided is not None:
+        rows.append(("of them touched an obstacle, %", collided))
+    runs = list(dict.fromkeys(label for curves in panels.values() for label in curves))
+    colour = {label: f"C{i}" for i, label in enumerate(runs)}
+    fig, axes = plt.subplots(len(rows), len(panels), sharex="col", sharey="row", squeeze=False,
+                             figsize=(7 if len(panels) == 1 else 3.6 * len(panels), 1.2 + 3.0 * len(rows)))
+    for r, (ylabel, grid) in enumerate(rows):
+        for ax, (panel, curves) in zip(axes[r], grid.items()):
+            for label, (steps, share) in curves.items():
+                ax.plot(steps / 1e6, 100 * share, label=label, color=colour[label])
+            if r == 0:
+                ax.axhline(100 * TARGET, color="gray", ls="--", lw=1)
+                if panel:
+                    ax.set_title(panel, fontsize=9)
+            ax.set_ylim(0, 102)
+        axes[r][0].set_ylabel(ylabel)
+    for ax in axes[-1]:
         ax.set_xlabel("env steps (millions)")
-        ax.set_ylim(0, 102)
-        if panel:
-            ax.set_title(panel, fontsize=9)
-    axes[0][0].set_ylabel("training episodes placed, %\n(ordinary resets, cp4)")
     handles, labels = axes[0][0].get_legend_handles_labels()
     fig.legend(handles, labels, fontsize=7, loc="lower center", ncol=min(2, len(labels)))
     fig.suptitle(title, fontsize=10)
-    fig.tight_layout(rect=(0, 0.06 * ((len(labels) + 1) // 2), 1, 1))
+    fig.tight_layout(rect=(0, 0.06 * ((len(labels) + 1) // 2) / len(rows), 1, 1))
     out.parent.mkdir(parents=True, exist_ok=True)
     fig.savefig(out, dpi=100)
     plt.close(fig)

@@ -395,20 +395,22 @@ def test_sac_on_a_mixed_scene_is_its_own_run_unchanged_but_for_the_share_and_ref
 
 def test_the_training_curve_draws_every_run_with_a_progress_file_per_task_type(tmp_path, monkeypatch):
     """`--training-curve`: one panel per task type, a curve per run of TRAIN_RUNS whose progress.csv is there (its
-    per-task moving mean of the training episodes placed), labelled with its env steps; with none there it says how
-    to start one."""
+    per-task moving mean of the training episodes placed), labelled with its env steps, and the touches of an
+    obstacle where the run logged them; with no run there it says how to start one."""
     from experiments import obstacles
     from experiments.campaign import checkpoint_of
 
     monkeypatch.chdir(tmp_path)
     with pytest.raises(SystemExit, match="train one with --train"):
         obstacles.training_curve(tmp_path / "curve.png")
-    drawn = {}
-    monkeypatch.setattr(obstacles.transfer, "plot_training", lambda panels, out, title: drawn.update(panels))
+    drawn, touched = {}, {}
+    monkeypatch.setattr(obstacles.transfer, "plot_training",
+                        lambda panels, out, title, collided: (drawn.update(panels), touched.update(collided)))
     progress = checkpoint_of(obstacles.training_run("nothing", share=0.5)).parent / "progress.csv"
     progress.parent.mkdir(parents=True)
-    progress.write_text("global_step,ordinary_place_ceiling,ordinary_place_window,ordinary_place_flooring\n"
-                        + "".join(f"{2000 * (i + 1)},1.0,,0.0\n" for i in range(3)))
+    progress.write_text("global_step,ordinary_place_ceiling,ordinary_place_window,ordinary_place_flooring,"
+                        "ordinary_collided_ceiling\n"  # the touches logged from the second row on, ceiling only
+                        + "".join(f"{2000 * (i + 1)},1.0,,0.0,{'' if i == 0 else 0.5}\n" for i in range(3)))
     obstacles.training_curve(tmp_path / "curve.png")
     assert list(drawn) == ["ceiling", "window", "flooring"]
     label = "SAC from nothing, mixed scene (--share 0.5), 6,000 env steps"
@@ -417,3 +419,5 @@ def test_the_training_curve_draws_every_run_with_a_progress_file_per_task_type(t
     assert list(steps) == [2000, 4000, 6000] and list(placed) == [1.0, 1.0, 1.0]
     assert list(drawn["flooring"][label][1]) == [0.0] * 3
     assert all(v != v for v in drawn["window"][label][1]), "no window episode ended: nothing to average"
+    assert list(touched["ceiling"]) == [label] and not touched["window"] and not touched["flooring"]
+    assert list(touched["ceiling"][label][1])[1:] == [0.5, 0.5], "the touches from where the run logged them"
