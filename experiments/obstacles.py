@@ -248,13 +248,12 @@ def training_curve(out: Path = TRAIN_CURVE) -> Path:
         with open(progress, newline="") as f:
             rows = list(csv.DictReader(f))
         steps = csv_column(rows, "global_step")
+        name = f"{label}, {int(steps[-1]):,} env steps"
         for kind, curves in panels.items():
-            placed = moving_mean(csv_column(rows, f"ordinary_place_{kind}"), transfer.STEPS_WINDOW)
-            curves[f"{label}, {int(steps[-1]):,} env steps"] = (steps, placed)
+            curves[name] = (steps, moving_mean(csv_column(rows, f"ordinary_place_{kind}"), transfer.STEPS_WINDOW))
             touched = csv_column(rows, f"ordinary_collided_{kind}")
             if np.isfinite(touched).any():  # logged by runs (or parts of runs) since SAC's CSV had the column
-                collided[kind][f"{label}, {int(steps[-1]):,} env steps"] = (steps, moving_mean(touched,
-                                                                                              transfer.STEPS_WINDOW))
+                collided[kind][name] = (steps, moving_mean(touched, transfer.STEPS_WINDOW))
     if not panels[next(iter(panels))]:
         raise SystemExit("--training-curve: no run among obstacles has a progress.csv yet; train one with --train")
     transfer.plot_training(panels, out, f"Training among obstacles ({TRAIN_SCENE} scene), seed 1", collided)
