@@ -190,9 +190,10 @@ def plot_training(panels: dict[str, dict[str, tuple[np.ndarray, np.ndarray]]], o
     for ax in axes[-1]:
         ax.set_xlabel("env steps (millions)")
     handles, labels = axes[0][0].get_legend_handles_labels()
-    fig.legend(handles, labels, fontsize=7, loc="lower center", ncol=min(2, len(labels)))
+    ncol = 1 if len(panels) == 1 else min(2, len(labels))  # one narrow panel: long labels one to a line
+    fig.legend(handles, labels, fontsize=7, loc="lower center", ncol=ncol)
     fig.suptitle(title, fontsize=10)
-    fig.tight_layout(rect=(0, 0.06 * ((len(labels) + 1) // 2) / len(rows), 1, 1))
+    fig.tight_layout(rect=(0, 0.045 * (-(-len(labels) // ncol) + 1) / len(rows), 1, 1))
     out.parent.mkdir(parents=True, exist_ok=True)
     fig.savefig(out, dpi=100)
     plt.close(fig)
