@@ -8,7 +8,8 @@ held out of training, evaluated with the paper's protocol on the openings it nev
     python -m experiments.unseen_openings --seed 1 --learner ppo # PPO's recipe instead, to its budget
     python -m experiments.unseen_openings --imitation --dry-run  # its plan, and how far it has come
     python -m experiments.unseen_openings --imitation            # the imitation twin: demonstrations -> clone ->
-                                                                 # residual PPO on the trained openings, then evaluated
+                                                                 # residual PPO on the trained openings; the clone and
+                                                                 # the refined policy evaluated
     python -m experiments.unseen_openings --seed 1 --curve       # the held-out and trained openings placed at each
                                                                  # snapshot the run kept (30 episodes per task)
     python -m experiments.unseen_openings --report               # RESULTS' section from the evaluations
@@ -174,7 +175,7 @@ def plot_curve(out: Optional[Path] = None) -> Optional[Path]:
 
 def evaluation_json(seed, seen: bool) -> Path:
     """A run's evaluation on the unseen or the seen openings: `seed` is the recipe's seed, "sac_s<seed>" or
-    "imitation"."""
+    one of IMITATION_POLICIES."""
     return EVAL_DIR / f"unseen_{'s' if isinstance(seed, int) else ''}{seed}_{'seen' if seen else 'unseen'}.json"
 
 
@@ -204,20 +205,25 @@ def evaluate(checkpoint: Path, seed, steps: int = EVAL_STEPS, workers: int = 2) 
         record_checkpoint_step(out, checkpoint)
 
 
-def imitation(run_dir: Path = IMITATION_DIR, clone: Optional[dict] = None, refine_args: Optional[dict] = None) -> Path:
+def imitation(run_dir: Optional[Path] = None, clone: Optional[dict] = None,
+              refine_args: Optional[dict] = None) -> tuple[Path, Path]:
     """The imitation twin, stage by stage (each skipped where its output is there): the clone of the expert's
     demonstrations of the TRAINED openings, its residual PPO refinement on them, the refined policy chosen on
-    validation among them; the policy. `clone`, `refine_args`: overrides of IMITATION_CLONE, IMITATION_REFINE."""
+    validation among them; the clone and the refined policy. `clone`, `refine_args`: overrides of IMITATION_CLONE,
+    IMITATION_REFINE. `run_dir`: default IMITATION_DIR."""
     from experiments import general_agent, refine
+
+    run_dir = run_dir or IMITATION_DIR
 
     cloned = general_agent.main(general_agent.Args(run_dir=run_dir / "clone", goal_slots=TRAINED,
                                                    **{**IMITATION_CLONE, **(clone or {})}))
-    return refine.main(refine.Args(clone=cloned, run_dir=run_dir / "refine", goal_slots=TRAINED, ship=False,
-                                   **{**IMITATION_REFINE, **(refine_args or {})}))
+    return cloned, refine.main(refine.Args(clone=cloned, run_dir=run_dir / "refine", goal_slots=TRAINED, ship=False,
+                                           **{**IMITATION_REFINE, **(refine_args or {})}))
 
 
-def imitation_plan(run_dir: Path = IMITATION_DIR) -> str:
-    """What `imitation` would do, and how far it has come in `run_dir` (nothing is run)."""
+def imitation_plan(run_dir: Optional[Path] = None) -> str:
+    """What `imitation` would do, and how far it has come in `run_dir` (default IMITATION_DIR; nothing is run)."""
+    run_dir = run_dir or IMITATION_DIR
     lines = [f"the imitation twin on goal openings {', '.join(map(str, TRAINED))} "
              f"(held out: {', '.join(map(str, HELD_OUT))}), in {run_dir}:"]
     for stage, what, settings in (
@@ -226,24 +232,40 @@ def imitation_plan(run_dir: Path = IMITATION_DIR) -> str:
         where = run_dir / stage
         made = sum(p.is_file() for p in where.rglob("*")) if where.is_dir() else 0
         lines.append(f"- {stage}: {what}, {settings}: " + (f"{made} file{'s' * (made != 1)} in {where} so far" if made else "not started"))
-    for seen in (False, True):
-        path = evaluation_json("imitation", seen)
-        lines.append(f"- the paper's protocol on the {'trained' if seen else 'held-out'} openings: "
-                     + (f"done ({path})" if path.is_file() else "not yet"))
+    for policy in IMITATION_POLICIES:
+        for seen in (False, True):
+            path = evaluation_json(policy, seen)
+            lines.append(f"- the paper's protocol, {run_label(policy)}, on the {'trained' if seen else 'held-out'} "
+                         "openings: " + (f"done ({path})" if path.is_file() else "not yet"))
     return "\n".join(lines)
 
 
 SEEDS = (1, 2)
-EVALUATED = (*SEEDS, *(f"sac_s{s}" for s in SEEDS), "imitation")
+IMITATION_POLICIES = ("imitation_clone", "imitation")
+"""the imitation twin's two policies as `evaluation_json` names them: its clone, then the clone refined by PPO (the
+recipe's policy). The clone alone says what the demonstrations carry to an opening they never showed; the refined
+policy, what PPO on the trained openings adds or takes away."""
+EVALUATED = (*SEEDS, *(f"sac_s{s}" for s in SEEDS), *IMITATION_POLICIES)
 """the runs whose evaluations the report looks for (`evaluation_json`'s `seed`): the recipe's seeds, SAC's, the
-imitation twin."""
+imitation twin's policies."""
 
 
 def run_label(seed) -> str:
     """How RESULTS names the run of `evaluation_json`'s `seed`."""
     return (f"the recipe from nothing, seed {seed}" if isinstance(seed, int) else
             f"SAC from nothing, seed {seed.removeprefix('sac_s')}" if seed.startswith("sac_s") else
-            "imitation (clone + residual PPO)")
+            "imitation: its clone alone" if seed == "imitation_clone" else "imitation (clone + residual PPO)")
+
+
+def trained_steps(seed, data: dict) -> str:
+    """The table's env steps of an evaluated run: its RL's (an imitation policy's PPO on the clone, the expert's
+    demonstrations not counted: the clone's own record counts them)."""
+    if "checkpoint_step" not in data:
+        return "-"
+    step = data["checkpoint_step"]
+    if isinstance(seed, str) and seed.startswith("imitation"):
+        return f"{step:,} of PPO on the clone" if step else "none: demonstrations only"
+    return f"{step:,}"
 
 
 def report(results: Path = Path("docs/RESULTS.md")) -> str:
@@ -257,8 +279,7 @@ def report(results: Path = Path("docs/RESULTS.md")) -> str:
             cells = [pct(tasks[e]["place_success"], tasks[e]["place_success_ci95"]) for e in PAPER_TASK_ENV_IDS.values()]
             slots = ", ".join(map(str, TRAINED if seen else HELD_OUT))
             which = f"{'trained on' if seen else 'never trained on'} ({slots})"
-            trained = f"{data['checkpoint_step']:,}" if "checkpoint_step" in data else "-"
-            lines.append(f"| {run_label(seed)} | {trained} | {which} | " + " | ".join(cells) + " |")
+            lines.append(f"| {run_label(seed)} | {trained_steps(seed, data)} | {which} | " + " | ".join(cells) + " |")
     table = "\n".join(lines) if len(lines) > 2 else "No run has been evaluated yet."
     body = ("## Openings no agent trained on\n\n"
             f"Commands: `{COMMAND} --seed S` (training SAC; `--learner ppo`: PPO's recipe), `{COMMAND} --seed S "
@@ -288,7 +309,7 @@ class Args:
     report: bool = False
     """write RESULTS' section from the evaluations there are, and exit."""
     imitation: bool = False
-    """run (or resume) the imitation twin (`imitation`) and evaluate its policy, then exit."""
+    """run (or resume) the imitation twin (`imitation`) and evaluate its clone and its refined policy, then exit."""
     learner: str = LEARNER
     """with --seed: `sac` (the recipe's learner: `sac_run`) or `ppo` (PPO's recipe: `seed_run`)."""
     until: Optional[int] = None
@@ -307,7 +328,8 @@ def main(args: Args) -> None:
         print(imitation_plan())
         if args.dry_run:
             return
-        evaluate(imitation(), "imitation")
+        for policy, name in zip(imitation(), IMITATION_POLICIES):
+            evaluate(policy, name)
         print(report())
         return
     if args.seed is None:

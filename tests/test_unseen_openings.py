@@ -65,6 +65,11 @@ def test_the_report_tables_unseen_and_seen_openings_per_seed(tmp_path, monkeypat
     assert uo.evaluation_json("imitation", False).name == "unseen_imitation_unseen.json"
     body = uo.report(tmp_path / "RESULTS.md")
     assert "| imitation (clone + residual PPO) | - | never trained on (1) | 90.0" in body
+    for policy, step, cell in (("imitation", 400_000, "400,000 of PPO on the clone"),
+                               ("imitation_clone", 0, "none: demonstrations only")):
+        uo.evaluation_json(policy, True).write_text(json.dumps({"tasks": tasks, "checkpoint_step": step}))
+        assert f"| {uo.run_label(policy)} | {cell} | trained on (0, 2) | 90.0" in uo.report(tmp_path / "RESULTS.md")
+    assert uo.evaluation_json("imitation_clone", True).name == "unseen_imitation_clone_seen.json"
     uo.evaluation_json("sac_s2", True).write_text(json.dumps({"tasks": tasks, "checkpoint_step": 350_000}))
     assert uo.evaluation_json("sac_s2", True).name == "unseen_sac_s2_seen.json"
     assert "| SAC from nothing, seed 2 | 350,000 | trained on (0, 2) | 90.0" in uo.report(tmp_path / "RESULTS.md")
@@ -79,14 +84,14 @@ def test_the_imitation_twins_dry_run_runs_nothing_and_says_how_far_it_has_come(t
     monkeypatch.setattr(uo, "imitation", lambda *a, **k: pytest.fail("a dry run trained"))
     uo.main(uo.Args(imitation=True, dry_run=True))
     plan = capsys.readouterr().out
-    assert "goal openings 0, 2 (held out: 1)" in plan and plan.count("not started") == 2 and plan.count("not yet") == 2
+    assert "goal openings 0, 2 (held out: 1)" in plan and plan.count("not started") == 2 and plan.count("not yet") == 4
     (tmp_path / "imitation" / "clone" / "bc0").mkdir(parents=True)
     (tmp_path / "imitation" / "clone" / "bc0" / "checkpoint.pt").write_bytes(b"")
     (tmp_path / "evaluations").mkdir()
     uo.evaluation_json("imitation", False).write_text("{}")
     plan = uo.imitation_plan(tmp_path / "imitation")
     assert "- clone:" in plan and "1 file in" in plan and plan.count("not started") == 1
-    assert "held-out openings: done" in plan and plan.count("not yet") == 1
+    assert "(clone + residual PPO), on the held-out openings: done" in plan and plan.count("not yet") == 3
 
 
 def test_the_imitation_twin_demonstrates_clones_refines_and_validates_on_the_trained_openings_only(tmp_path, monkeypatch):
@@ -113,11 +118,12 @@ def test_the_imitation_twin_demonstrates_clones_refines_and_validates_on_the_tra
     spy(refine, "collect_failure_states", lambda *a, **k: k["env_kwargs"] == {"goal_slot_weights": weights})
     spy(evaluation, "main", lambda args: args.goal_slots == uo.TRAINED)
     spy(ppo, "main", lambda args: args.starts.goal_slot_weights == evaluation.training_slot_weights(uo.TRAINED))
-    policy = uo.imitation(tmp_path, clone=dict(demos=2, window_demos=0, flooring_demos=0, validation_episodes=1,
+    cloned, policy = uo.imitation(tmp_path, clone=dict(demos=2, window_demos=0, flooring_demos=0, validation_episodes=1,
                                                bc_epochs=2, workers=1),
                           refine_args=dict(bank_episodes=2, total_timesteps=40, num_envs=2, num_steps=20,
                                            validate_every=40, validation_episodes=1, confirmation_episodes=1))
-    assert policy.is_file() and demos.tried_episodes(tmp_path / "clone" / "demos" / "general.npz") == 2
+    assert cloned.is_file() and policy.is_file() and cloned != policy
+    assert demos.tried_episodes(tmp_path / "clone" / "demos" / "general.npz") == 2
     assert {name for name, _ in seen} == {"record_demos", "collect_failure_states", "main"}
     assert all(ok for _, ok in seen), seen
 
