@@ -32,7 +32,8 @@ them (IMITATION_CLONE: experiments/general_agent.py's direct-path demonstrations
 IMITATION_REFINE: experiments/refine.py's residual PPO on the frozen clone), with `goal_slots` = TRAINED in both:
 no demonstration, takeover, bank state, training episode, validation or confirmation draws a held-out opening. Its
 stages write to runs/unseen_imitation/ and each is skipped when its output is there (demonstrations of about 100 MB
-are not committed: it resumes on the machine that ran it; about 2.5 h on 2 cores).
+are not committed; about 2.5 h on 2 cores). The clone is committed (KEPT_CLONE): on another machine the twin
+starts from it, at the refinement (about 1.2 h).
 """
 
 from __future__ import annotations
@@ -90,6 +91,9 @@ IMITATION_REFINE = dict(reward_mode="sparse", reward_scale=1.0, gamma=0.999, boo
                         task_weights=(0.5, 0.25, 0.25), bank_episodes=3000, bank_offsets=(-40, -25, -10),
                         validation_episodes=1000, confirmation_episodes=1000, total_timesteps=600_000)
 """experiments/refine.py's settings of the shipped imitation agent (general_agent.pt's record)."""
+KEPT_CLONE = Path("campaign/unseen_imitation/clone.pt")
+"""the twin's clone, committed: on a machine whose run directory holds no clone of its own the twin refines this one
+instead of recording the demonstrations (68 minutes) and cloning them again."""
 
 
 SNAPSHOT_DIR = Path("runs/unseen_snapshots")
@@ -214,9 +218,11 @@ def imitation(run_dir: Optional[Path] = None, clone: Optional[dict] = None,
     from experiments import general_agent, refine
 
     run_dir = run_dir or IMITATION_DIR
-
-    cloned = general_agent.main(general_agent.Args(run_dir=run_dir / "clone", goal_slots=TRAINED,
-                                                   **{**IMITATION_CLONE, **(clone or {})}))
+    if KEPT_CLONE.is_file() and not (run_dir / "clone").is_dir():
+        cloned = KEPT_CLONE  # another machine made it: its demonstrations are not committed
+    else:
+        cloned = general_agent.main(general_agent.Args(run_dir=run_dir / "clone", goal_slots=TRAINED,
+                                                       **{**IMITATION_CLONE, **(clone or {})}))
     return cloned, refine.main(refine.Args(clone=cloned, run_dir=run_dir / "refine", goal_slots=TRAINED, ship=False,
                                            **{**IMITATION_REFINE, **(refine_args or {})}))
 
@@ -231,7 +237,9 @@ def imitation_plan(run_dir: Optional[Path] = None) -> str:
             ("refine", "residual PPO on the frozen clone, chosen on validation (experiments/refine.py)", IMITATION_REFINE)):
         where = run_dir / stage
         made = sum(p.is_file() for p in where.rglob("*")) if where.is_dir() else 0
-        lines.append(f"- {stage}: {what}, {settings}: " + (f"{made} file{'s' * (made != 1)} in {where} so far" if made else "not started"))
+        kept = stage == "clone" and not where.is_dir() and KEPT_CLONE.is_file()
+        lines.append(f"- {stage}: {what}, {settings}: " + (f"{made} file{'s' * (made != 1)} in {where} so far" if made
+                                                          else f"the committed one, {KEPT_CLONE}" if kept else "not started"))
     for policy in IMITATION_POLICIES:
         for seen in (False, True):
             path = evaluation_json(policy, seen)

@@ -82,6 +82,7 @@ def test_the_imitation_twins_dry_run_runs_nothing_and_says_how_far_it_has_come(t
     monkeypatch.setattr(uo, "IMITATION_DIR", tmp_path / "imitation")
     monkeypatch.setattr(uo, "EVAL_DIR", tmp_path / "evaluations")
     monkeypatch.setattr(uo, "imitation", lambda *a, **k: pytest.fail("a dry run trained"))
+    monkeypatch.setattr(uo, "KEPT_CLONE", tmp_path / "kept.pt")
     uo.main(uo.Args(imitation=True, dry_run=True))
     plan = capsys.readouterr().out
     assert "goal openings 0, 2 (held out: 1)" in plan and plan.count("not started") == 2 and plan.count("not yet") == 4
@@ -113,6 +114,7 @@ def test_the_imitation_twin_demonstrates_clones_refines_and_validates_on_the_tra
 
         monkeypatch.setattr(module, name, wrapped)
 
+    monkeypatch.setattr(uo, "KEPT_CLONE", tmp_path / "no_kept_clone.pt")
     weights = evaluation.slot_weights(uo.TRAINED)
     spy(general_agent, "record_demos", lambda *a, **k: k["env_kwargs"] == {"goal_slot_weights": weights})
     spy(refine, "collect_failure_states", lambda *a, **k: k["env_kwargs"] == {"goal_slot_weights": weights})
@@ -126,6 +128,28 @@ def test_the_imitation_twin_demonstrates_clones_refines_and_validates_on_the_tra
     assert demos.tried_episodes(tmp_path / "clone" / "demos" / "general.npz") == 2
     assert {name for name, _ in seen} == {"record_demos", "collect_failure_states", "main"}
     assert all(ok for _, ok in seen), seen
+
+
+def test_on_a_machine_without_its_demonstrations_the_twin_refines_the_committed_clone(tmp_path, monkeypatch):
+    """Where the run directory holds no clone, the committed one (KEPT_CLONE) is refined: no demonstrations are
+    recorded again; where it holds one (the machine that made it), its own stages run as before."""
+    from experiments import general_agent, refine
+
+    kept = tmp_path / "kept.pt"
+    kept.write_bytes(b"clone")
+    monkeypatch.setattr(uo, "KEPT_CLONE", kept)
+    refined = []
+    monkeypatch.setattr(refine, "main", lambda args: refined.append(args) or tmp_path / "refined.pt")
+    monkeypatch.setattr(general_agent, "main", lambda args: pytest.fail("recorded demonstrations again"))
+    assert "- clone:" in uo.imitation_plan(tmp_path / "fresh") and f"the committed one, {kept}" in uo.imitation_plan(tmp_path / "fresh")
+    assert uo.imitation(tmp_path / "fresh") == (kept, tmp_path / "refined.pt")
+    assert refined[0].clone == kept and refined[0].goal_slots == uo.TRAINED
+    own = tmp_path / "made_here"
+    (own / "clone").mkdir(parents=True)
+    monkeypatch.setattr(general_agent, "main", lambda args: args.run_dir / "bc0" / "checkpoint.pt")
+    assert uo.imitation(own)[0] == own / "clone" / "bc0" / "checkpoint.pt"
+    assert Path(uo.__file__).parents[1].joinpath("campaign", "unseen_imitation", "clone.pt").is_file(), \
+        "the twin's clone is committed"
 
 
 def test_the_expert_s_demonstrations_draw_the_goal_slots_their_kwargs_allow():
