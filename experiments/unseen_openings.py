@@ -209,6 +209,11 @@ def evaluate(checkpoint: Path, seed, steps: int = EVAL_STEPS, workers: int = 2) 
         record_checkpoint_step(out, checkpoint)
 
 
+def refines_kept_clone(run_dir: Path) -> bool:
+    """Whether the twin in `run_dir` refines the committed clone (KEPT_CLONE): it has no clone of its own."""
+    return KEPT_CLONE.is_file() and not (run_dir / "clone").is_dir()
+
+
 def imitation(run_dir: Optional[Path] = None, clone: Optional[dict] = None,
               refine_args: Optional[dict] = None) -> tuple[Path, Path]:
     """The imitation twin, stage by stage (each skipped where its output is there): the clone of the expert's
@@ -218,7 +223,7 @@ def imitation(run_dir: Optional[Path] = None, clone: Optional[dict] = None,
     from experiments import general_agent, refine
 
     run_dir = run_dir or IMITATION_DIR
-    if KEPT_CLONE.is_file() and not (run_dir / "clone").is_dir():
+    if refines_kept_clone(run_dir):
         cloned = KEPT_CLONE  # another machine made it: its demonstrations are not committed
     else:
         cloned = general_agent.main(general_agent.Args(run_dir=run_dir / "clone", goal_slots=TRAINED,
@@ -237,7 +242,7 @@ def imitation_plan(run_dir: Optional[Path] = None) -> str:
             ("refine", "residual PPO on the frozen clone, chosen on validation (experiments/refine.py)", IMITATION_REFINE)):
         where = run_dir / stage
         made = sum(p.is_file() for p in where.rglob("*")) if where.is_dir() else 0
-        kept = stage == "clone" and not where.is_dir() and KEPT_CLONE.is_file()
+        kept = stage == "clone" and refines_kept_clone(run_dir)
         lines.append(f"- {stage}: {what}, {settings}: " + (f"{made} file{'s' * (made != 1)} in {where} so far" if made
                                                           else f"the committed one, {KEPT_CLONE}" if kept else "not started"))
     for policy in IMITATION_POLICIES:
