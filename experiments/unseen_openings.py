@@ -32,8 +32,8 @@ them (IMITATION_CLONE: experiments/general_agent.py's direct-path demonstrations
 IMITATION_REFINE: experiments/refine.py's residual PPO on the frozen clone), with `goal_slots` = TRAINED in both:
 no demonstration, takeover, bank state, training episode, validation or confirmation draws a held-out opening. Its
 stages write to runs/unseen_imitation/ and each is skipped when its output is there (demonstrations of about 100 MB
-are not committed; about 2.5 h on 2 cores). The clone is committed (KEPT_CLONE): on another machine the twin
-starts from it, at the refinement (about 1.2 h).
+are not committed; about 3 h on 2 cores, measured). The clone is committed (KEPT_CLONE): on another machine the twin
+starts from it, at the refinement (about 1.8 h, most of it validation).
 """
 
 from __future__ import annotations
