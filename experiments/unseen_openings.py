@@ -209,6 +209,14 @@ def evaluate(checkpoint: Path, seed, steps: int = EVAL_STEPS, workers: int = 2) 
         record_checkpoint_step(out, checkpoint)
 
 
+def evaluated(checkpoint: Path, seed) -> bool:
+    """Whether both of `seed`'s evaluations are of `checkpoint` as it is (written after it, naming it): the twin's
+    rerun does not evaluate its policies again. A checkpoint remade at the same path is newer than its evaluations."""
+    outs = [evaluation_json(seed, seen) for seen in (False, True)]
+    return all(out.is_file() and json.loads(out.read_text()).get("checkpoint") == str(checkpoint)
+               and out.stat().st_mtime > Path(checkpoint).stat().st_mtime for out in outs)
+
+
 def refines_kept_clone(run_dir: Path) -> bool:
     """Whether the twin in `run_dir` refines the committed clone (KEPT_CLONE): it has no clone of its own."""
     return KEPT_CLONE.is_file() and not (run_dir / "clone").is_dir()
@@ -342,7 +350,8 @@ def main(args: Args) -> None:
         if args.dry_run:
             return
         for policy, name in zip(imitation(), IMITATION_POLICIES):
-            evaluate(policy, name)
+            if not evaluated(policy, name):
+                evaluate(policy, name)
         print(report())
         return
     if args.seed is None:

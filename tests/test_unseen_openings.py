@@ -233,3 +233,25 @@ def test_a_sac_run_keeps_its_snapshots_and_the_curve_measures_each_once_on_both_
     rows = [line for line in uo.report(tmp_path / "RESULTS.md").splitlines() if "seed 2" in line]
     assert [row.split(" | ")[1:3] for row in rows] == [["200", "never trained on (1)"], ["200", "trained on (0, 2)"],
                                                        ["400", "never trained on (1)"], ["400", "trained on (0, 2)"]]
+
+
+def test_a_policy_evaluated_as_it_is_is_not_evaluated_again(tmp_path, monkeypatch):
+    """The twin's rerun skips a policy both of whose evaluations name it and were written after it; one remade at the
+    same path (newer than its evaluations) or never evaluated is evaluated."""
+    import json
+    import os
+
+    monkeypatch.setattr(uo, "EVAL_DIR", tmp_path)
+    policy = tmp_path / "checkpoint_300000.pt"
+    policy.write_bytes(b"policy")
+    assert not uo.evaluated(policy, "imitation")
+    for seen in (False, True):
+        uo.evaluation_json("imitation", seen).write_text(json.dumps({"checkpoint": str(policy)}))
+    os.utime(policy, (0, 0))
+    assert uo.evaluated(policy, "imitation")
+    other = tmp_path / "other.pt"
+    other.write_bytes(b"another policy")
+    os.utime(other, (0, 0))
+    assert not uo.evaluated(other, "imitation"), "the evaluations name another checkpoint"
+    os.utime(policy)  # remade after its evaluations
+    assert not uo.evaluated(policy, "imitation")
