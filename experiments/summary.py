@@ -109,7 +109,9 @@ def trained_table() -> list[str]:
     for seed in unseen_openings.EVALUATED:
         path = unseen_openings.evaluation_json(seed, seen=False)
         if (data := _read(path)) is not None:
-            lines.append(f"| {unseen_openings.run_label(seed)}, {data['checkpoint_step']:,} env steps | - | "
+            steps = unseen_openings.trained_steps(seed, data)
+            steps += " env steps" if steps.replace(",", "").isdigit() else ""
+            lines.append(f"| {unseen_openings.run_label(seed)}, {steps} | - | "
                          + " / ".join(_placed(data["tasks"])) + f" | - | {path} |")
     for label, row in obstacles_scene_rows(_read(OBSTACLES) or {}, "moving").items():
         if label.endswith(TRAINED):

@@ -78,6 +78,9 @@ def test_the_trained_generalization_rows_are_the_runs_evaluated_each_in_its_own_
     uo.EVAL_DIR.mkdir(parents=True)
     uo.evaluation_json("sac_s1", seen=False).write_text(json.dumps({"tasks": _tasks(0.25), "checkpoint_step": 300_000}))
     uo.evaluation_json("sac_s1", seen=True).write_text(json.dumps({"tasks": _tasks(1.0), "checkpoint_step": 300_000}))
+    # the imitation clone had no RL: its row says so, not "0 env steps"
+    uo.evaluation_json("imitation_clone", seen=False).write_text(json.dumps({"tasks": _tasks(0.0),
+                                                                             "checkpoint_step": 0}))
     (tmp_path / "obstacles.json").write_text(json.dumps({"rows": {
         "SAC among obstacles, 100 env steps (trained among obstacles) | moving (solvable seeds)": _tasks(0.5),
         "SAC among obstacles, 100 env steps (trained among obstacles) | none (solvable seeds)": _tasks(0.0),
@@ -87,6 +90,8 @@ def test_the_trained_generalization_rows_are_the_runs_evaluated_each_in_its_own_
         f"| SAC on paneling from nothing, seed 2, 250,000 env steps | 95.0 | - | - | {paneling.train_eval_json(sac)} |",
         f"| SAC from nothing, seed 1, 300,000 env steps | - | 25.0 / 25.0 / 25.0 | - | "
         f"{uo.evaluation_json('sac_s1', seen=False)} |",
+        f"| imitation: its clone alone, none: demonstrations only | - | 0.0 / 0.0 / 0.0 | - | "
+        f"{uo.evaluation_json('imitation_clone', seen=False)} |",
         f"| SAC among obstacles, 100 env steps | - | - | 50.0 / 50.0 / 50.0 | {tmp_path / 'obstacles.json'} |"]
 
 
