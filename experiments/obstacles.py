@@ -27,6 +27,7 @@ the file is there with the same seeds, so an interrupted run goes on where it st
 from __future__ import annotations
 
 import csv
+import itertools
 import json
 import multiprocessing as mp
 import shlex
@@ -67,7 +68,10 @@ TRAIN_RUNS = {
     "SAC from nothing, mixed scene (--share 0.5)": ("nothing", "sac", 0.5),
     "SAC from SAC's reward-only agent, mixed scene (--share 0.5)": ("shipped", "sac", 0.5),
 }
-"""the runs among obstacles `--training-curve` draws, seed 1: label -> (--train, --learner, --share)."""
+"""the runs among obstacles `--training-curve` draws, each seed of TRAIN_SEEDS it has: label -> (--train, --learner,
+--share)."""
+TRAIN_SEEDS = (1, 2)
+"""the seeds (--train-seed) `--training-curve` looks for."""
 TRAIN_CURVE = Path("docs/images/obstacles_training.png")
 TRAINED = " (trained among obstacles)"
 """what the label of an agent trained on the moving scene (`--train`) ends with in summary.json."""
@@ -235,20 +239,20 @@ def scene_rows(summary: dict, scene: str) -> dict[str, dict]:
 
 
 def training_curve(out: Path = TRAIN_CURVE) -> Path:
-    """Each run of TRAIN_RUNS that has a progress.csv: its training episodes from ordinary resets placed per task
-    type (their moving mean over transfer.STEPS_WINDOW rows) against env steps, one panel per task type, and below
-    them the share of those episodes that touched an obstacle where the run logged it. A mixed run's curves count
-    its episodes on both scenes; a touch on an obstacle fails an episode."""
+    """Each run of TRAIN_RUNS, each seed of TRAIN_SEEDS, that has a progress.csv: its training episodes from ordinary
+    resets placed per task type (their moving mean over transfer.STEPS_WINDOW rows) against env steps, one panel per
+    task type, and below them the share of those episodes that touched an obstacle where the run logged it. A mixed
+    run's curves count its episodes on both scenes; a touch on an obstacle fails an episode."""
     panels: dict[str, dict] = {kind: {} for kind in PAPER_TASK_ENV_IDS}
     collided: dict[str, dict] = {kind: {} for kind in PAPER_TASK_ENV_IDS}
-    for label, (start, learner, share) in TRAIN_RUNS.items():
-        progress = checkpoint_of(training_run(start, 1, None, learner, share)).parent / "progress.csv"
+    for (label, (start, learner, share)), seed in itertools.product(TRAIN_RUNS.items(), TRAIN_SEEDS):
+        progress = checkpoint_of(training_run(start, seed, None, learner, share)).parent / "progress.csv"
         if not progress.is_file():
             continue
         with open(progress, newline="") as f:
             rows = list(csv.DictReader(f))
         steps = csv_column(rows, "global_step")
-        name = f"{label}, {int(steps[-1]):,} env steps"
+        name = f"{label}, seed {seed}, {int(steps[-1]):,} env steps"
         for kind, curves in panels.items():
             curves[name] = (steps, moving_mean(csv_column(rows, f"ordinary_place_{kind}"), transfer.STEPS_WINDOW))
             touched = csv_column(rows, f"ordinary_collided_{kind}")
@@ -256,7 +260,7 @@ def training_curve(out: Path = TRAIN_CURVE) -> Path:
                 collided[kind][name] = (steps, moving_mean(touched, transfer.STEPS_WINDOW))
     if not panels[next(iter(panels))]:
         raise SystemExit("--training-curve: no run among obstacles has a progress.csv yet; train one with --train")
-    transfer.plot_training(panels, out, f"Training among obstacles ({TRAIN_SCENE} scene), seed 1", collided)
+    transfer.plot_training(panels, out, f"Training among obstacles ({TRAIN_SCENE} scene)", collided)
     return out
 
 

@@ -413,7 +413,7 @@ def test_the_training_curve_draws_every_run_with_a_progress_file_per_task_type(t
                         + "".join(f"{2000 * (i + 1)},1.0,,0.0,{'' if i == 0 else 0.5}\n" for i in range(3)))
     obstacles.training_curve(tmp_path / "curve.png")
     assert list(drawn) == ["ceiling", "window", "flooring"]
-    label = "SAC from nothing, mixed scene (--share 0.5), 6,000 env steps"
+    label = "SAC from nothing, mixed scene (--share 0.5), seed 1, 6,000 env steps"
     assert all(list(curves) == [label] for curves in drawn.values()), "only the run with a progress.csv"
     steps, placed = drawn["ceiling"][label]
     assert list(steps) == [2000, 4000, 6000] and list(placed) == [1.0, 1.0, 1.0]
@@ -421,3 +421,11 @@ def test_the_training_curve_draws_every_run_with_a_progress_file_per_task_type(t
     assert all(v != v for v in drawn["window"][label][1]), "no window episode ended: nothing to average"
     assert list(touched["ceiling"]) == [label] and not touched["window"] and not touched["flooring"]
     assert list(touched["ceiling"][label][1])[1:] == [0.5, 0.5], "the touches from where the run logged them"
+    seed2 = checkpoint_of(obstacles.training_run("nothing", 2, share=0.5)).parent / "progress.csv"
+    seed2.parent.mkdir(parents=True)
+    seed2.write_text("global_step,ordinary_place_ceiling,ordinary_place_window,ordinary_place_flooring\n"
+                     "2000,0.0,0.0,0.0\n")
+    drawn.clear()
+    obstacles.training_curve(tmp_path / "curve.png")
+    assert list(drawn["window"]) == [label, "SAC from nothing, mixed scene (--share 0.5), seed 2, 2,000 env steps"], \
+        "a second seed of the run is drawn beside the first"
