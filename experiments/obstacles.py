@@ -8,6 +8,8 @@
     python -m experiments.obstacles --share 0.5 --train nothing   # SAC on a mixed scene: half of its training
                                                                   # episodes among obstacles, half without
     python -m experiments.obstacles --training-curve      # the training runs' curves (docs/images/)
+    python -m experiments.obstacles --share 0.5 --train shipped --learner sac --snapshot-table   # that run's
+                                                          # evaluated snapshots, each seed
 
 Protocol, per task (ceiling, window, flooring), on evaluation seeds (from 1,000,000: never trained on):
 1. the planning expert solves each seed's static scene (a material stack and a scaffold post, seeded per episode):
@@ -142,6 +144,9 @@ class Args(transfer.TrainOptions):
     """write the table into docs/RESULTS.md (section `obstacles-zero-shot`)."""
     training_curve: bool = False
     """draw the training runs among obstacles (TRAIN_RUNS, those with a progress.csv) to TRAIN_CURVE, and exit."""
+    snapshot_table: bool = False
+    """with --train: print the table of that run's evaluated snapshots, each seed of TRAIN_SEEDS (from the JSONs in
+    --out that --evaluate or --more-agents wrote for its candidates), and exit."""
 
 
 _experts: dict = {}
@@ -264,6 +269,28 @@ def training_curve(out: Path = TRAIN_CURVE) -> Path:
     return out
 
 
+def snapshot_table(start: str, learner: Optional[str], share: float, out: Path) -> list[str]:
+    """The evaluated snapshots (campaign/<run>/candidates/candidate_<env steps>.pt) of one training run among
+    obstacles, each seed of TRAIN_SEEDS: a row per seed, env steps and scene (none, moving), each task's placed %
+    [95% CI] / touched an obstacle %, read from the episodes' JSONs in `out` ("-" where a task's is not there)."""
+    tasks = list(PAPER_TASK_ENV_IDS)
+    lines = ["| seed | env steps | scene | " + " | ".join(f"{k}: placed % [95% CI] / touched %" for k in tasks) + " |",
+             "|---|---|---|" + "---|" * len(tasks)]
+    for seed in TRAIN_SEEDS:
+        name = checkpoint_of(training_run(start, seed, None, learner, share)).parent.name
+        steps = sorted({int(path.name.removeprefix(f"{name}_candidate_").partition("_")[0])
+                        for path in out.glob(f"{name}_candidate_*_*.json")})
+        for step, scene in itertools.product(steps, ("none", "moving")):
+            cells = []
+            for kind in tasks:
+                path = out / f"{name}_candidate_{step}_{scene}_{kind}.json"
+                s = summarize(json.loads(path.read_text())["episodes"], False) if path.is_file() else None
+                cells.append("-" if s is None else
+                             f"{pct(s['place_success'], s['place_success_ci95'])} / {100 * s['collision_rate']:.0f}")
+            lines.append(f"| {seed} | {step:,} | {scene} | " + " | ".join(cells) + " |")
+    return lines
+
+
 def main(args: Args) -> dict:
     if args.training_curve:
         print(f"wrote {training_curve()}")
@@ -272,6 +299,9 @@ def main(args: Args) -> dict:
         raise SystemExit("--episodes and --workers must be positive")
     args.agents = with_more_agents(args.agents, args.more_agents)
     if args.train is not None:
+        if args.snapshot_table:
+            print("\n".join(snapshot_table(args.train, args.learner, args.share, args.out)))
+            return {}
         run = training_run(args.train, args.train_seed, args.num_envs, args.learner, args.share)
         if not args.evaluate:
             return transfer.train(run, args.dry_run)

@@ -429,3 +429,30 @@ def test_the_training_curve_draws_every_run_with_a_progress_file_per_task_type(t
     obstacles.training_curve(tmp_path / "curve.png")
     assert list(drawn["window"]) == [label, "SAC from nothing, mixed scene (--share 0.5), seed 2, 2,000 env steps"], \
         "a second seed of the run is drawn beside the first"
+
+
+def test_the_snapshot_table_reads_each_seed_s_evaluated_candidates_from_their_episodes(tmp_path):
+    """`--train S --snapshot-table`: a row per seed, evaluated snapshot and scene (none, moving), each task's placed %
+    [95% CI] / touched %, read from the JSONs --evaluate wrote; a task not evaluated is a dash."""
+    from experiments import obstacles
+    from experiments.campaign import checkpoint_of
+
+    def write(seed: int, step: int, scene: str, kind: str, placed: int, touched: int, n: int = 4) -> None:
+        name = checkpoint_of(obstacles.training_run("shipped", seed, None, "sac", 0.5)).parent.name
+        episodes = [{"placed": i < placed, "collided": placed <= i < placed + touched, "length": 10,
+                     "policy_time_s": 0.01} for i in range(n)]
+        (tmp_path / f"{name}_candidate_{step}_{scene}_{kind}.json").write_text(json.dumps({"episodes": episodes}))
+
+    for kind in ("ceiling", "window", "flooring"):
+        for step in (300_000, 100_000):
+            write(1, step, "none", kind, 4, 0)
+            write(1, step, "moving", kind, 3, 1)
+        if kind != "window":
+            write(2, 100_000, "moving", kind, 2, 2)
+    rows = obstacles.snapshot_table("shipped", "sac", 0.5, tmp_path)[2:]
+    assert [r.split(" | ")[:3] for r in rows] == [["| 1", "100,000", "none"], ["| 1", "100,000", "moving"],
+                                                  ["| 1", "300,000", "none"], ["| 1", "300,000", "moving"],
+                                                  ["| 2", "100,000", "none"], ["| 2", "100,000", "moving"]]
+    assert rows[1].count("75.0 [") == 3 and rows[1].count("] / 25") == 3
+    assert rows[4].endswith("| - | - | - |"), "seed 2 was not evaluated without obstacles"
+    assert rows[5].split(" | ")[4] == "-" and rows[5].count("50.0 [") == 2, "seed 2's window rows are not there"
