@@ -58,6 +58,9 @@ AGENTS = {
     "scratch general agent (reward alone, shipped)": "assets/checkpoints/scratch_general_agent.pt",
     "scratch general agent, PPO's (reward alone, before SAC's)": "assets/checkpoints/scratch_general_agent_ppo.pt",
 }
+BLIND = "scratch general agent (reward alone, shipped)"
+"""the agent of AGENTS whose touches --snapshot-table compares a trained run's with: SAC's reward-only agent, blind to
+the obstacles (SAC's runs from the shipped weights start from its run's networks)."""
 SCENES = ("none", "static", "moving")
 RESULTS_PATH = Path("docs/RESULTS.md")
 TRAIN_SCENE = "moving"
@@ -272,8 +275,12 @@ def training_curve(out: Path = TRAIN_CURVE) -> Path:
 def snapshot_table(start: str, learner: Optional[str], share: float, out: Path) -> list[str]:
     """The evaluated snapshots (campaign/<run>/candidates/candidate_<env steps>.pt) of one training run among
     obstacles, each seed of TRAIN_SEEDS: a row per seed, env steps and scene (none, moving), each task's placed %
-    [95% CI] / touched an obstacle %, read from the episodes' JSONs in `out` ("-" where a task's is not there)."""
+    [95% CI] / touched an obstacle %, read from the episodes' JSONs in `out` ("-" where a task's is not there). Then,
+    per seed, where its latest snapshot's static scene was evaluated: how many of the episodes it touched an obstacle
+    in the shipped reward-only agent, blind to them (BLIND), touched too: whether training taught it to avoid what
+    the blind agent hits."""
     tasks = list(PAPER_TASK_ENV_IDS)
+    notes = []
     lines = ["| seed | env steps | scene | " + " | ".join(f"{k}: placed % [95% CI] / touched %" for k in tasks) + " |",
              "|---|---|---|" + "---|" * len(tasks)]
     for seed in TRAIN_SEEDS:
@@ -288,7 +295,18 @@ def snapshot_table(start: str, learner: Optional[str], share: float, out: Path) 
                 cells.append("-" if s is None else
                              f"{pct(s['place_success'], s['place_success_ci95'])} / {100 * s['collision_rate']:.0f}")
             lines.append(f"| {seed} | {step:,} | {scene} | " + " | ".join(cells) + " |")
-    return lines
+        static = {k: out / f"{name}_candidate_{steps[-1]}_static_{k}.json" for k in tasks} if steps else {}
+        blind = {k: out / f"{row_name(AGENTS[BLIND])}_static_{k}.json" for k in tasks}
+        if static and all(path.is_file() for path in [*static.values(), *blind.values()]):
+            touched = {k: {e["seed"] for e in json.loads(static[k].read_text())["episodes"] if e["collided"]}
+                       for k in tasks}
+            hit = {k: {e["seed"] for e in json.loads(blind[k].read_text())["episodes"] if e["collided"]} for k in tasks}
+            notes.append(f"Seed {seed} at {steps[-1]:,} env steps, static scene: touched an obstacle in "
+                         + " / ".join(str(len(touched[k])) for k in tasks) + " episodes (ceiling / window / flooring), "
+                         + "of which the blind reward-only agent touched " + " / ".join(
+                             str(len(touched[k] & hit[k])) for k in tasks) + " too (it touched "
+                         + " / ".join(str(len(hit[k])) for k in tasks) + ").")
+    return lines + ([""] + notes if notes else [])
 
 
 def main(args: Args) -> dict:

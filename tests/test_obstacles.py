@@ -439,7 +439,7 @@ def test_the_snapshot_table_reads_each_seed_s_evaluated_candidates_from_their_ep
 
     def write(seed: int, step: int, scene: str, kind: str, placed: int, touched: int, n: int = 4) -> None:
         name = checkpoint_of(obstacles.training_run("shipped", seed, None, "sac", 0.5)).parent.name
-        episodes = [{"placed": i < placed, "collided": placed <= i < placed + touched, "length": 10,
+        episodes = [{"seed": i, "placed": i < placed, "collided": placed <= i < placed + touched, "length": 10,
                      "policy_time_s": 0.01} for i in range(n)]
         (tmp_path / f"{name}_candidate_{step}_{scene}_{kind}.json").write_text(json.dumps({"episodes": episodes}))
 
@@ -456,3 +456,13 @@ def test_the_snapshot_table_reads_each_seed_s_evaluated_candidates_from_their_ep
     assert rows[1].count("75.0 [") == 3 and rows[1].count("] / 25") == 3
     assert rows[4].endswith("| - | - | - |"), "seed 2 was not evaluated without obstacles"
     assert rows[5].split(" | ")[4] == "-" and rows[5].count("50.0 [") == 2, "seed 2's window rows are not there"
+    # the touches of a seed's latest snapshot in the static scene against the blind reward-only agent's
+    blind = obstacles.row_name(obstacles.AGENTS[obstacles.BLIND])
+    for kind in ("ceiling", "window", "flooring"):
+        write(1, 300_000, "static", kind, 2, 2)  # touched in the episodes of seeds 2 and 3
+        (tmp_path / f"{blind}_static_{kind}.json").write_text(json.dumps({"episodes": [
+            {"seed": i, "collided": i in (1, 3)} for i in range(4)]}))
+    notes = obstacles.snapshot_table("shipped", "sac", 0.5, tmp_path)[9:]
+    assert notes == ["Seed 1 at 300,000 env steps, static scene: touched an obstacle in 2 / 2 / 2 episodes (ceiling / "
+                     "window / flooring), of which the blind reward-only agent touched 1 / 1 / 1 too (it touched "
+                     "2 / 2 / 2)."], "seed 2's static scene was not evaluated: no note"
