@@ -147,6 +147,10 @@ class Args(transfer.TrainOptions):
     """write the table into docs/RESULTS.md (section `obstacles-zero-shot`)."""
     training_curve: bool = False
     """draw the training runs among obstacles (TRAIN_RUNS, those with a progress.csv) to TRAIN_CURVE, and exit."""
+    touches_by_post_side: bool = False
+    """with --train: per task, the episodes each seed's latest evaluated snapshot of that run, and the blind reward-only
+    agent (BLIND), touched an obstacle in (static scene), by the side of the arm the scaffold post stands on; and
+    exit. It resets an env per seed to read the layout (about a minute per task)."""
     snapshot_table: bool = False
     """with --train: print the table of that run's evaluated snapshots, each seed of TRAIN_SEEDS (from the JSONs in
     --out that --evaluate or --more-agents wrote for its candidates), and exit."""
@@ -309,6 +313,48 @@ def snapshot_table(start: str, learner: Optional[str], share: float, out: Path) 
     return lines + ([""] + notes if notes else [])
 
 
+def post_sides(env_id: str, seeds: list[int]) -> dict[int, str]:
+    """The side of the arm (its base at the origin) each seed's scaffold post stands on: "-y" or "+y" (the tasks'
+    `obstacle_layout`, the same for a seed in every scene)."""
+    import gymnasium as gym
+
+    env = gym.make(env_id, num_envs=1, obs_mode="state", reward_mode="sparse", sim_backend="physx_cpu",
+                   curriculum_stage=FINAL_STAGE, obstacles="static")
+    sides = {}
+    for seed in seeds:
+        env.reset(seed=seed)
+        sides[seed] = "-y" if float(env.unwrapped.obstacle_layout[0, 5]) < 0 else "+y"
+    env.close()
+    return sides
+
+
+def touches_by_post_side(start: str, learner: Optional[str], share: float, out: Path) -> list[str]:
+    """A row per task and agent (BLIND, then each seed's latest evaluated snapshot of the run, as `snapshot_table`
+    finds them): of the static scene's episodes with the post on each side of the arm, how many it touched an
+    obstacle in."""
+    agents = {BLIND: row_name(AGENTS[BLIND])}
+    for seed in TRAIN_SEEDS:
+        name = checkpoint_of(training_run(start, seed, None, learner, share)).parent.name
+        steps = sorted(int(path.name.removeprefix(f"{name}_candidate_").partition("_")[0])
+                       for path in out.glob(f"{name}_candidate_*_static_*.json"))
+        if steps:
+            agents[f"seed {seed} at {steps[-1]:,} env steps"] = f"{name}_candidate_{steps[-1]}"
+    lines = ["| task | agent | post on the -y side: touched / episodes | post on the +y side: touched / episodes |",
+             "|---|---|---|---|"]
+    for kind, env_id in PAPER_TASK_ENV_IDS.items():
+        sides = None
+        for label, name in agents.items():
+            path = out / f"{name}_static_{kind}.json"
+            if not path.is_file():
+                continue
+            episodes = json.loads(path.read_text())["episodes"]
+            sides = sides or post_sides(env_id, [e["seed"] for e in episodes])
+            cells = [f"{sum(e['collided'] for e in episodes if sides[e['seed']] == side)} / "
+                     f"{sum(sides[e['seed']] == side for e in episodes)}" for side in ("-y", "+y")]
+            lines.append(f"| {kind} | {label} | " + " | ".join(cells) + " |")
+    return lines
+
+
 def main(args: Args) -> dict:
     if args.training_curve:
         print(f"wrote {training_curve()}")
@@ -317,8 +363,9 @@ def main(args: Args) -> dict:
         raise SystemExit("--episodes and --workers must be positive")
     args.agents = with_more_agents(args.agents, args.more_agents)
     if args.train is not None:
-        if args.snapshot_table:
-            print("\n".join(snapshot_table(args.train, args.learner, args.share, args.out)))
+        if args.snapshot_table or args.touches_by_post_side:
+            show = snapshot_table if args.snapshot_table else touches_by_post_side
+            print("\n".join(show(args.train, args.learner, args.share, args.out)))
             return {}
         run = training_run(args.train, args.train_seed, args.num_envs, args.learner, args.share)
         if not args.evaluate:

@@ -466,3 +466,22 @@ def test_the_snapshot_table_reads_each_seed_s_evaluated_candidates_from_their_ep
     assert notes == ["Seed 1 at 300,000 env steps, static scene: touched an obstacle in 2 / 2 / 2 episodes (ceiling / "
                      "window / flooring), of which the blind reward-only agent touched 1 / 1 / 1 too (it touched "
                      "2 / 2 / 2)."], "seed 2's static scene was not evaluated: no note"
+
+
+def test_the_touches_by_post_side_count_each_agent_s_static_episodes_on_each_side(tmp_path, monkeypatch):
+    """`--train S --touches-by-post-side`: per task, the blind reward-only agent and each seed's latest evaluated
+    snapshot, the static episodes touched of those with the post on each side of the arm."""
+    from experiments import obstacles
+    from experiments.campaign import checkpoint_of
+
+    monkeypatch.setattr(obstacles, "post_sides", lambda env_id, seeds: {s: "-y" if s < 2 else "+y" for s in seeds})
+    blind = obstacles.row_name(obstacles.AGENTS[obstacles.BLIND])
+    name = checkpoint_of(obstacles.training_run("shipped", 1, None, "sac", 0.5)).parent.name
+    for kind in ("ceiling", "window", "flooring"):
+        for row, touched in ((blind, {0, 1, 2}), (f"{name}_candidate_100", {0}), (f"{name}_candidate_300", {2})):
+            (tmp_path / f"{row}_static_{kind}.json").write_text(json.dumps({"episodes": [
+                {"seed": s, "collided": s in touched} for s in range(4)]}))
+    rows = obstacles.touches_by_post_side("shipped", "sac", 0.5, tmp_path)[2:]
+    assert rows[:2] == ["| ceiling | scratch general agent (reward alone, shipped) | 2 / 2 | 1 / 2 |",
+                        "| ceiling | seed 1 at 300 env steps | 0 / 2 | 1 / 2 |"], "seed 1's latest; seed 2 not there"
+    assert len(rows) == 6
