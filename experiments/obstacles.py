@@ -276,6 +276,18 @@ def training_curve(out: Path = TRAIN_CURVE) -> Path:
     return out
 
 
+def evaluated_snapshots(start: str, learner: Optional[str], share: float,
+                        out: Path) -> dict[int, tuple[str, list[int]]]:
+    """{seed of TRAIN_SEEDS: (its run's folder name, the env steps of its candidates with episode JSONs in `out`)}
+    of one training run among obstacles."""
+    found = {}
+    for seed in TRAIN_SEEDS:
+        name = checkpoint_of(training_run(start, seed, None, learner, share)).parent.name
+        found[seed] = (name, sorted({int(path.name.removeprefix(f"{name}_candidate_").partition("_")[0])
+                                     for path in out.glob(f"{name}_candidate_*_*.json")}))
+    return found
+
+
 def snapshot_table(start: str, learner: Optional[str], share: float, out: Path) -> list[str]:
     """The evaluated snapshots (campaign/<run>/candidates/candidate_<env steps>.pt) of one training run among
     obstacles, each seed of TRAIN_SEEDS: a row per seed, env steps and scene (none, moving), each task's placed %
@@ -287,10 +299,7 @@ def snapshot_table(start: str, learner: Optional[str], share: float, out: Path) 
     notes = []
     lines = ["| seed | env steps | scene | " + " | ".join(f"{k}: placed % [95% CI] / touched %" for k in tasks) + " |",
              "|---|---|---|" + "---|" * len(tasks)]
-    for seed in TRAIN_SEEDS:
-        name = checkpoint_of(training_run(start, seed, None, learner, share)).parent.name
-        steps = sorted({int(path.name.removeprefix(f"{name}_candidate_").partition("_")[0])
-                        for path in out.glob(f"{name}_candidate_*_*.json")})
+    for seed, (name, steps) in evaluated_snapshots(start, learner, share, out).items():
         for step, scene in itertools.product(steps, ("none", "moving")):
             cells = []
             for kind in tasks:
@@ -333,10 +342,7 @@ def touches_by_post_side(start: str, learner: Optional[str], share: float, out: 
     finds them): of the static scene's episodes with the post on each side of the arm, how many it touched an
     obstacle in."""
     agents = {BLIND: row_name(AGENTS[BLIND])}
-    for seed in TRAIN_SEEDS:
-        name = checkpoint_of(training_run(start, seed, None, learner, share)).parent.name
-        steps = sorted(int(path.name.removeprefix(f"{name}_candidate_").partition("_")[0])
-                       for path in out.glob(f"{name}_candidate_*_static_*.json"))
+    for seed, (name, steps) in evaluated_snapshots(start, learner, share, out).items():
         if steps:
             agents[f"seed {seed} at {steps[-1]:,} env steps"] = f"{name}_candidate_{steps[-1]}"
     lines = ["| task | agent | post on the -y side: touched / episodes | post on the +y side: touched / episodes |",
