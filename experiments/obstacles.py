@@ -36,7 +36,7 @@ import shlex
 import sys
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Optional
+from typing import Literal, Optional
 
 import numpy as np
 import torch
@@ -67,14 +67,20 @@ TRAIN_SCENE = "moving"
 """the scene a training run among obstacles draws: the stack and the post, and the worker walking across."""
 TRAIN_BUDGET = 3_000_000
 """env steps of each training run among obstacles."""
+OBSTACLE_REWARD = 2
+"""the version of the obstacle scenes' dense reward that `--train` trains on, named in the run's folder: 1, the carry
+measured along the usable start paths clear of the stack and the post, and along all usable ones (into them) where
+none is clear (the runs before 2026-12-06, folders without a suffix); 2, a clear detour from the other turret side
+before that last resort (CarryGeometry.clear_ways; folders with `_r2`). The site as built measures the same in both."""
 TRAIN_RUNS = {
-    "PPO from PPO's reward-only agent": ("shipped", None, 1.0),
-    "SAC from nothing": ("nothing", "sac", 1.0),
-    "SAC from nothing, mixed scene (--share 0.5)": ("nothing", "sac", 0.5),
-    "SAC from SAC's reward-only agent, mixed scene (--share 0.5)": ("shipped", "sac", 0.5),
+    "PPO from PPO's reward-only agent": ("shipped", None, 1.0, 1),
+    "SAC from nothing": ("nothing", "sac", 1.0, 1),
+    "SAC from nothing, mixed scene (--share 0.5)": ("nothing", "sac", 0.5, 1),
+    "SAC from SAC's reward-only agent, mixed scene (--share 0.5)": ("shipped", "sac", 0.5, 1),
+    "the same, reward 2 (detours)": ("shipped", "sac", 0.5, 2),
 }
 """the runs among obstacles `--training-curve` draws, each seed of TRAIN_SEEDS it has: label -> (--train, --learner,
---share)."""
+--share, --obstacle-reward)."""
 TRAIN_SEEDS = (1, 2)
 """the seeds (--train-seed) `--training-curve` looks for."""
 TRAIN_CURVE = Path("docs/images/obstacles_training.png")
@@ -83,21 +89,26 @@ TRAINED = " (trained among obstacles)"
 
 
 def training_run(start: str, seed: int = 1, num_envs: Optional[int] = None, learner: Optional[str] = None,
-                 share: float = 1.0) -> Run:
+                 share: float = 1.0, reward: int = OBSTACLE_REWARD) -> Run:
     """The recipe among obstacles (TRAIN_SCENE) from `start` (experiments/transfer.py's STARTS) with `learner`
     (default: `transfer.learner_for` the start), unchanged but for the tasks' `obstacles` and the budget; with
     `share` < 1 (SAC only), a mixed scene: that share of its training episodes with obstacles, the others on the
-    site as built (the tasks' `obstacle_share`)."""
+    site as built (the tasks' `obstacle_share`). `reward`: the OBSTACLE_REWARD version its folder is for (an earlier
+    one names the runs trained on it, to evaluate or tabulate)."""
+    if reward not in (1, OBSTACLE_REWARD):
+        raise SystemExit(f"--obstacle-reward {reward}: {OBSTACLE_REWARD} (today's) or 1 (the runs before the detours)")
     if not 0 < share <= 1:
         raise SystemExit(f"--share {share}: the share of training episodes with obstacles, in (0, 1]")
     if share < 1 and transfer.learner_for(start, learner) != "sac":
         raise SystemExit(f"--share {share:g}: a mixed scene is SAC's option (--learner sac); PPO's recipe has none")
     mixed = share < 1
-    return transfer.transfer_run(f"obstacles_{TRAIN_SCENE}" + (f"_share{round(100 * share)}" if mixed else ""), start,
-                                 seed, num_envs, TRAIN_BUDGET,
-                                 "python -m experiments.obstacles" + (f" --share {share:g}" if mixed else ""),
+    return transfer.transfer_run(f"obstacles_{TRAIN_SCENE}" + (f"_share{round(100 * share)}" if mixed else "")
+                                 + ("" if reward == 1 else f"_r{reward}"), start, seed, num_envs, TRAIN_BUDGET,
+                                 "python -m experiments.obstacles" + (f" --share {share:g}" if mixed else "")
+                                 + ("" if reward == OBSTACLE_REWARD else f" --obstacle-reward {reward}"),
                                  f"a site with obstacles ({TRAIN_SCENE})"
-                                 + (f" in {share:.0%} of its training episodes" if mixed else ""),
+                                 + (f" in {share:.0%} of its training episodes" if mixed else "")
+                                 + ("" if reward == 1 else f" (obstacle reward {reward})"),
                                  learner, obstacles=TRAIN_SCENE, **({"obstacle_share": share} if mixed else {}))
 
 
@@ -140,6 +151,9 @@ class Args(transfer.TrainOptions):
     """label -> checkpoint of the agents to run."""
     more_agents: tuple[str, ...] = ()
     """more agents to run after those, LABEL=CHECKPOINT each (a seed's candidate snapshot, say)."""
+    obstacle_reward: int = OBSTACLE_REWARD
+    """with --train: the version of the obstacle scenes' dense reward (OBSTACLE_REWARD) whose run it means; an earlier
+    one only to --evaluate or tabulate its runs (that reward is gone)."""
     share: float = 1.0
     """with --train (SAC): the share of its training episodes with obstacles; below 1, a mixed scene, the others on
     the site as built, in its own run (campaign/obstacles_moving_share<%>_sac_s<seed>/)."""
@@ -147,10 +161,11 @@ class Args(transfer.TrainOptions):
     """write the table into docs/RESULTS.md (section `obstacles-zero-shot`)."""
     training_curve: bool = False
     """draw the training runs among obstacles (TRAIN_RUNS, those with a progress.csv) to TRAIN_CURVE, and exit."""
-    touches_by_post_side: bool = False
+    touches_by: Optional[Literal["post-side", "clear-way"]] = None
     """with --train: per task, the episodes each seed's latest evaluated snapshot of that run, and the blind reward-only
-    agent (BLIND), touched an obstacle in (static scene), by the side of the arm the scaffold post stands on; and
-    exit. It resets an env per seed to read the layout (about a minute per task)."""
+    agent (BLIND), touched an obstacle in (static scene), by the side of the arm the scaffold post stands on
+    (post-side) or by the ways the dense reward finds clear of the obstacles (clear-way: LAYOUT_GROUPS); and exit.
+    It resets an env per seed to read the layout (a minute or two per task)."""
     snapshot_table: bool = False
     """with --train: print the table of that run's evaluated snapshots, each seed of TRAIN_SEEDS (from the JSONs in
     --out that --evaluate or --more-agents wrote for its candidates), and exit."""
@@ -257,8 +272,8 @@ def training_curve(out: Path = TRAIN_CURVE) -> Path:
     run's curves count its episodes on both scenes; a touch on an obstacle fails an episode."""
     panels: dict[str, dict] = {kind: {} for kind in PAPER_TASK_ENV_IDS}
     collided: dict[str, dict] = {kind: {} for kind in PAPER_TASK_ENV_IDS}
-    for (label, (start, learner, share)), seed in itertools.product(TRAIN_RUNS.items(), TRAIN_SEEDS):
-        progress = checkpoint_of(training_run(start, seed, None, learner, share)).parent / "progress.csv"
+    for (label, (start, learner, share, reward)), seed in itertools.product(TRAIN_RUNS.items(), TRAIN_SEEDS):
+        progress = checkpoint_of(training_run(start, seed, None, learner, share, reward)).parent / "progress.csv"
         if not progress.is_file():
             continue
         with open(progress, newline="") as f:
@@ -276,19 +291,20 @@ def training_curve(out: Path = TRAIN_CURVE) -> Path:
     return out
 
 
-def evaluated_snapshots(start: str, learner: Optional[str], share: float,
-                        out: Path) -> dict[int, tuple[str, list[int]]]:
+def evaluated_snapshots(start: str, learner: Optional[str], share: float, out: Path,
+                        reward: int = OBSTACLE_REWARD) -> dict[int, tuple[str, list[int]]]:
     """{seed of TRAIN_SEEDS: (its run's folder name, the env steps of its candidates with episode JSONs in `out`)}
     of one training run among obstacles."""
     found = {}
     for seed in TRAIN_SEEDS:
-        name = checkpoint_of(training_run(start, seed, None, learner, share)).parent.name
+        name = checkpoint_of(training_run(start, seed, None, learner, share, reward)).parent.name
         found[seed] = (name, sorted({int(path.name.removeprefix(f"{name}_candidate_").partition("_")[0])
                                      for path in out.glob(f"{name}_candidate_*_*.json")}))
     return found
 
 
-def snapshot_table(start: str, learner: Optional[str], share: float, out: Path) -> list[str]:
+def snapshot_table(start: str, learner: Optional[str], share: float, out: Path,
+                   reward: int = OBSTACLE_REWARD) -> list[str]:
     """The evaluated snapshots (campaign/<run>/candidates/candidate_<env steps>.pt) of one training run among
     obstacles, each seed of TRAIN_SEEDS: a row per seed, env steps and scene (none, moving), each task's placed %
     [95% CI] / touched an obstacle %, read from the episodes' JSONs in `out` ("-" where a task's is not there). Then,
@@ -299,7 +315,7 @@ def snapshot_table(start: str, learner: Optional[str], share: float, out: Path) 
     notes = []
     lines = ["| seed | env steps | scene | " + " | ".join(f"{k}: placed % [95% CI] / touched %" for k in tasks) + " |",
              "|---|---|---|" + "---|" * len(tasks)]
-    for seed, (name, steps) in evaluated_snapshots(start, learner, share, out).items():
+    for seed, (name, steps) in evaluated_snapshots(start, learner, share, out, reward).items():
         for step, scene in itertools.product(steps, ("none", "moving")):
             cells = []
             for kind in tasks:
@@ -322,41 +338,57 @@ def snapshot_table(start: str, learner: Optional[str], share: float, out: Path) 
     return lines + ([""] + notes if notes else [])
 
 
-def post_sides(env_id: str, seeds: list[int]) -> dict[int, str]:
-    """The side of the arm (its base at the origin) each seed's scaffold post stands on: "-y" or "+y" (the tasks'
-    `obstacle_layout`, the same for a seed in every scene)."""
+LAYOUT_GROUPS = {
+    "post-side": ("-y", "+y"),
+    "clear-way": ("a usable path", "a detour only", "none"),
+}
+"""how `--touches-by` groups the static scene's layouts (`layouts`): the side of the arm (its base at the origin) the
+scaffold post stands on; the ways the dense reward finds clear of the stack and the post for the episode's goal slot
+(CarryGeometry.clear_ways: a usable start path; only a detour from a turret side without usable paths; none, where
+it measures along the usable paths, into the obstacles)."""
+
+
+def layouts(env_id: str, seeds: list[int]) -> dict[int, dict[str, str]]:
+    """{seed: {group of LAYOUT_GROUPS: its value}} of each seed's static scene (the tasks' `obstacle_layout` and
+    `clear_paths`, the same for a seed in every scene)."""
     import gymnasium as gym
 
     env = gym.make(env_id, num_envs=1, obs_mode="state", reward_mode="sparse", sim_backend="physx_cpu",
                    curriculum_stage=FINAL_STAGE, obstacles="static")
-    sides = {}
+    u, found = env.unwrapped, {}
     for seed in seeds:
         env.reset(seed=seed)
-        sides[seed] = "-y" if float(env.unwrapped.obstacle_layout[0, 5]) < 0 else "+y"
+        clear = u.clear_paths()
+        usable = (u.geometry.paths["usable"][u.task_id, u.goal_slot] & clear).any()
+        way = ("a usable path" if usable else "a detour only" if u.geometry.clear_ways(u.task_id, u.goal_slot, clear).any()
+               else "none")
+        found[seed] = {"post-side": "-y" if float(u.obstacle_layout[0, 5]) < 0 else "+y", "clear-way": way}
     env.close()
-    return sides
+    return found
 
 
-def touches_by_post_side(start: str, learner: Optional[str], share: float, out: Path) -> list[str]:
+def touches_by(group: str, start: str, learner: Optional[str], share: float, out: Path,
+               reward: int = OBSTACLE_REWARD) -> list[str]:
     """A row per task and agent (BLIND, then each seed's latest evaluated snapshot of the run, as `snapshot_table`
-    finds them): of the static scene's episodes with the post on each side of the arm, how many it touched an
+    finds them): of the static scene's episodes in each of `group`'s classes (LAYOUT_GROUPS), how many it touched an
     obstacle in."""
     agents = {BLIND: row_name(AGENTS[BLIND])}
-    for seed, (name, steps) in evaluated_snapshots(start, learner, share, out).items():
+    for seed, (name, steps) in evaluated_snapshots(start, learner, share, out, reward).items():
         if steps:
             agents[f"seed {seed} at {steps[-1]:,} env steps"] = f"{name}_candidate_{steps[-1]}"
-    lines = ["| task | agent | post on the -y side: touched / episodes | post on the +y side: touched / episodes |",
-             "|---|---|---|---|"]
+    classes = LAYOUT_GROUPS[group]
+    lines = ["| task | agent | " + " | ".join(f"{group.replace('-', ' ')} {c}: touched / episodes" for c in classes) + " |",
+             "|---|---|" + "---|" * len(classes)]
     for kind, env_id in PAPER_TASK_ENV_IDS.items():
-        sides = None
+        found = None
         for label, name in agents.items():
             path = out / f"{name}_static_{kind}.json"
             if not path.is_file():
                 continue
             episodes = json.loads(path.read_text())["episodes"]
-            sides = sides or post_sides(env_id, [e["seed"] for e in episodes])
-            cells = [f"{sum(e['collided'] for e in episodes if sides[e['seed']] == side)} / "
-                     f"{sum(sides[e['seed']] == side for e in episodes)}" for side in ("-y", "+y")]
+            found = found or layouts(env_id, [e["seed"] for e in episodes])
+            cells = [f"{sum(e['collided'] for e in episodes if found[e['seed']][group] == c)} / "
+                     f"{sum(found[e['seed']][group] == c for e in episodes)}" for c in classes]
             lines.append(f"| {kind} | {label} | " + " | ".join(cells) + " |")
     return lines
 
@@ -369,12 +401,18 @@ def main(args: Args) -> dict:
         raise SystemExit("--episodes and --workers must be positive")
     args.agents = with_more_agents(args.agents, args.more_agents)
     if args.train is not None:
-        if args.snapshot_table or args.touches_by_post_side:
-            show = snapshot_table if args.snapshot_table else touches_by_post_side
-            print("\n".join(show(args.train, args.learner, args.share, args.out)))
+        if args.snapshot_table:
+            print("\n".join(snapshot_table(args.train, args.learner, args.share, args.out, args.obstacle_reward)))
             return {}
-        run = training_run(args.train, args.train_seed, args.num_envs, args.learner, args.share)
+        if args.touches_by:
+            print("\n".join(touches_by(args.touches_by, args.train, args.learner, args.share, args.out,
+                                        args.obstacle_reward)))
+            return {}
+        run = training_run(args.train, args.train_seed, args.num_envs, args.learner, args.share, args.obstacle_reward)
         if not args.evaluate:
+            if args.obstacle_reward != OBSTACLE_REWARD:
+                raise SystemExit(f"--obstacle-reward {args.obstacle_reward}: that reward is gone; its runs can be "
+                                 f"evaluated (--evaluate) and tabulated, and trained on today's ({OBSTACLE_REWARD}) only")
             return transfer.train(run, args.dry_run)
         step, policy = trained_policy(run)
         args.agents = {**args.agents, f"{run.what}, {step:,} env steps{TRAINED}": str(policy)}

@@ -13,7 +13,9 @@
 
 Nothing here comes from demonstrations: the URDF, the manifest's goal and grasp poses, and IK; where no IK path
 leaves a goal slot from the turret side its task type's other slots are reached from, one via configuration found
-once by the planner's RRT on the site (`plan_vias`, assets/start_path_vias.json).
+once by the planner's RRT on the site (`plan_vias`, assets/start_path_vias.json); and from every turret side a slot has
+no usable path from, a detour found the same way (`plan_detours`, assets/start_path_detours.json), which the dense
+reward measures along only where a site's obstacles block every usable path.
 """
 
 from __future__ import annotations
@@ -202,6 +204,11 @@ class StartPaths:
     planned: np.ndarray
     """[...] bool: the paths whose corner is a planned via (`plan_vias`): a detour around what the straight joint
     line and the raised corner run into."""
+    detour: np.ndarray
+    """[...] bool: the paths of the turret sides a goal slot has no usable path from, through a planned via
+    (`plan_detours`) and wholly clear of the site: never drawn on for starts on the site as built, nor measured
+    along there; the dense reward measures along them where a site's obstacles block every usable path (the tasks'
+    `obstacles`, CarryGeometry.usable)."""
 
 
 def _clear_fraction(planners: list, waypoints: np.ndarray, turns: list[float]) -> float:
@@ -220,6 +227,8 @@ def _clear_fraction(planners: list, waypoints: np.ndarray, turns: list[float]) -
 VIAS_PATH = ASSET_DIR / "start_path_vias.json"
 """the planned vias (`plan_vias`): {kind: {slot: {side: {configuration: [6 joints]}}}}, written by
 `python -m ms_construction.goal_configurations`."""
+DETOURS_PATH = ASSET_DIR / "start_path_detours.json"
+"""the detours' vias (`plan_detours`), laid out as VIAS_PATH's, written by the same command."""
 
 
 def _path_planners(workdir, kind: str, site: dict) -> list:
@@ -248,15 +257,15 @@ def _path_ends(k: int, index: tuple, install, backoff, lift, table) -> tuple:
     return q_install, q_back, q_lift, q_table
 
 
-def load_vias() -> dict:
-    return json.loads(VIAS_PATH.read_text()) if VIAS_PATH.is_file() else {}
+def load_vias(path: Path = VIAS_PATH) -> dict:
+    return json.loads(path.read_text()) if path.is_file() else {}
 
 
 @functools.lru_cache(maxsize=None)
 def start_paths() -> StartPaths:
-    """The start paths (see StartPaths), with the shipped planned vias. Needs mplib: a few seconds the first time on a
-    machine, then read from the disk cache (`cached_start_paths`)."""
-    return cached_start_paths(json.dumps(load_vias()))
+    """The start paths (see StartPaths), with the shipped planned vias and detours. Needs mplib: a few seconds the
+    first time on a machine, then read from the disk cache (`cached_start_paths`)."""
+    return cached_start_paths(json.dumps(load_vias()), json.dumps(load_vias(DETOURS_PATH)))
 
 
 CACHE_ENV = "MS_CONSTRUCTION_CACHE"
@@ -272,16 +281,17 @@ def cache_inputs() -> list[Path]:
     return [MANIFEST_PATH, ARM_URDF_PATH, ARM_SRDF_PATH] + [here / name for name in code]
 
 
-def cached_start_paths(vias_json: str) -> StartPaths:
+def cached_start_paths(vias_json: str, detours_json: str = "{}") -> StartPaths:
     """`_start_paths`, from a file of the disk cache whose name is the hash of everything it is computed from (the
-    vias, `cache_inputs`, the versions of mplib and numpy), written there the first time: a changed input is a new
-    file, never a stale read. A cache that cannot be read is computed again; one that cannot be written, skipped."""
+    vias and detours, `cache_inputs`, the versions of mplib and numpy), written there the first time: a changed input
+    is a new file, never a stale read. A cache that cannot be read is computed again; one that cannot be written,
+    skipped."""
     folder = os.environ.get(CACHE_ENV, str(Path.home() / ".cache" / "ms_construction"))
     if not folder:
-        return _start_paths(vias_json)
+        return _start_paths(vias_json, detours_json)
     from importlib.metadata import version
 
-    key = hashlib.sha256(f"{vias_json} mplib {version('mplib')} numpy {np.__version__}".encode())
+    key = hashlib.sha256(f"{vias_json} {detours_json} mplib {version('mplib')} numpy {np.__version__}".encode())
     for path in cache_inputs():
         key.update(Path(path).read_bytes())
     path = Path(folder) / f"start_paths-{key.hexdigest()[:20]}.npz"
@@ -290,7 +300,7 @@ def cached_start_paths(vias_json: str) -> StartPaths:
             return StartPaths(**{f.name: saved[f.name] for f in dataclasses.fields(StartPaths)})
     except Exception:  # absent, or unreadable (a disk that filled up): computed again below
         pass
-    paths = _start_paths(vias_json)
+    paths = _start_paths(vias_json, detours_json)
     tmp = path.with_suffix(f".{os.getpid()}.npz")
     try:
         path.parent.mkdir(parents=True, exist_ok=True)
@@ -301,26 +311,32 @@ def cached_start_paths(vias_json: str) -> StartPaths:
     return paths
 
 
+def _planned_via(vias: dict, kind: str, index: tuple) -> Optional[np.ndarray]:
+    slot, c, side = index
+    via = vias.get(kind, {}).get(str(slot), {}).get(str(side), {}).get(str(c))
+    return None if via is None else np.asarray(via, dtype=np.float64)
+
+
 @functools.lru_cache(maxsize=None)
-def _start_paths(vias_json: str) -> StartPaths:
+def _start_paths(vias_json: str, detours_json: str = "{}") -> StartPaths:
     import tempfile
 
     from ms_construction.planning.collision_model import site_collision_objects
 
-    vias = json.loads(vias_json)
+    vias, detours = json.loads(vias_json), json.loads(detours_json)
     m = load_manifest()
     install, lift = install_configurations().astype(np.float64), lift_configurations().astype(np.float64)
     table = lift_configurations(0.0).astype(np.float64)
     backoff = backoff_configurations().astype(np.float64)
     shape = install.shape[:3] + (2,)
     waypoints, free, planned = np.zeros(shape + (5, 6)), np.zeros(shape), np.zeros(shape, dtype=bool)
+    usable, detour = np.zeros(shape, dtype=bool), np.zeros(shape, dtype=bool)
     turns = [float(np.deg2rad(t)) for t in START_TURNS_DEG]
     with tempfile.TemporaryDirectory(prefix="ms_construction_paths_") as workdir:
         for k, kind in enumerate(ELEMENT_KINDS):
             # each task type's paths among its own site (tests check that the paper's keep clear of paneling's partition)
             planners = _path_planners(workdir, kind, site_collision_objects(m, (kind,)))
             for index in np.ndindex(shape[1:]):
-                slot, c, side = index
                 q_install, q_back, q_lift, q_table = _path_ends(k, index, install, backoff, lift, table)
                 if np.array_equal(q_back, q_install):  # no way out of the opening in this branch
                     waypoints[(k,) + index] = [q_install] * 3 + [q_lift, q_table]
@@ -329,15 +345,26 @@ def _start_paths(vias_json: str) -> StartPaths:
                 corner[1:5] = q_lift[1:5]
                 options = [np.array([q_install, q_back, q_back, q_lift, q_table]),
                            np.array([q_install, q_back, corner, q_lift, q_table])]
-                via = vias.get(kind, {}).get(str(slot), {}).get(str(side), {}).get(str(c))
+                via = _planned_via(vias, kind, index)
                 if via is not None:
-                    options.append(np.array([q_install, q_back, np.asarray(via, dtype=np.float64), q_lift, q_table]))
+                    options.append(np.array([q_install, q_back, via, q_lift, q_table]))
                 clear = [_clear_fraction(planners, w, turns) for w in options]
                 best = int(np.argmax(clear))
                 waypoints[(k,) + index], free[(k,) + index] = options[best], clear[best]
                 planned[(k,) + index] = best == 2
-    best = free.reshape(shape[0], shape[1], -1).max(-1)[:, :, None, None]
-    return StartPaths(waypoints.astype(np.float32), free.astype(np.float32), (free >= 0.5 * best) & (best > 0), planned)
+            best = free[k].reshape(shape[1], -1).max(-1)[:, None, None]
+            usable[k] = (free[k] >= 0.5 * best) & (best > 0)
+            # a side without usable paths takes its detours (the site as built never measures along them, so the
+            # usable paths and the reward there are the same with and without them)
+            for index in zip(*np.nonzero(~usable[k].any(1, keepdims=True) & ~usable[k])):
+                via = _planned_via(detours, kind, index)
+                if via is None:
+                    continue
+                q_install, q_back, q_lift, q_table = _path_ends(k, index, install, backoff, lift, table)
+                path = np.array([q_install, q_back, via, q_lift, q_table])
+                if _clear_fraction(planners, path, turns) == 1.0:
+                    waypoints[(k,) + index], free[(k,) + index], detour[(k,) + index] = path, 1.0, True
+    return StartPaths(waypoints.astype(np.float32), free.astype(np.float32), usable, planned, detour)
 
 
 def path_point(waypoints: np.ndarray, fraction: float) -> np.ndarray:
@@ -357,57 +384,91 @@ VIA_PLAN_SECONDS = 5.0
 VIA_PLAN_TRIES = 10
 
 
-def plan_vias(paths: Optional[StartPaths] = None, kinds: tuple[str, ...] = ELEMENT_KINDS) -> dict:
-    """Per task type of `kinds`, the turret side most of its goal slots have usable start paths from (a general agent
-    grasps an element type from one side), and for each slot without a wholly clear one from there, one via
-    configuration per installation configuration: the middle of an RRTConnect path (the planner's, on the site's collision model,
-    the element unturned on the plate) from the back-off to the lift, shortcut to a single via, kept where the path
-    install - back-off - via - lift - table is clear at every turn of START_TURNS_DEG. Only the window opening at
-    y = +0.85 needs one (its IK paths leave only from +pi; the other openings' only from -pi). The planner's
-    random draws are OMPL's own: a new plan differs, so the vias are planned once and shipped (VIAS_PATH)."""
+def _plan_via(planners: list, ends: tuple, turns: list[float]) -> Optional[list[float]]:
+    """One via configuration for a start path with these `ends` (`_path_ends`): the middle of an RRTConnect path (the
+    planner's, on the site's collision model, the element unturned on the plate) from the back-off to the lift,
+    shortcut to a single via, where the path install - back-off - via - lift - table is clear at every turn of
+    `turns`; None when VIA_PLAN_TRIES plans find none."""
+    q_install, q_back, q_lift, q_table = ends
+    planner = planners[START_TURNS_DEG.index(0.0)]
+    for _ in range(VIA_PLAN_TRIES):
+        path = planner.rrt_connect(q_back, q_lift, VIA_PLAN_SECONDS)
+        if path is None:
+            continue
+        short = planner.shortcut(path)
+        via = short[len(short) // 2]
+        if len(short) == 3 and _clear_fraction(planners, np.array([q_install, q_back, via, q_lift, q_table]), turns) == 1.0:
+            return [round(float(v), 4) for v in via]
+    return None
+
+
+def _plan(kinds: tuple[str, ...], wanted) -> dict:
+    """{kind: {slot: {side: {configuration: via}}}} for the start paths `wanted(k)` names ([slots, configurations,
+    2] bool) of each task type of `kinds`, those with a way out of their opening, by `_plan_via`."""
     import tempfile
 
     from ms_construction.planning.collision_model import site_collision_objects
 
-    paths = paths if paths is not None else _start_paths("{}")
     install, lift = install_configurations().astype(np.float64), lift_configurations().astype(np.float64)
     table = lift_configurations(0.0).astype(np.float64)
     backoff = backoff_configurations().astype(np.float64)
     turns = [float(np.deg2rad(t)) for t in START_TURNS_DEG]
-    sides = paths.usable.any(2)  # [kinds, slots, 2]
-    clear = paths.free.max(2) >= 1.0  # [kinds, slots, 2]
     vias: dict = {}
     with tempfile.TemporaryDirectory(prefix="ms_construction_vias_") as workdir:
         for k, kind in enumerate(ELEMENT_KINDS):
             if kind not in kinds:
                 continue
-            side = int(np.argmax(sides[k].sum(0)))
             planners = None
-            for slot in np.flatnonzero(~clear[k, :, side]):
-                for c in range(install.shape[2]):
-                    q_install, q_back, q_lift, q_table = _path_ends(k, (slot, c, side), install, backoff, lift, table)
-                    if np.array_equal(q_back, q_install):
-                        continue
-                    planners = planners or _path_planners(workdir, kind, site_collision_objects(load_manifest(), (kind,)))
-                    for _ in range(VIA_PLAN_TRIES):
-                        path = planners[START_TURNS_DEG.index(0.0)].rrt_connect(q_back, q_lift, VIA_PLAN_SECONDS)
-                        if path is None:
-                            continue
-                        short = planners[START_TURNS_DEG.index(0.0)].shortcut(path)
-                        via = short[len(short) // 2]
-                        if len(short) == 3 and _clear_fraction(planners, np.array([q_install, q_back, via, q_lift, q_table]), turns) == 1.0:
-                            vias.setdefault(kind, {}).setdefault(str(slot), {}).setdefault(str(side), {})[str(c)] = \
-                                [round(float(v), 4) for v in via]
-                            break
+            for slot, c, side in zip(*np.nonzero(wanted(k))):
+                ends = _path_ends(k, (slot, c, side), install, backoff, lift, table)
+                if np.array_equal(ends[0], ends[1]):  # no way out of the opening in this branch
+                    continue
+                planners = planners or _path_planners(workdir, kind, site_collision_objects(load_manifest(), (kind,)))
+                via = _plan_via(planners, ends, turns)
+                if via is not None:
+                    vias.setdefault(kind, {}).setdefault(str(slot), {}).setdefault(str(side), {})[str(c)] = via
     return vias
+
+
+def plan_vias(paths: Optional[StartPaths] = None, kinds: tuple[str, ...] = ELEMENT_KINDS) -> dict:
+    """Per task type of `kinds`, the turret side most of its goal slots have usable start paths from (a general agent
+    grasps an element type from one side), and for each slot without a wholly clear one from there, one via
+    configuration per installation configuration (`_plan_via`). Only the window opening at y = +0.85 needs one (its
+    IK paths leave only from +pi; the other openings' only from -pi). The planner's random draws are OMPL's own: a
+    new plan differs, so the vias are planned once and shipped (VIAS_PATH)."""
+    paths = paths if paths is not None else _start_paths("{}")
+    sides = paths.usable.any(2)  # [kinds, slots, 2]
+    clear = paths.free.max(2) >= 1.0  # [kinds, slots, 2]
+
+    def wanted(k: int) -> np.ndarray:
+        side = int(np.argmax(sides[k].sum(0)))
+        out = np.zeros(paths.usable.shape[1:], dtype=bool)
+        out[~clear[k, :, side], :, side] = True
+        return out
+
+    return _plan(kinds, wanted)
+
+
+def plan_detours(paths: Optional[StartPaths] = None, kinds: tuple[str, ...] = ELEMENT_KINDS) -> dict:
+    """Per task type of `kinds`, a via (`_plan_via`) for every installation configuration of every goal slot on each
+    turret side the slot has no usable start path from (with the shipped vias): the detours a site's obstacles may
+    leave as the only clear ways (StartPaths.detour). Shipped as DETOURS_PATH, as the vias are."""
+    paths = paths if paths is not None else _start_paths(json.dumps(load_vias()))
+    return _plan(kinds, lambda k: ~paths.usable[k].any(1, keepdims=True) & ~paths.usable[k])
 
 
 if __name__ == "__main__":
     import sys
 
-    # the task types named (all by default) are planned anew; the others keep their shipped vias
-    planned_kinds = tuple(sys.argv[1:]) or ELEMENT_KINDS
-    VIAS_PATH.write_text(json.dumps({**{k: v for k, v in load_vias().items() if k not in planned_kinds},
-                                     **plan_vias(kinds=planned_kinds)}, indent=1) + "\n")
-    print(f"wrote {VIAS_PATH}; the start paths now: usable per kind, slot, side:",
-          _start_paths(json.dumps(load_vias())).usable.any(2).astype(int).tolist())
+    # the task types named (all by default) are planned anew, their detours alone with --detours (a new plan of the
+    # vias differs, and changes the start paths on the site as built); the others keep what is shipped
+    detours_only = "--detours" in sys.argv[1:]
+    planned_kinds = tuple(a for a in sys.argv[1:] if a != "--detours") or ELEMENT_KINDS
+    if not detours_only:
+        VIAS_PATH.write_text(json.dumps({**{k: v for k, v in load_vias().items() if k not in planned_kinds},
+                                         **plan_vias(kinds=planned_kinds)}, indent=1) + "\n")
+    DETOURS_PATH.write_text(json.dumps({**{k: v for k, v in load_vias(DETOURS_PATH).items() if k not in planned_kinds},
+                                        **plan_detours(kinds=planned_kinds)}, indent=1) + "\n")
+    paths = _start_paths(json.dumps(load_vias()), json.dumps(load_vias(DETOURS_PATH)))
+    print(f"wrote {DETOURS_PATH if detours_only else f'{VIAS_PATH} and {DETOURS_PATH}'}; the start paths now, per kind, slot and side: usable",
+          paths.usable.any(2).astype(int).tolist(), "detours", paths.detour.any(2).astype(int).tolist())

@@ -7,7 +7,7 @@
 - on slots moved to new places: the twins and branches follow the poses (a window opening moved off its twin's
   mirror image loses it; a ceiling opening moved onto another's mirror image gains one);
 - the projection the reward and the observation share is the one of the definition (every point of every path,
-  brute force) on random configurations.
+  brute force) on random configurations, and the same with and without the detours an obstacle scene's reward uses.
 """
 
 import dataclasses
@@ -112,7 +112,8 @@ def test_the_projection_is_the_least_cost_over_every_point_of_every_usable_path(
     task, slot = torch.randint(3, (n,), generator=g), torch.randint(3, (n,), generator=g)
     side = torch.randint(-1, 2, (n,), generator=g)
     turn = (torch.rand(n, generator=g) - 0.5) * 0.5
-    qpos = p["waypoints"][task, slot, 0, 2] + (torch.rand(n, 6, generator=g) - 0.5) * 3.0
+    first = p["usable"][task, slot].float().argmax(-1)  # about the corner of the slot's first usable path
+    qpos = p["waypoints"][task, slot, first, 2] + (torch.rand(n, 6, generator=g) - 0.5) * 3.0
     got = geometry.project(qpos, turn, task, slot, side).distance
     fractions = torch.linspace(0, 1, 4000)
     above = []
@@ -142,6 +143,27 @@ def test_the_projection_is_the_least_cost_over_every_point_of_every_usable_path(
     assert (np.abs(above) < 1e-3).mean() >= 0.75, np.round(np.sort(above), 3)
 
 
+def test_the_site_as_built_measures_the_same_with_and_without_the_detours(geometry, monkeypatch):
+    """The detours (StartPaths.detour) are for a site's obstacles alone: without them the projection (carry distance,
+    offsets) and the reach distance are the same to the bit on random configurations of every task type, slot and
+    grasp side."""
+    import ms_construction.envs.carry_geometry as cg
+
+    assert geometry.paths["detour"].any()  # (the shipped paths, read before the patch below)
+    monkeypatch.setattr(cg, "start_paths", lambda: gc.cached_start_paths(json.dumps(gc.load_vias())))
+    without = CarryGeometry(torch.device("cpu"))
+    assert not without.paths["detour"].any()
+    g, n = torch.Generator().manual_seed(1), 2000
+    qpos = (torch.rand(n, 6, generator=g) * 2 - 1) * torch.tensor([3.3, 1.5, 2.0, 3.0, 2.0, 3.2])
+    task = torch.randint(len(ELEMENT_KINDS), (n,), generator=g)
+    slot, side = torch.randint(3, (n,), generator=g), torch.randint(-1, 2, (n,), generator=g)
+    turn = torch.rand(n, generator=g) - 0.5
+    a, b = geometry.project(qpos, turn, task, slot, side), without.project(qpos, turn, task, slot, side)
+    for f in dataclasses.fields(a):
+        assert torch.equal(getattr(a, f.name), getattr(b, f.name)), f.name
+    assert torch.equal(geometry.reach_distance(qpos, task, slot), without.reach_distance(qpos, task, slot))
+
+
 def test_start_paths_are_cached_on_disk_under_the_hash_of_what_they_are_computed_from(tmp_path, monkeypatch):
     monkeypatch.setenv(gc.CACHE_ENV, str(tmp_path))
     vias = json.dumps(gc.load_vias())
@@ -150,10 +172,11 @@ def test_start_paths_are_cached_on_disk_under_the_hash_of_what_they_are_computed
     read = gc.cached_start_paths(vias)
     for f in dataclasses.fields(computed):
         np.testing.assert_array_equal(getattr(read, f.name), getattr(computed, f.name))
-    # another input is another file, never the stale one: other vias, or a changed source file
-    monkeypatch.setattr(gc, "_start_paths", lambda v: computed)
+    # another input is another file, never the stale one: other vias or detours, or a changed source file
+    monkeypatch.setattr(gc, "_start_paths", lambda *inputs: computed)
     gc.cached_start_paths(json.dumps({}))
-    assert len(list(tmp_path.glob("start_paths-*.npz"))) == 2 and written.is_file()
+    gc.cached_start_paths(vias, json.dumps(gc.load_vias(gc.DETOURS_PATH)))
+    assert len(list(tmp_path.glob("start_paths-*.npz"))) == 3 and written.is_file()
     source = tmp_path / "code.py"
     source.write_text("A = 1\n")
     inputs = gc.cache_inputs()
@@ -161,7 +184,7 @@ def test_start_paths_are_cached_on_disk_under_the_hash_of_what_they_are_computed
     gc.cached_start_paths(vias)
     source.write_text("A = 2\n")
     gc.cached_start_paths(vias)
-    assert len(list(tmp_path.glob("start_paths-*.npz"))) == 4
+    assert len(list(tmp_path.glob("start_paths-*.npz"))) == 5
     # an unreadable file is computed again (and written whole)
     written.write_bytes(b"not a cache")
     monkeypatch.setattr(gc, "cache_inputs", lambda: inputs)

@@ -498,6 +498,7 @@ def test_the_window_opening_beside_the_staging_side_is_reached_from_both_sides_a
     same = np.ones(without.free.shape, dtype=bool)
     same[w, 2, :, 1] = False
     same[ELEMENT_KINDS.index("paneling"), 2] = False  # paneling's one slot with vias (tests/test_paneling.py)
+    same &= ~shipped.detour  # the detours (next test) take the place of paths no start or reward uses on the site
     assert np.array_equal(shipped.waypoints[same], without.waypoints[same])
     assert np.array_equal(shipped.usable[same], without.usable[same])
     planned = plan_vias(without, kinds=("window",))
@@ -506,6 +507,26 @@ def test_the_window_opening_beside_the_staging_side_is_reached_from_both_sides_a
     # installation configurations; the shipped file (asserted above) has all four
     assert 1 <= len(planned["window"]["2"]["1"]) <= without.free.shape[2]
     assert set(planned["window"]["2"]["1"]) <= {str(c) for c in range(without.free.shape[2])}
+
+
+def test_every_turret_side_without_usable_paths_has_detours_clear_of_the_site_and_nothing_else_changes():
+    """`plan_detours` (assets/start_path_detours.json): every goal slot of every task type has detours (a planned via
+    each, wholly clear of the site at every turn) from each turret side it has no usable start path from, and only
+    there; the usable paths, their waypoints and clear fractions and the vias' are those computed without them, so the
+    site as built measures the same (tests/test_carry_geometry.py); an obstacle scene's reward uses them."""
+    import json
+
+    from ms_construction.goal_configurations import _start_paths, load_vias, start_paths
+
+    shipped, without = start_paths(), _start_paths(json.dumps(load_vias()))
+    sides_without = ~shipped.usable.any(2)  # [kinds, slots, 2 sides]
+    assert sides_without.any() and shipped.detour.any(2)[sides_without].all()
+    assert not shipped.detour.any(2)[~sides_without].any() and not without.detour.any()
+    assert (shipped.free[shipped.detour] == 1.0).all()
+    keep = ~shipped.detour
+    assert np.array_equal(shipped.waypoints[keep], without.waypoints[keep])
+    assert np.array_equal(shipped.free[keep], without.free[keep])
+    assert np.array_equal(shipped.usable, without.usable) and np.array_equal(shipped.planned, without.planned)
 
 
 def test_goal_slot_weights_draw_the_weighted_slot_more_and_leave_the_draws_alone_without_them():

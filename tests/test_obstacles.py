@@ -234,18 +234,53 @@ def test_near_goal_starts_pose_the_arm_on_the_paths_clear_of_the_obstacles():
     touched, starts, blocked = 0, 0, 0
     for seed in range(12):
         env.reset(seed=seed)
-        clear, usable = u.clear_paths(), u.geometry.paths["usable"][u.task_id, u.goal_slot]
-        if not (usable & clear).any():  # every way out of this goal blocked: an ordinary reset instead
+        ways = u.geometry.clear_ways(u.task_id, u.goal_slot, u.clear_paths())  # usable, else detours, clear
+        if not ways.any():  # every way out of this goal blocked: an ordinary reset instead
             assert not bool(u.near_goal_start[0])
             blocked += 1
             continue
         assert bool(u.near_goal_start[0])
-        sides = (usable & clear).view(-1, 2).any(0)  # the start's grasp side is a side of a clear path
+        sides = ways.view(-1, 2).any(0)  # the start's grasp side is a side of a clear path
         assert bool(sides[u.carry_side[0]])
         _, _, _, _, info = env.step(u.agent.robot.get_qpos())
         touched += int(info["obstacle_collision"])
         starts += 1
     assert touched == 0 and starts >= 8, (touched, starts, blocked)
+    env.close()
+
+
+def test_where_the_obstacles_block_every_usable_path_the_reward_takes_a_clear_detour_from_the_other_side():
+    """A window layout whose stack or post blocks every usable start path of its goal slot (all from one turret side)
+    and leaves a detour from the other side clear (`CarryGeometry.clear_ways`): the dense reward reaches for the
+    table from the detour's side and measures the carry along it, and a near-goal start is posed on it and touches
+    nothing. (Without the detours the reward fell back to the blocked paths, into the obstacle.)"""
+    env = make_env("WindowInstallation-v1", obstacles="static", reward_mode="dense")
+    u = env.unwrapped
+    g = u.geometry
+    for seed in range(40):
+        env.reset(seed=seed)
+        clear = u.clear_paths()
+        usable = g.paths["usable"][u.task_id, u.goal_slot]
+        ways = g.clear_ways(u.task_id, u.goal_slot, clear)
+        if not (usable & clear).any() and ways.any():
+            break
+    else:
+        pytest.fail("no window seed of 40 whose obstacles block every usable path and leave a detour")
+    assert (ways <= g.paths["detour"][u.task_id, u.goal_slot]).all()
+    assert torch.equal(g.usable(u.task_id, u.goal_slot, clear), ways)
+    sides = ways.view(-1, 2).any(0)
+    assert int(sides.sum()) == 1 and not (usable.view(-1, 2).any(0) & sides).any(), "the side without usable paths"
+    side = int(sides.float().argmax())
+    q = u.agent.robot.get_qpos()
+    torch.testing.assert_close(u.reach_distance(), (g.table_q[u.task_id, side, :5] - q[:, :5]).abs().sum(-1))
+    path = g.paths["waypoints"][u.task_id, u.goal_slot][0, int(ways[0].nonzero()[0, 0])]  # [install .. table]
+    at_via = g.project(path[2][None], torch.zeros(1), u.task_id, u.goal_slot, torch.full((1,), side), clear)
+    assert float(at_via.distance) <= float((path[1:3] - path[:2]).abs().sum()) + 1e-4, "on the detour: its length left"
+    u.set_near_goal_starts(1.0, 1.0)
+    env.reset(seed=seed)
+    assert bool(u.near_goal_start[0]) and int(u.carry_side[0]) == side
+    _, _, _, _, info = env.step(u.agent.robot.get_qpos())
+    assert not bool(info["obstacle_collision"])
     env.close()
 
 
@@ -379,10 +414,10 @@ def test_sac_on_a_mixed_scene_is_its_own_run_unchanged_but_for_the_share_and_ref
     from experiments import obstacles
 
     full, mixed = obstacles.training_run("nothing"), obstacles.training_run("nothing", share=0.5)  # SAC by default
-    assert full == obstacles.training_run("nothing", learner="sac") and full.name == "obstacles_moving_sac_s1"
+    assert full == obstacles.training_run("nothing", learner="sac") and full.name == "obstacles_moving_r2_sac_s1"
     changed = {k for k, v in vars(mixed.args).items() if v != vars(full.args)[k]}
     assert changed == {"obstacle_share", "exp_name"} and mixed.args.obstacle_share == 0.5
-    assert mixed.name == "obstacles_moving_share50_sac_s1" != full.name
+    assert mixed.name == "obstacles_moving_share50_r2_sac_s1" != full.name
     assert mixed.command == "python -m experiments.obstacles --share 0.5 --train nothing --learner sac --train-seed 1"
     assert "in 50% of its training episodes" in mixed.what
     with pytest.raises(SystemExit, match="SAC's option"):
@@ -391,6 +426,23 @@ def test_sac_on_a_mixed_scene_is_its_own_run_unchanged_but_for_the_share_and_ref
         obstacles.training_run("nothing", learner="ppo", share=0.5)
     with pytest.raises(SystemExit, match=r"in \(0, 1\]"):
         obstacles.training_run("nothing", learner="sac", share=0.0)
+
+
+def test_the_runs_on_the_earlier_obstacle_reward_keep_their_folders_and_are_not_trained_on():
+    """OBSTACLE_REWARD names the obstacle scenes' reward a run trains on: today's runs' folders carry it (`_r2`), the
+    runs on reward 1 (before the detours) keep theirs, for --evaluate and the tables; training one is refused."""
+    from experiments import obstacles
+
+    old = obstacles.training_run("shipped", 1, None, "sac", 0.5, reward=1)
+    assert old.name == "obstacles_moving_share50_shipped_sac_s1" and "obstacle reward" not in old.what
+    assert old.command.startswith("python -m experiments.obstacles --share 0.5 --obstacle-reward 1 --train shipped")
+    new = obstacles.training_run("shipped", 1, None, "sac", 0.5)
+    assert new.name == "obstacles_moving_share50_r2_shipped_sac_s1" and "(obstacle reward 2)" in new.what
+    assert "--obstacle-reward" not in new.command
+    with pytest.raises(SystemExit, match="--obstacle-reward 3"):
+        obstacles.training_run("shipped", reward=3)
+    with pytest.raises(SystemExit, match="that reward is gone"):
+        obstacles.main(obstacles.Args(train="shipped", learner="sac", share=0.5, obstacle_reward=1))
 
 
 def test_the_training_curve_draws_every_run_with_a_progress_file_per_task_type(tmp_path, monkeypatch):
@@ -406,7 +458,7 @@ def test_the_training_curve_draws_every_run_with_a_progress_file_per_task_type(t
     drawn, touched = {}, {}
     monkeypatch.setattr(obstacles.transfer, "plot_training",
                         lambda panels, out, title, collided: (drawn.update(panels), touched.update(collided)))
-    progress = checkpoint_of(obstacles.training_run("nothing", share=0.5)).parent / "progress.csv"
+    progress = checkpoint_of(obstacles.training_run("nothing", share=0.5, reward=1)).parent / "progress.csv"
     progress.parent.mkdir(parents=True)
     progress.write_text("global_step,ordinary_place_ceiling,ordinary_place_window,ordinary_place_flooring,"
                         "ordinary_collided_ceiling\n"  # the touches logged from the second row on, ceiling only
@@ -421,7 +473,7 @@ def test_the_training_curve_draws_every_run_with_a_progress_file_per_task_type(t
     assert all(v != v for v in drawn["window"][label][1]), "no window episode ended: nothing to average"
     assert list(touched["ceiling"]) == [label] and not touched["window"] and not touched["flooring"]
     assert list(touched["ceiling"][label][1])[1:] == [0.5, 0.5], "the touches from where the run logged them"
-    seed2 = checkpoint_of(obstacles.training_run("nothing", 2, share=0.5)).parent / "progress.csv"
+    seed2 = checkpoint_of(obstacles.training_run("nothing", 2, share=0.5, reward=1)).parent / "progress.csv"
     seed2.parent.mkdir(parents=True)
     seed2.write_text("global_step,ordinary_place_ceiling,ordinary_place_window,ordinary_place_flooring\n"
                      "2000,0.0,0.0,0.0\n")
@@ -469,19 +521,43 @@ def test_the_snapshot_table_reads_each_seed_s_evaluated_candidates_from_their_ep
 
 
 def test_the_touches_by_post_side_count_each_agent_s_static_episodes_on_each_side(tmp_path, monkeypatch):
-    """`--train S --touches-by-post-side`: per task, the blind reward-only agent and each seed's latest evaluated
+    """`--train S --touches-by post-side`: per task, the blind reward-only agent and each seed's latest evaluated
     snapshot, the static episodes touched of those with the post on each side of the arm."""
     from experiments import obstacles
     from experiments.campaign import checkpoint_of
 
-    monkeypatch.setattr(obstacles, "post_sides", lambda env_id, seeds: {s: "-y" if s < 2 else "+y" for s in seeds})
+    monkeypatch.setattr(obstacles, "layouts", lambda env_id, seeds: {
+        s: {"post-side": "-y" if s < 2 else "+y", "clear-way": "none"} for s in seeds})
     blind = obstacles.row_name(obstacles.AGENTS[obstacles.BLIND])
     name = checkpoint_of(obstacles.training_run("shipped", 1, None, "sac", 0.5)).parent.name
     for kind in ("ceiling", "window", "flooring"):
         for row, touched in ((blind, {0, 1, 2}), (f"{name}_candidate_100", {0}), (f"{name}_candidate_300", {2})):
             (tmp_path / f"{row}_static_{kind}.json").write_text(json.dumps({"episodes": [
                 {"seed": s, "collided": s in touched} for s in range(4)]}))
-    rows = obstacles.touches_by_post_side("shipped", "sac", 0.5, tmp_path)[2:]
+    table = obstacles.touches_by("post-side", "shipped", "sac", 0.5, tmp_path)
+    assert table[0] == "| task | agent | post side -y: touched / episodes | post side +y: touched / episodes |"
+    rows = table[2:]
     assert rows[:2] == ["| ceiling | scratch general agent (reward alone, shipped) | 2 / 2 | 1 / 2 |",
                         "| ceiling | seed 1 at 300 env steps | 0 / 2 | 1 / 2 |"], "seed 1's latest; seed 2 not there"
     assert len(rows) == 6
+    by_way = obstacles.touches_by("clear-way", "shipped", "sac", 0.5, tmp_path)
+    assert by_way[2] == "| ceiling | scratch general agent (reward alone, shipped) | 0 / 0 | 0 / 0 | 3 / 4 |"
+
+
+def test_the_layouts_of_a_scene_name_the_post_s_side_and_the_ways_the_reward_finds_clear():
+    """`layouts` (what `--touches-by` groups by) on real window scenes: each seed's post side is the sign of its
+    post's y, and its clear way is the one `CarryGeometry.clear_ways` gives for its goal slot."""
+    from experiments.obstacles import LAYOUT_GROUPS, layouts
+
+    found = layouts("WindowInstallation-v1", list(range(6)))
+    env = make_env("WindowInstallation-v1", obstacles="static")
+    u = env.unwrapped
+    for seed, layout in found.items():
+        env.reset(seed=seed)
+        assert layout["post-side"] == ("-y" if float(u.obstacle_layout[0, 5]) < 0 else "+y")
+        assert layout["clear-way"] in LAYOUT_GROUPS["clear-way"]
+        clear = u.clear_paths()
+        usable_clear = bool((u.geometry.paths["usable"][u.task_id, u.goal_slot] & clear).any())
+        assert (layout["clear-way"] == "a usable path") == usable_clear
+        assert (layout["clear-way"] == "none") == (not bool(u.geometry.clear_ways(u.task_id, u.goal_slot, clear).any()))
+    env.close()

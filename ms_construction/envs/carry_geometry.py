@@ -10,7 +10,9 @@ names a slot, an opening or a turret side:
 - the start paths of each goal slot (`goal_configurations.StartPaths`): collision-checked joint paths from each
   installation configuration out to the staging table, one per turret side, a planned via where the direct ones
   run into the site. The turret sides a slot's usable paths leave from are the sides its element is reached and
-  grasped from (`path_sides`); the carry is measured along the grasp side's paths (`project`).
+  grasped from (`path_sides`); the carry is measured along the grasp side's paths (`project`). From the sides a slot
+  has no usable path from, its detours (a planned via each): where a site's obstacles block every usable path, the
+  reward measures along the detours they leave clear (`usable`, `clear_ways`).
 
 `CarryGeometry.project` is the one projection per step the reward and the observation share: it is the cost of a
 dense-reward step, so it works on per-slot constants gathered in two index operations.
@@ -175,13 +177,14 @@ class CarryGeometry:
             w = torch.tensor(sp.waypoints, **f32).flatten(2, 3)  # [k, s, M, P, 6]
             usable = torch.tensor(sp.usable & self.kept[..., None], device=self.device).flatten(2)  # [k, s, M]
             planned = torch.tensor(sp.planned, device=self.device).flatten(2)
+            detour = torch.tensor(sp.detour & self.kept[..., None], device=self.device).flatten(2)
             seg = w[..., 1:, :] - w[..., :-1, :]  # [k, s, M, S, 6]
             length = seg.abs().sum(-1)
             before = torch.cumsum(length, -1) - length  # the path's length from the installation to each segment
             # from the lift in, a planned via's path counts VIA_DEVIATION_WEIGHT; the table's segment keeps the lenient
             # weight (the grasp's posture need not match the path's, and nothing lies across)
             not_table = torch.arange(seg.shape[-2], device=self.device) < seg.shape[-2] - 1
-            weight = torch.where(planned[..., None] & not_table, VIA_DEVIATION_WEIGHT, PATH_DEVIATION_WEIGHT)
+            weight = torch.where((planned | detour)[..., None] & not_table, VIA_DEVIATION_WEIGHT, PATH_DEVIATION_WEIGHT)
             # a vertex is the end of the segments either side of it: it counts at the lighter of their weights
             vertex_weight = torch.minimum(torch.cat([weight[..., :1], weight], -1), torch.cat([weight, weight[..., -1:]], -1))
             vertex_before = torch.cat([torch.zeros_like(length[..., :1]), torch.cumsum(length, -1)], -1)
@@ -189,20 +192,28 @@ class CarryGeometry:
             sides = usable.view(k, s, -1, 2).any(2)
             kept = torch.tensor(self.kept, device=self.device).repeat_interleave(2, -1)  # [k, s, M]
             self._paths = dict(
-                waypoints=w, free=torch.tensor(sp.free, **f32).flatten(2), usable=usable, planned=planned, kept=kept,
+                waypoints=w, free=torch.tensor(sp.free, **f32).flatten(2), usable=usable, planned=planned, detour=detour, kept=kept,
                 sides=sides | ~sides.any(-1, keepdim=True),
                 segments=torch.cat([seg, inv[..., None], length[..., None], before[..., None], weight[..., None]], -1),
                 vertices=torch.cat([w, vertex_before[..., None], vertex_weight[..., None]], -1))
         return self._paths
 
+    def clear_ways(self, task: torch.Tensor, slot: torch.Tensor, clear: torch.Tensor) -> torch.Tensor:
+        """[n, M] bool: the start paths of each env's goal slot that keep clear of a site's obstacles (`clear` [n, M],
+        `SiteObstacles.clear_paths`): its usable ones that are clear, where any is; else its detours that are clear
+        (StartPaths.detour: from the turret sides it has no usable path from); none where neither is."""
+        usable = self.paths["usable"][task, slot] & clear
+        return torch.where(usable.any(-1, keepdim=True), usable, self.paths["detour"][task, slot] & clear)
+
     def usable(self, task: torch.Tensor, slot: torch.Tensor, clear: Optional[torch.Tensor] = None) -> torch.Tensor:
-        """[n, M] bool: the usable start paths of each env's goal slot; with `clear` [n, M] (the paths clear of a
-        site's obstacles, `SiteObstacles.clear_paths`), those of them that are clear, where any is."""
+        """[n, M] bool: the start paths the dense reward measures along for each env's goal slot: its usable ones;
+        with `clear` [n, M] (the paths clear of a site's obstacles), its `clear_ways` where it has any, and its usable
+        ones where the obstacles block every way."""
         usable = self.paths["usable"][task, slot]
         if clear is None:
             return usable
-        both = usable & clear
-        return torch.where(both.any(-1, keepdim=True), both, usable)
+        ways = self.clear_ways(task, slot, clear)
+        return torch.where(ways.any(-1, keepdim=True), ways, usable)
 
     def path_sides(self, task: torch.Tensor, slot: torch.Tensor, clear: Optional[torch.Tensor] = None) -> torch.Tensor:
         """[n, 2] bool: the turret sides (+pi, -pi) a usable start path (`usable`) of each goal slot leaves the table

@@ -15,7 +15,8 @@ fronts, the arm's rest pose and (the post) the ceiling openings; none of the thr
 layout may still block every way to a goal: `experiments/generalization.py` keeps the evaluation seeds whose static
 scene the planning expert solves ("solvable at its start").
 
-The dense reward measures its carry along the start paths that keep clear of the stack and the post (`clear_paths`).
+The dense reward measures its carry along the start paths that keep clear of the stack and the post (`clear_paths`),
+a detour from the other turret side where they block every usable one (`CarryGeometry.clear_ways`).
 A touch of the arm or the element on an obstacle is `info["obstacle_collision"]`; `info["fail"]` (ManiSkill's
 failure key, which ends the episode) holds once one happened. The obstacles are kinematic bodies (immovable; the
 static site does not collide with them). physx_cpu only for now: the GPU path (pairwise contact queries, kinematic
@@ -300,7 +301,8 @@ class SiteObstacles:
     def clear_paths(self) -> Optional[torch.Tensor]:
         """[n, M] bool: which start paths of each env's goal slot (`CarryGeometry.paths`) keep the arm and its element
         clear of the stack and the post as they stand (None without obstacles): the dense reward measures the carry
-        along those, where any is (`CarryGeometry.usable`), so that it does not lead the arm into them. Checked as the
+        along the usable ones of those, where any is, else along the clear detours (`CarryGeometry.usable`), so that
+        it does not lead the arm into them. Checked as the
         start paths are against the site (goal_configurations: the same points, turns and margins), once per
         episode when the reward first asks; the walking worker is left out (it is outside the cell at the start)."""
         if not self.has_obstacles:

@@ -72,8 +72,9 @@ class StartStates:
         chosen = torch.rand(b) < self.near_goal_share
         usable = paths["usable"][self.task_id[env_idx], self.goal_slot[env_idx]]
         clear = self._clear_paths_of(env_idx)
-        if clear is not None:  # with obstacles: on a path clear of them, and an ordinary reset where none is
-            usable = usable & clear
+        if clear is not None:  # with obstacles: on a way clear of them (a detour where no usable path is), and an
+            # ordinary reset where none is
+            usable = self.geometry.clear_ways(self.task_id[env_idx], self.goal_slot[env_idx], clear)
             chosen &= usable.any(-1)
         if not bool(chosen.any()):
             return
