@@ -158,7 +158,8 @@ class Args(transfer.TrainOptions):
     """with --train (SAC): the share of its training episodes with obstacles; below 1, a mixed scene, the others on
     the site as built, in its own run (campaign/obstacles_moving_share<%>_sac_s<seed>/)."""
     write_results: bool = True
-    """write the table into docs/RESULTS.md (section `obstacles-zero-shot`)."""
+    """write the table into docs/RESULTS.md (section `obstacles-zero-shot`) and its rows to --out/summary.json; with
+    --no-write-results (a snapshot evaluated on its own, say) both are left as they are and the table only printed."""
     training_curve: bool = False
     """draw the training runs among obstacles (TRAIN_RUNS, those with a progress.csv) to TRAIN_CURVE, and exit."""
     touches_by: Optional[Literal["post-side", "clear-way"]] = None
@@ -454,10 +455,10 @@ def main(args: Args) -> dict:
             f"held still): {'; '.join(giving_way)}.\n")
     print(body)
     summary = {f"{label} | {scene}": per_task for (label, scene), per_task in rows.items()}
-    (args.out / "summary.json").write_text(json.dumps({"command": command, "rows": summary}, indent=1) + "\n")
-    if args.write_results:
+    if args.write_results:  # the table and its JSON (which experiments/summary.py reads) are one measurement
+        (args.out / "summary.json").write_text(json.dumps({"command": command, "rows": summary}, indent=1) + "\n")
         update_section(RESULTS_PATH, "obstacles-zero-shot", title="Results", body=body)
-        print(f"wrote {RESULTS_PATH}")
+        print(f"wrote {RESULTS_PATH} and {args.out / 'summary.json'}")
     return summary
 
 

@@ -561,3 +561,25 @@ def test_the_layouts_of_a_scene_name_the_post_s_side_and_the_ways_the_reward_fin
         assert (layout["clear-way"] == "a usable path") == usable_clear
         assert (layout["clear-way"] == "none") == (not bool(u.geometry.clear_ways(u.task_id, u.goal_slot, clear).any()))
     env.close()
+
+
+def test_an_evaluation_without_write_results_leaves_results_and_the_summary_json_as_they_are(tmp_path, monkeypatch):
+    """`--no-write-results` (a snapshot evaluated on its own) prints its table and writes neither RESULTS' section
+    nor summary.json, which the project summary reads: an evaluation of fewer agents does not replace the full one."""
+    from experiments import obstacles
+
+    expert = dict(placed=True, collisions=0, steps=10, planning_time=0.1, replans=0, escapes=0, waited_steps=0)
+    agent = dict(placed=True, collided=False, length=10, policy_time_s=0.01)
+    monkeypatch.setattr(obstacles, "run_row", lambda pool, path, fn, jobs, seeds, desc, checkpoint=None: [
+        dict(expert if fn is obstacles._expert_episode else agent, seed=s) for s in seeds])
+    results = tmp_path / "RESULTS.md"
+    results.write_text("kept\n")
+    monkeypatch.setattr(obstacles, "RESULTS_PATH", results)
+    args = dict(episodes=2, workers=1, out=tmp_path, agents={"an agent": "a/b.pt"})
+    rows = obstacles.main(obstacles.Args(**args, write_results=False))
+    assert "an agent | moving (solvable seeds)" in rows
+    assert results.read_text() == "kept\n" and not (tmp_path / "summary.json").exists()
+    obstacles.main(obstacles.Args(**args))
+    written = json.loads((tmp_path / "summary.json").read_text())["rows"]
+    assert set(written) == set(rows) and "an agent | none (solvable seeds)" in written
+    assert "obstacles, zero-shot" in results.read_text()
