@@ -55,6 +55,7 @@ from experiments import sac_recipe, transfer
 from experiments.campaign import (Run, checkpoint_of, checkpoint_step, describe, record_checkpoint_step,
                                  run_or_resume)
 from experiments.from_scratch import LEARNER, LEARNERS, METHOD, scratch_args
+from ms_construction.assets import sha256
 from ms_construction.envs import PAPER_TASK_ENV_IDS
 from ms_construction.reporting import update_section
 
@@ -210,11 +211,20 @@ def evaluate(checkpoint: Path, seed, steps: int = EVAL_STEPS, workers: int = 2) 
 
 
 def evaluated(checkpoint: Path, seed) -> bool:
-    """Whether both of `seed`'s evaluations are of `checkpoint` as it is (written after it, naming it): the twin's
-    rerun does not evaluate its policies again. A checkpoint remade at the same path is newer than its evaluations."""
-    outs = [evaluation_json(seed, seen) for seen in (False, True)]
-    return all(out.is_file() and json.loads(out.read_text()).get("checkpoint") == str(checkpoint)
-               and out.stat().st_mtime > Path(checkpoint).stat().st_mtime for out in outs)
+    """Whether both of `seed`'s evaluations are of `checkpoint` as it is (naming it, and the file's sha256 theirs): the
+    twin's rerun does not evaluate its policies again, on a fresh clone too. An evaluation written before the JSON
+    recorded the hash counts where it is newer than the file (file times: on a fresh clone, checkout times)."""
+    digest = sha256(checkpoint) if Path(checkpoint).is_file() else None
+
+    def of_it(out: Path) -> bool:
+        data = json.loads(out.read_text())
+        if data.get("checkpoint") != str(checkpoint):
+            return False
+        if "checkpoint_sha256" in data:
+            return data["checkpoint_sha256"] == digest
+        return out.stat().st_mtime > Path(checkpoint).stat().st_mtime
+
+    return all(out.is_file() and of_it(out) for out in (evaluation_json(seed, seen) for seen in (False, True)))
 
 
 def refines_kept_clone(run_dir: Path) -> bool:

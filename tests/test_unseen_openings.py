@@ -236,10 +236,13 @@ def test_a_sac_run_keeps_its_snapshots_and_the_curve_measures_each_once_on_both_
 
 
 def test_a_policy_evaluated_as_it_is_is_not_evaluated_again(tmp_path, monkeypatch):
-    """The twin's rerun skips a policy both of whose evaluations name it and were written after it; one remade at the
-    same path (newer than its evaluations) or never evaluated is evaluated."""
+    """The twin's rerun skips a policy both of whose evaluations name it and record its sha256, whatever the file
+    times (a fresh clone's are checkout times); one remade at the same path (another hash) or never evaluated is
+    evaluated. An evaluation from before the hash was recorded counts where it was written after the policy."""
     import json
     import os
+
+    from ms_construction.assets import sha256
 
     monkeypatch.setattr(uo, "EVAL_DIR", tmp_path)
     policy = tmp_path / "checkpoint_300000.pt"
@@ -254,4 +257,11 @@ def test_a_policy_evaluated_as_it_is_is_not_evaluated_again(tmp_path, monkeypatc
     os.utime(other, (0, 0))
     assert not uo.evaluated(other, "imitation"), "the evaluations name another checkpoint"
     os.utime(policy)  # remade after its evaluations
+    assert not uo.evaluated(policy, "imitation")
+    for seen in (False, True):  # evaluations that record the policy's hash
+        uo.evaluation_json("imitation", seen).write_text(json.dumps({"checkpoint": str(policy),
+                                                                     "checkpoint_sha256": sha256(policy)}))
+    os.utime(uo.evaluation_json("imitation", True), (0, 0))  # older than the policy: the hash decides
+    assert uo.evaluated(policy, "imitation")
+    policy.write_bytes(b"a policy trained again")
     assert not uo.evaluated(policy, "imitation")

@@ -35,6 +35,7 @@ from tqdm import tqdm
 from baselines import cli
 from baselines.ppo.checkpoints import load_checkpoint, load_policy
 from baselines.ppo.start_states import GOAL_SLOTS
+from ms_construction.assets import sha256
 from ms_construction.curriculum import FINAL_STAGE, STAGE_NAMES, stage_tolerances
 from ms_construction.envs import ENV_IDS, PAPER_TASK_ENV_IDS
 from ms_construction.envs.construction_env import ConstructionTaskEnv
@@ -397,6 +398,7 @@ def main(args: Args) -> dict[str, dict]:
         command = command_of(args)
         out = results[env_ids[0]] if len(env_ids) == 1 else {"tasks": results}
         args.json.write_text(json.dumps({"command": command, "checkpoint": str(args.checkpoint),
+                                         "checkpoint_sha256": sha256(args.checkpoint),
                                          "curriculum_stage": args.curriculum_stage,
                                          "sample_actions": args.sample_actions, "action_gain": args.action_gain, **out}, indent=1) + "\n")
         print(f"wrote {args.json}")
