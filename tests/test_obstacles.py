@@ -276,6 +276,14 @@ def test_where_the_obstacles_block_every_usable_path_the_reward_takes_a_clear_de
     path = g.paths["waypoints"][u.task_id, u.goal_slot][0, int(ways[0].nonzero()[0, 0])]  # [install .. table]
     at_via = g.project(path[2][None], torch.zeros(1), u.task_id, u.goal_slot, torch.full((1,), side), clear)
     assert float(at_via.distance) <= float((path[1:3] - path[:2]).abs().sum()) + 1e-4, "on the detour: its length left"
+    # grasped from the other side (the turret cannot cross holding it): along that side's usable paths, blocked or not
+    other = 1 - side
+    blocked = g.paths["waypoints"][u.task_id, u.goal_slot][0, int((usable[0].view(-1, 2)[:, other]).nonzero()[0, 0]) * 2 + other]
+    assert torch.equal(g.carry_paths(u.task_id, u.goal_slot, torch.full((1,), other), clear), usable)
+    at_lift = g.project(blocked[3][None], torch.zeros(1), u.task_id, u.goal_slot, torch.full((1,), other), clear)
+    assert float(at_lift.distance) <= float((blocked[1:4] - blocked[:3]).abs().sum()) + 1e-4
+    before = g.project(blocked[3][None], torch.zeros(1), u.task_id, u.goal_slot, torch.full((1,), -1), clear)
+    assert float(before.distance) > float(at_lift.distance) + 0.1, "not grasped: along the clear detour only"
     u.set_near_goal_starts(1.0, 1.0)
     env.reset(seed=seed)
     assert bool(u.near_goal_start[0]) and int(u.carry_side[0]) == side
@@ -414,10 +422,10 @@ def test_sac_on_a_mixed_scene_is_its_own_run_unchanged_but_for_the_share_and_ref
     from experiments import obstacles
 
     full, mixed = obstacles.training_run("nothing"), obstacles.training_run("nothing", share=0.5)  # SAC by default
-    assert full == obstacles.training_run("nothing", learner="sac") and full.name == "obstacles_moving_r2_sac_s1"
+    assert full == obstacles.training_run("nothing", learner="sac") and full.name == "obstacles_moving_r3_sac_s1"
     changed = {k for k, v in vars(mixed.args).items() if v != vars(full.args)[k]}
     assert changed == {"obstacle_share", "exp_name"} and mixed.args.obstacle_share == 0.5
-    assert mixed.name == "obstacles_moving_share50_r2_sac_s1" != full.name
+    assert mixed.name == "obstacles_moving_share50_r3_sac_s1" != full.name
     assert mixed.command == "python -m experiments.obstacles --share 0.5 --train nothing --learner sac --train-seed 1"
     assert "in 50% of its training episodes" in mixed.what
     with pytest.raises(SystemExit, match="SAC's option"):
@@ -429,20 +437,23 @@ def test_sac_on_a_mixed_scene_is_its_own_run_unchanged_but_for_the_share_and_ref
 
 
 def test_the_runs_on_the_earlier_obstacle_reward_keep_their_folders_and_are_not_trained_on():
-    """OBSTACLE_REWARD names the obstacle scenes' reward a run trains on: today's runs' folders carry it (`_r2`), the
-    runs on reward 1 (before the detours) keep theirs, for --evaluate and the tables; training one is refused."""
+    """OBSTACLE_REWARD names the obstacle scenes' reward a run trains on: today's runs' folders carry it (`_r3`), the
+    runs on rewards 1 (before the detours) and 2 keep theirs, for --evaluate and the tables; training one is refused."""
     from experiments import obstacles
 
     old = obstacles.training_run("shipped", 1, None, "sac", 0.5, reward=1)
     assert old.name == "obstacles_moving_share50_shipped_sac_s1" and "obstacle reward" not in old.what
     assert old.command.startswith("python -m experiments.obstacles --share 0.5 --obstacle-reward 1 --train shipped")
     new = obstacles.training_run("shipped", 1, None, "sac", 0.5)
-    assert new.name == "obstacles_moving_share50_r2_shipped_sac_s1" and "(obstacle reward 2)" in new.what
+    assert new.name == "obstacles_moving_share50_r3_shipped_sac_s1" and "(obstacle reward 3)" in new.what
     assert "--obstacle-reward" not in new.command
-    with pytest.raises(SystemExit, match="--obstacle-reward 3"):
-        obstacles.training_run("shipped", reward=3)
-    with pytest.raises(SystemExit, match="that reward is gone"):
-        obstacles.main(obstacles.Args(train="shipped", learner="sac", share=0.5, obstacle_reward=1))
+    probe = obstacles.training_run("shipped", 1, None, "sac", 0.5, reward=2)
+    assert probe.name == "obstacles_moving_share50_r2_shipped_sac_s1" and "--obstacle-reward 2" in probe.command
+    with pytest.raises(SystemExit, match="--obstacle-reward 4"):
+        obstacles.training_run("shipped", reward=4)
+    for earlier in (1, 2):
+        with pytest.raises(SystemExit, match="that reward is gone"):
+            obstacles.main(obstacles.Args(train="shipped", learner="sac", share=0.5, obstacle_reward=earlier))
 
 
 def test_the_training_curve_draws_every_run_with_a_progress_file_per_task_type(tmp_path, monkeypatch):

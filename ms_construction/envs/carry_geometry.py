@@ -215,6 +215,22 @@ class CarryGeometry:
         ways = self.clear_ways(task, slot, clear)
         return torch.where(ways.any(-1, keepdim=True), ways, usable)
 
+    def carry_paths(self, task: torch.Tensor, slot: torch.Tensor, side: torch.Tensor,
+                    clear: Optional[torch.Tensor] = None) -> torch.Tensor:
+        """[n, M] bool: the paths the carry is measured along: `usable`; among a site's obstacles (`clear`), after a
+        grasp from turret side `side` [n] (0: +pi, 1: -pi; -1: none), that side's usable paths clear of them where any
+        is, else its clear detours, else its usable paths even though blocked: the turret cannot cross to the other
+        side holding the element, so another side's clear way is no way for it."""
+        ways = self.usable(task, slot, clear)
+        if clear is None:
+            return ways
+        on_side = torch.remainder(torch.arange(ways.shape[-1], device=ways.device), 2)[None] == side[:, None]
+        usable, detour = self.paths["usable"][task, slot] & on_side, self.paths["detour"][task, slot] & on_side
+        grasped = usable & clear
+        for fallback in (detour & clear, usable):
+            grasped = torch.where(grasped.any(-1, keepdim=True), grasped, fallback)
+        return torch.where(grasped.any(-1, keepdim=True), grasped, ways)
+
     def path_sides(self, task: torch.Tensor, slot: torch.Tensor, clear: Optional[torch.Tensor] = None) -> torch.Tensor:
         """[n, 2] bool: the turret sides (+pi, -pi) a usable start path (`usable`) of each goal slot leaves the table
         from; both for a slot without usable paths."""
@@ -232,12 +248,12 @@ class CarryGeometry:
         modulo the element's symmetry. Only along the paths that leave the table from the turret side `side` [n]
         (0: +pi, 1: -pi, -1: none) the element was grasped from, where the slot has any: the turret cannot cross to
         the other side holding it. The candidates are each segment's nearest point by joints 1-5 (joint 6 is
-        compared modulo a period, which a projection cannot take) and every vertex. With `clear`, only along the
-        paths clear of the site's obstacles (`usable`)."""
+        compared modulo a period, which a projection cannot take) and every vertex. With `clear`, along the paths
+        clear of the site's obstacles, the grasp side's first (`carry_paths`)."""
         p = self.paths
         return Projection(*_scripted(_project)(
             qpos, turn, self.period[task], p["segments"][task, slot], p["vertices"][task, slot],
-            self.usable(task, slot, clear), p["kept"][task, slot], side, PATH_LOOKAHEAD))
+            self.carry_paths(task, slot, side, clear), p["kept"][task, slot], side, PATH_LOOKAHEAD))
 
     def reach_distance(self, qpos: torch.Tensor, task: torch.Tensor, slot: torch.Tensor,
                        clear: Optional[torch.Tensor] = None) -> torch.Tensor:
