@@ -76,10 +76,10 @@ before that last resort (CarryGeometry.clear_ways), even after a grasp from the 
 turret cannot reach holding the element (one probe, `_r2`); 3, after a grasp, that side's clear ways first, else its
 usable paths (CarryGeometry.carry_paths; `_r3`). The site as built measures the same in all three."""
 TRAIN_RUNS = {
-    "PPO from PPO's reward-only agent": ("shipped", None, 1.0, 1),
-    "SAC from nothing": ("nothing", "sac", 1.0, 1),
-    "SAC from nothing, mixed scene (--share 0.5)": ("nothing", "sac", 0.5, 1),
-    "SAC from SAC's reward-only agent, mixed scene (--share 0.5)": ("shipped", "sac", 0.5, 1),
+    "PPO from PPO's reward-only agent, reward 1": ("shipped", None, 1.0, 1),
+    "SAC from nothing, reward 1": ("nothing", "sac", 1.0, 1),
+    "SAC from nothing, mixed scene (--share 0.5), reward 1": ("nothing", "sac", 0.5, 1),
+    "SAC from SAC's reward-only agent, mixed scene (--share 0.5), reward 1": ("shipped", "sac", 0.5, 1),
     "the same, reward 2 (detours)": ("shipped", "sac", 0.5, 2),
     "the same, reward 3 (the grasp side's ways first)": ("shipped", "sac", 0.5, 3),
 }

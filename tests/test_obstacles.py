@@ -278,7 +278,8 @@ def test_where_the_obstacles_block_every_usable_path_the_reward_takes_a_clear_de
     assert float(at_via.distance) <= float((path[1:3] - path[:2]).abs().sum()) + 1e-4, "on the detour: its length left"
     # grasped from the other side (the turret cannot cross holding it): along that side's usable paths, blocked or not
     other = 1 - side
-    blocked = g.paths["waypoints"][u.task_id, u.goal_slot][0, int((usable[0].view(-1, 2)[:, other]).nonzero()[0, 0]) * 2 + other]
+    config = int(usable[0].view(-1, 2)[:, other].nonzero()[0, 0])
+    blocked = g.paths["waypoints"][u.task_id, u.goal_slot][0, config * 2 + other]
     assert torch.equal(g.carry_paths(u.task_id, u.goal_slot, torch.full((1,), other), clear), usable)
     at_lift = g.project(blocked[3][None], torch.zeros(1), u.task_id, u.goal_slot, torch.full((1,), other), clear)
     assert float(at_lift.distance) <= float((blocked[1:4] - blocked[:3]).abs().sum()) + 1e-4
@@ -476,7 +477,7 @@ def test_the_training_curve_draws_every_run_with_a_progress_file_per_task_type(t
                         + "".join(f"{2000 * (i + 1)},1.0,,0.0,{'' if i == 0 else 0.5}\n" for i in range(3)))
     obstacles.training_curve(tmp_path / "curve.png")
     assert list(drawn) == ["ceiling", "window", "flooring"]
-    label = "SAC from nothing, mixed scene (--share 0.5), seed 1, 6,000 env steps"
+    label = "SAC from nothing, mixed scene (--share 0.5), reward 1, seed 1, 6,000 env steps"
     assert all(list(curves) == [label] for curves in drawn.values()), "only the run with a progress.csv"
     steps, placed = drawn["ceiling"][label]
     assert list(steps) == [2000, 4000, 6000] and list(placed) == [1.0, 1.0, 1.0]
@@ -490,7 +491,7 @@ def test_the_training_curve_draws_every_run_with_a_progress_file_per_task_type(t
                      "2000,0.0,0.0,0.0\n")
     drawn.clear()
     obstacles.training_curve(tmp_path / "curve.png")
-    assert list(drawn["window"]) == [label, "SAC from nothing, mixed scene (--share 0.5), seed 2, 2,000 env steps"], \
+    assert list(drawn["window"]) == [label, "SAC from nothing, mixed scene (--share 0.5), reward 1, seed 2, 2,000 env steps"], \
         "a second seed of the run is drawn beside the first"
 
 
