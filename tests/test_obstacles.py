@@ -227,6 +227,37 @@ def test_the_dense_reward_measures_the_carry_along_the_paths_clear_of_the_obstac
     env.close()
 
 
+def test_the_paths_clear_of_the_obstacles_are_those_the_start_paths_own_check_finds_clear(tmp_path):
+    """The env checks the arm's self-collision once per goal slot and the obstacles per episode: the same paths as
+    goal_configurations' whole check (`_clear_fraction`) with the stack and the post in its world, on every task
+    type, blocked and clear paths both among them."""
+    import numpy as np
+
+    from ms_construction.goal_configurations import START_TURNS_DEG, _clear_fraction, _path_planners
+    from ms_construction.parameters import ELEMENT_KINDS
+    from ms_construction.planning.collision_model import obstacle_objects
+
+    env = make_env("ConstructionPickPlace-v1", obstacles="static")
+    u = env.unwrapped
+    turns = [float(np.deg2rad(t)) for t in START_TURNS_DEG]
+    seen, kinds = torch.zeros(2, dtype=torch.bool), set()
+    for seed in range(12):
+        env.reset(seed=seed)
+        kind, slot = int(u.task_id[0]), int(u.goal_slot[0])
+        planners = _path_planners(tmp_path, ELEMENT_KINDS[kind], {})
+        for key, obj in obstacle_objects(u).items():
+            if key != "obstacle_worker":
+                for planner in planners:
+                    planner.set_obstacle(key, obj)
+        whole = [_clear_fraction(planners, path, turns) == 1.0
+                 for path in u.geometry.paths["waypoints"][kind, slot].numpy().astype(float)]
+        assert u.clear_paths()[0].tolist() == whole
+        seen |= torch.tensor([not all(whole), any(whole)])
+        kinds.add(kind)
+    assert bool(seen.all()) and kinds == {0, 1, 2}
+    env.close()
+
+
 def test_near_goal_starts_pose_the_arm_on_the_paths_clear_of_the_obstacles():
     env = make_env("CeilingInstallation-v1", obstacles="static", reward_mode="dense")
     u = env.unwrapped

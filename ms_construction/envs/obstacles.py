@@ -228,6 +228,8 @@ class SiteObstacles:
         self.obstacle_clock = torch.zeros(n, dtype=torch.long, device=self.device)
         self.obstacle_collided = torch.zeros(n, dtype=torch.bool, device=self.device)
         self.obstacle_contact_now = torch.zeros(n, dtype=torch.bool, device=self.device)
+        self._worker_upright = torch.tensor([np.sqrt(0.5), 0, np.sqrt(0.5), 0], device=self.device)
+        self._worker_parked_xy = torch.tensor(WORKER_PARKED_XY, device=self.device)
 
     def _place_obstacles(self, env_idx: torch.Tensor) -> None:
         self._clear_paths = None
@@ -247,11 +249,17 @@ class SiteObstacles:
         stack = torch.cat([lay[:, 0:2], stack_z[:, None], quat_z(torch.rad2deg(lay[:, 3]))], -1)
         post_z = torch.full_like(lay[:, 0], self._obstacle_site.story_height / 2)
         post = torch.cat([lay[:, 4:6], post_z[:, None], quat_z(torch.zeros_like(post_z))], -1)
-        upright = torch.tensor([np.sqrt(0.5), 0, np.sqrt(0.5), 0], device=self.device).expand(len(lay), 4)
-        worker_z = torch.full_like(post_z, WORKER_HEIGHT / 2)
         self.obstacles["stack"].set_pose(Pose.create(stack))
         self.obstacles["post"].set_pose(Pose.create(post))
-        self.obstacles["worker"].set_pose(Pose.create(torch.cat([self.worker_xy(), worker_z[:, None], upright], -1)))
+        self._pose_worker()
+
+    def _pose_worker(self) -> None:
+        """The worker at its place by the layout and the clock (the stack and the post stay where an episode put
+        them: per control step only the worker moves)."""
+        n = len(self.obstacle_layout)
+        upright = self._worker_upright.expand(n, 4)
+        worker_z = torch.full((n, 1), WORKER_HEIGHT / 2, device=self.device)
+        self.obstacles["worker"].set_pose(Pose.create(torch.cat([self.worker_xy(), worker_z, upright], -1)))
 
     def obstacles_present(self) -> torch.Tensor:
         """[n] whether each env's episode has its obstacles on the site (not PARKED: `obstacle_share`)."""
@@ -271,8 +279,7 @@ class SiteObstacles:
         clock = self.obstacle_clock if clock is None else clock
         t = ((clock.float() - lay[:, 10]) / self.control_freq).clamp(min=0)
         lane = torch.stack([lay[:, 6] + lay[:, 8] * t, lay[:, 7] + lay[:, 9] * t], -1)
-        parked = torch.tensor(WORKER_PARKED_XY, device=self.device).expand_as(lane)
-        return torch.where(self.worker_walking(clock)[:, None], lane, parked)
+        return torch.where(self.worker_walking(clock)[:, None], lane, self._worker_parked_xy.expand_as(lane))
 
     def worker_velocity(self) -> torch.Tensor:
         """[n, 2] m/s; the worker's velocity now (0 outside its lane)."""
@@ -284,7 +291,7 @@ class SiteObstacles:
             return
         self.obstacle_clock += 1
         if self.obstacle_mode == "moving":
-            self._pose_obstacles()
+            self._pose_worker()
         self.obstacle_contact_now = self._obstacle_contacts()
         self.obstacle_collided |= self.obstacle_contact_now
 
@@ -314,24 +321,60 @@ class SiteObstacles:
         return self._clear_paths
 
     def _check_paths(self) -> torch.Tensor:
-        from ms_construction.goal_configurations import START_TURNS_DEG, _clear_fraction, _path_planners
-        from ms_construction.parameters import ELEMENT_KINDS
+        """[1, M]: `_clear_fraction(...) == 1` of goal_configurations for each start path of the episode's goal slot
+        with the stack and the post in the planners' world, computed in two halves with the same result: whether the
+        arm collides with itself at each checked point is the same in every episode, so it is checked once per goal
+        slot (`_path_points`), and each episode checks only the obstacles, at the points of the paths clear of the
+        arm itself, coarse to fine (a blocked path is found after a few checks)."""
         from ms_construction.planning.collision_model import obstacle_objects
 
-        kind = int(self.task_id[0])
-        if not hasattr(self, "_path_checkers"):
-            self._path_checkers_dir = tempfile.TemporaryDirectory(prefix="ms_construction_obstacles_")
-            self._path_checkers = {}
-        if kind not in self._path_checkers:
-            self._path_checkers[kind] = _path_planners(self._path_checkers_dir.name, ELEMENT_KINDS[kind], {})
-        planners = self._path_checkers[kind]
+        kind, slot = int(self.task_id[0]), int(self.goal_slot[0])
+        planners = self._path_planners(kind)
+        points, self_clear = self._path_points(kind, slot)
         static = {k: v for k, v in obstacle_objects(self).items() if k != "obstacle_worker"}
         for planner in planners:
             for key, obj in static.items():
                 planner.set_obstacle(key, obj)
-        waypoints = self.geometry.paths["waypoints"][kind, int(self.goal_slot[0])].cpu().numpy().astype(float)
-        turns = [float(np.deg2rad(t)) for t in START_TURNS_DEG]
-        return torch.tensor([[_clear_fraction(planners, path, turns) == 1.0 for path in waypoints]], device=self.device)
+        clear = [bool(free) and not any(planner.world.set_qpos_all(q) or planner.world.collide_with_others()
+                                        for q_turns in path for planner, q in zip(planners, q_turns))
+                 for path, free in zip(points, self_clear)]
+        return torch.tensor([clear], device=self.device)
+
+    def _path_planners(self, kind: int) -> list:
+        """goal_configurations' path checkers (one per START_TURNS_DEG) for task type `kind`, made once per env."""
+        from ms_construction.goal_configurations import _path_planners
+        from ms_construction.parameters import ELEMENT_KINDS
+
+        if not hasattr(self, "_path_checkers"):
+            self._path_checkers_dir = tempfile.TemporaryDirectory(prefix="ms_construction_obstacles_")
+            self._path_checkers, self._path_point_cache = {}, {}
+        if kind not in self._path_checkers:
+            self._path_checkers[kind] = _path_planners(self._path_checkers_dir.name, ELEMENT_KINDS[kind], {})
+        return self._path_checkers[kind]
+
+    def _path_points(self, kind: int, slot: int) -> tuple[np.ndarray, np.ndarray]:
+        """The checked configurations of goal slot `slot`'s start paths, [M, PATH_CHECKS + 1, turns, 6] with the
+        points coarse to fine, and [M] whether the arm holding its element keeps clear of itself at all of them (the
+        planners hold no obstacle when it is computed: once per goal slot and env)."""
+        from ms_construction.goal_configurations import PATH_CHECKS, START_TURNS_DEG, path_point
+
+        planners = self._path_planners(kind)
+        if (kind, slot) not in self._path_point_cache:
+            i = np.arange(1, PATH_CHECKS + 2)
+            order = np.argsort(-(i & -i), kind="stable")  # by the largest power of two dividing i
+            fractions = np.linspace(0.0, 1.0, PATH_CHECKS + 1)[order]
+            turns = np.deg2rad(START_TURNS_DEG)
+            waypoints = self.geometry.paths["waypoints"][kind, slot].cpu().numpy().astype(float)
+            points = np.array([[[path_point(path, a) + np.eye(6)[5] * t for t in turns] for a in fractions]
+                               for path in waypoints])
+            for planner in planners:
+                for key in planner.world.get_normal_object_names():
+                    planner.remove_obstacle(key)
+            self_clear = np.array([not any(planner.world.set_qpos_all(q) or planner.world.self_collide()
+                                           for q_turns in path for planner, q in zip(planners, q_turns))
+                                   for path in points])
+            self._path_point_cache[kind, slot] = points, self_clear
+        return self._path_point_cache[kind, slot]
 
     def obstacle_observation(self) -> torch.Tensor:
         """[n, OBSTACLE_OBS_SIZE] (the module's OBSTACLE_OBS_SIZE says what); zeros without obstacles."""
