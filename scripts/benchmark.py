@@ -3,6 +3,7 @@
     python scripts/benchmark.py                     # CPU sections, and the GPU section where CUDA is there
     python scripts/benchmark.py --steps 300 --rounds 2 --no-write
     python scripts/benchmark.py --no-cpu            # the GPU section only
+    python scripts/benchmark.py --no-cpu --no-gpu --obstacles   # the obstacle scenes' section only
     python scripts/benchmark.py --workers 16 --trainings free-none free-recipe free-recipe-cuda \
         --cpu-section cpu-speed-16-cores            # a larger machine's CPU figures, beside this one's
 
@@ -20,7 +21,10 @@ CPU (physx_cpu, state observations, pd_joint_delta_pos, uniform random actions):
   included; the learner's defaults but for the number of envs), free-running and held, ICM off and
   on, and the from-scratch recipe (`--trainings`; `-cuda`: its learner on the GPU), against those
   processes simulating alone: the share of the simulator's speed the learner keeps;
-- peak host memory: the resident set of this process and of each env worker process.
+- peak host memory: the resident set of this process and of each env worker process;
+- among obstacles (`--obstacles`, its own section): one env with the recipe's training kwargs on the site as built,
+  with static and moving obstacles and the mixed scene the runs among obstacles train on, a reset every few steps as
+  in a trained agent's episodes.
 
 Each figure is the median over rounds that alternate between the things compared, so the drifts of
 a shared machine hit them all alike.
@@ -97,6 +101,11 @@ class Args:
     """run the CPU sections."""
     gpu: bool = True
     """run the GPU section when CUDA is there."""
+    obstacles: bool = False
+    """run the obstacle scenes' section (one env, the recipe's training kwargs; section cpu-obstacles)."""
+    obstacle_episode_steps: int = 25
+    """env steps between the resets of the obstacle section: about a trained agent's episode among obstacles (the
+    runs' progress.csv, episode_length), most of them near-goal starts."""
     gpu_envs: tuple[int, ...] = (256, 1024, 4096)
     """num_envs of the state-observation GPU measurements."""
     gpu_rgb_envs: int = 256
@@ -136,6 +145,12 @@ def main(args: Args) -> None:
         print(body)
         if args.write:
             update_section(args.out, args.cpu_section, title="Benchmarks", body=body)
+            print(f"wrote {args.out}")
+    if args.obstacles:
+        body = obstacle_section(args)
+        print(body)
+        if args.write:
+            update_section(args.out, "cpu-obstacles", title="Benchmarks", body=body)
             print(f"wrote {args.out}")
     if args.gpu:
         if not torch.cuda.is_available():
@@ -572,6 +587,76 @@ def one_env_table(args: Args) -> str:
         rows.append(f"| {eid} | {sps:.0f} | {sps / ref:.2f} | {sps_held:.0f} | {sps_held / ref:.2f} |")
     rows.append(f"| {REFERENCE} (reference) | {ref:.0f} | 1.00 | | |")
     return "\n".join(rows)
+
+
+OBSTACLE_SCENES = (("the site as built (reference)", None, 1.0), ("static obstacles", "static", 1.0),
+                   ("moving obstacles", "moving", 1.0), ("moving obstacles in half the episodes", "moving", 0.5))
+"""the obstacle section's rows: label, the tasks' `obstacles` and `obstacle_share` (the last: the mixed scene of the
+runs among obstacles, `python -m experiments.obstacles --share 0.5`)."""
+
+
+def make_training_env(obstacles: Optional[str], share: float):
+    """One env of SAC's recipe (experiments/sac_recipe.py) with the tasks' `obstacles` and `obstacle_share`: its
+    training kwargs (dense reward, observation, obstacles observed), near-goal starts as its training draws them at
+    their widest."""
+    from baselines.sac import sac
+    from experiments.sac_recipe import sac_args
+
+    a = sac_args(obstacles=obstacles, obstacle_share=share)
+    env = gym.make(GENERAL, num_envs=1, sim_backend="physx_cpu", render_backend=default_render_backend(),
+                   **sac.env_kwargs(a, train=True))
+    env.unwrapped.set_near_goal_starts(a.near_goal_share, 1.0, a.near_goal_max_steps)
+    return env
+
+
+def episodes_per_second(env, steps: int, seed: int, episode_steps: int) -> float:
+    """Env steps/s of uniform random actions, a seeded reset every `episode_steps` steps (and where one ends)."""
+    gen = torch.Generator().manual_seed(seed)
+    low, high = torch.as_tensor(env.action_space.low), torch.as_tensor(env.action_space.high)
+    actions = low + (high - low) * torch.rand((steps, *low.shape), generator=gen)
+    t0 = time.perf_counter()
+    env.reset(seed=seed)
+    for i in range(steps):
+        _, _, term, trunc, _ = env.step(actions[i])
+        if bool(term.any() or trunc.any()) or (i + 1) % episode_steps == 0:
+            env.reset(seed=seed * steps + i)
+    return steps / (time.perf_counter() - t0)
+
+
+def obstacle_section(args: Args) -> str:
+    envs = {label: make_training_env(scene, share) for label, scene, share in OBSTACLE_SCENES}
+    for env in envs.values():  # warm-up: the planners and each goal slot's path points (once per env) made
+        episodes_per_second(env, args.steps, 10_000, args.obstacle_episode_steps)
+    sps = {label: [] for label in envs}
+    with tqdm(total=args.rounds * len(envs), desc="obstacles", unit="run") as bar:
+        for r in range(args.rounds):
+            for label, env in envs.items():
+                sps[label].append(episodes_per_second(env, args.steps, r, args.obstacle_episode_steps))
+                bar.update()
+    for env in envs.values():
+        env.close()
+    ref = statistics.median(sps[OBSTACLE_SCENES[0][0]])
+    rows = ["| scene | env steps/s | ratio to the site as built |", "|---|---|---|"]
+    rows += [f"| {label} | {statistics.median(v):.0f} | {statistics.median(v) / ref:.2f} |" for label, v in sps.items()]
+    from experiments.sac_recipe import sac_args
+
+    return "\n".join([
+        f"## CPU (physx_cpu), {os.cpu_count()} cores: among obstacles",
+        "",
+        f"Command: `{command(args)}` ({time.strftime('%Y-%m-%d %H:%M')}). Machine: {machine()}. Load average (1 min) "
+        f"when it ended: {os.getloadavg()[0]:.1f} on {os.cpu_count()} cores.",
+        "",
+        f"One env of SAC's recipe as it trains ({GENERAL}, its dense reward and observation, near-goal starts in "
+        f"{sac_args().near_goal_share:.0%} of the episodes), uniform random actions, a seeded reset every "
+        f"{args.obstacle_episode_steps} steps (about a trained agent's episode among obstacles); median of "
+        f"{args.rounds} runs of {args.steps} steps after a warm-up run each, alternating the scenes in the same "
+        "process, beside whatever else runs on the machine (the load average above). Where the obstacles cost: an "
+        "episode with them checks its goal slot's start paths against the stack and the post at its reset "
+        "(`clear_paths`); every step of a scene with obstacles, the mixed one's episodes without them too, poses the "
+        "worker, reads the obstacles' contacts and observes them.",
+        "",
+        *rows,
+    ]) + "\n"
 
 
 def rgb_table(args: Args) -> str:

@@ -158,3 +158,16 @@ def test_the_split_table_has_a_row_per_part_the_rest_and_the_whole(monkeypatch):
     assert "| the rest: the rollout's bookkeeping, logs, evaluations | 1.00 | 6.00 | 6.0 |" in rows
     assert f"| **{labels[-1]}** | 5.00 | 10.00 | 2.0 |" in rows
     assert rows[-1] == "| env steps/s it makes | 400 | 200 | |"
+
+
+def test_the_obstacle_section_measures_each_scene_against_the_site_as_built_in_one_run():
+    args = bench.Args(steps=30, rounds=1, cpu=False, gpu=False, obstacles=True, obstacle_episode_steps=10)
+    assert bench.command(args) == ("python scripts/benchmark.py --steps 30 --rounds 1 --no-cpu --no-gpu --obstacles "
+                                   "--obstacle-episode-steps 10")
+    body = bench.obstacle_section(args)
+    rows = [line.split(" | ") for line in body.splitlines() if line.startswith("| ") and "---" not in line][1:]
+    assert [r[0].removeprefix("| ") for r in rows] == [label for label, _, _ in bench.OBSTACLE_SCENES]
+    assert rows[0][2] == "1.00 |" and all(float(r[1]) > 0 for r in rows)
+    env = bench.make_training_env("moving", 0.5)
+    assert env.unwrapped.obstacle_share == 0.5 and env.unwrapped.near_goal_share > 0
+    env.close()
