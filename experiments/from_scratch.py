@@ -300,7 +300,7 @@ def rule_table() -> list[str]:
              f"{CONFIRM_EPISODES} fresh episodes per task, the one that places most there on its worst task chosen; "
              f"candidates tied there validated again on {TIEBREAK_EPISODES} more per task and ranked on all "
              f"{CONFIRM_EPISODES + TIEBREAK_EPISODES} (placed there in brackets), a tie still going to the better "
-             "screened, then the earliest (validation seeds only; the test seeds judge the choice above):", "",
+             "screened, then the earliest (validation seeds only; the test seeds judge the choice: the first table):", "",
              "| learner | seed | snapshots screened | candidates: env steps (placed on confirmation, ceiling / window "
              "/ flooring %) | chosen |", "|---|---|---|---|---|"]
     for learner, seed in ((learner, seed) for learner in LEARNERS for seed in SEEDS):
@@ -354,7 +354,13 @@ def seeds_report(results: Path = Path("docs/RESULTS.md"), log_dir: Path = CAMPAI
 
     lines = [f"Command: `{COMMAND} --report` (from campaign/<run>/progress.csv; the recipe: experiments/sac_recipe.py's "
              "`sac_args` with SAC, `scratch_args` in experiments/from_scratch.py with PPO, each unchanged from step 0). "
-             "Demonstrations: none.", "",
+             "Demonstrations: none.", "", *seed_evaluations_table(), "",
+             f"![the recipe from nothing, per seed]({Path(*SEEDS_CURVE.parts[1:])})", "",
+             f"*Made by `{COMMAND} --report`: each seed's training episodes placed from ordinary resets per task (solid), "
+             f"with PPO its reach-start radius per task, the mean of its goal slots' (dotted, x 100: how far out the "
+             f"reach and grasp are trained from; SAC has no reach starts), each snapshot placed on {VALIDATION_EPISODES} "
+             "validation episodes per task (dots) and the snapshot the rule chose (dashed).*", "",
+             "<details><summary>Where each run stands, and the snapshot rule's choices</summary>", "",
              "| learner | seed | env steps done / budget | training wall time | near-goal start radius now: ceiling / window / "
              "flooring | reach-start radius now, per goal slot: ceiling / window / flooring | training episodes of the "
              "last 200,000 steps placed, ordinary resets: ceiling / window / flooring % | placed, near-goal starts % | "
@@ -397,11 +403,7 @@ def seeds_report(results: Path = Path("docs/RESULTS.md"), log_dir: Path = CAMPAI
     SEEDS_CURVE.parent.mkdir(parents=True, exist_ok=True)
     fig.savefig(SEEDS_CURVE, dpi=100)
     plt.close(fig)
-    lines += ["", *seed_evaluations_table(), "", *rule_table(), "", f"![the recipe from nothing, per seed]({Path(*SEEDS_CURVE.parts[1:])})", "",
-              f"*Made by `{COMMAND} --report`: each seed's training episodes placed from ordinary resets per task (solid), "
-              f"with PPO its reach-start radius per task, the mean of its goal slots' (dotted, x 100: how far out the "
-              f"reach and grasp are trained from; SAC has no reach starts), each snapshot placed on {VALIDATION_EPISODES} "
-              "validation episodes per task (dots) and the snapshot the rule chose (dashed).*"]
+    lines += ["", *rule_table(), "", "</details>"]
     body = "\n".join(lines)
     update_section(results, "from-scratch-seeds", body, "Results")
     return body

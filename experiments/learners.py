@@ -269,17 +269,18 @@ def report(results: Path = Path("docs/RESULTS.md"), log_dir: Path = CAMPAIGN_DIR
     CURVES.parent.mkdir(parents=True, exist_ok=True)
     fig.savefig(CURVES, dpi=100)
     plt.close(fig)
+    notes = []  # the inexact resumes and the probe's clock, folded under the figure
     for seed in SEEDS:
         sac_ckpt = arm_checkpoint("sac", log_dir, seed)
         refilled = (torch.load(sac_ckpt, map_location="cpu", weights_only=False)["clock"].get("refilled_at", [])
                     if sac_ckpt.is_file() else [])
         if refilled:  # an inexact resume: the reader should know where
-            lines += ["", f"SAC seed {seed}'s replay buffer was lost between sessions and refilled by its actor at "
+            notes += ["", f"SAC seed {seed}'s replay buffer was lost between sessions and refilled by its actor at "
                       + ", ".join(f"{step:,}" for step in refilled) + " env steps (`--refill-lost-buffer`)."]
     for seed in SEEDS:
         if (probe := progress_csv("sac_utd", log_dir, seed)).is_file():
             recipe = progress_csv("sac", log_dir, seed)
-            lines += ["", update_ratio_sentence(probe, curve(recipe, until=None) if recipe.is_file() else None, seed)]
+            notes += ["", update_ratio_sentence(probe, curve(recipe, until=None) if recipe.is_file() else None, seed)]
     body = "\n".join([
         "## Which learner, and curiosity", "",
         f"Commands: `{from_scratch.COMMAND} --seed S [--learner ppo]` (the SAC and PPO arms on a seed are the "
@@ -288,7 +289,9 @@ def report(results: Path = Path("docs/RESULTS.md"), log_dir: Path = CAMPAIGN_DIR
         "the training episodes from ordinary resets, the worst of the three task types placed; the target: every task "
         f"placed >= {TARGET:.0%} and picked >= {PICK_TARGET:.0%} with the paper's protocol (every evaluation: "
         f"[the experiment page]({Path(*page.parts[1:])}#every-evaluation-with-the-papers-protocol)).", "", *lines, "",
-        f"![learners]({Path(*CURVES.parts[1:])})"])
+        f"![learners]({Path(*CURVES.parts[1:])})",
+        *(["", "<details><summary>Inexact resumes, and the update-ratio probe's clock</summary>", *notes, "",
+           "</details>"] if notes else [])])
     update_section(results, "learners", body, "Results")
     table = evaluations_table(eval_dir, log_dir)
     update_section(page, "learners-evaluations", "\n".join(

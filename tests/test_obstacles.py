@@ -626,3 +626,18 @@ def test_an_evaluation_without_write_results_leaves_results_and_the_summary_json
     written = json.loads((tmp_path / "summary.json").read_text())["rows"]
     assert set(written) == set(rows) and "an agent | none (solvable seeds)" in written
     assert "obstacles, zero-shot" in results.read_text()
+
+
+def test_the_results_table_of_one_scene_has_a_row_per_agent_and_the_full_one_every_scene():
+    from experiments import obstacles
+
+    tasks = list(obstacles.PAPER_TASK_ENV_IDS.values())
+    result = obstacles.summarize([dict(placed=True, collided=False, length=10, policy_time_s=0.01)], False)
+    rows = {(agent, f"{scene} (solvable seeds)"): {t: result for t in tasks}
+            for agent in ("agent A", "agent B") for scene in obstacles.SCENES}
+    moving = obstacles.table(rows, "moving").splitlines()
+    full = obstacles.table(rows).splitlines()
+    assert [line.split(" | ")[0] for line in moving[2:]] == ["| agent A", "| agent B"]
+    assert moving[0].count("|") == full[0].count("|") - 1 and len(full) == 2 + 2 * len(obstacles.SCENES)
+    assert all(line.count("|") == moving[0].count("|") for line in moving)
+    assert "moving" not in "".join(moving) and "100.0 [" in moving[2]
