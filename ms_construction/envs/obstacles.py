@@ -354,8 +354,8 @@ class SiteObstacles:
 
     def _path_points(self, kind: int, slot: int) -> tuple[np.ndarray, np.ndarray]:
         """The checked configurations of goal slot `slot`'s start paths, [M, PATH_CHECKS + 1, turns, 6] with the
-        points coarse to fine, and [M] whether the arm holding its element keeps clear of itself at all of them (the
-        planners hold no obstacle when it is computed: once per goal slot and env)."""
+        points coarse to fine, and [M] whether the arm holding its element keeps clear of itself at all of them
+        (`self_collide`: the world's obstacles play no part); once per goal slot and env."""
         from ms_construction.goal_configurations import PATH_CHECKS, START_TURNS_DEG, path_point
 
         planners = self._path_planners(kind)
@@ -367,9 +367,6 @@ class SiteObstacles:
             waypoints = self.geometry.paths["waypoints"][kind, slot].cpu().numpy().astype(float)
             points = np.array([[[path_point(path, a) + np.eye(6)[5] * t for t in turns] for a in fractions]
                                for path in waypoints])
-            for planner in planners:
-                for key in planner.world.get_normal_object_names():
-                    planner.remove_obstacle(key)
             self_clear = np.array([not any(planner.world.set_qpos_all(q) or planner.world.self_collide()
                                            for q_turns in path for planner, q in zip(planners, q_turns))
                                    for path in points])
