@@ -226,8 +226,9 @@ def make(env_id: str, obs_mode: str = "state"):
                     render_backend=default_render_backend(), **dict(CPU_KWARGS, obs_mode=obs_mode))
 
 
-def steps_per_second(env, steps: int, seed: int, held: bool = False) -> float:
-    """One env: uniform random actions from a seeded reset, a reset where an episode ends."""
+def steps_per_second(env, steps: int, seed: int, held: bool = False, reset_every: Optional[int] = None) -> float:
+    """One env: uniform random actions from a seeded reset, a reset where an episode ends (and, with `reset_every`,
+    every that many steps: episodes as long as a trained agent's)."""
     u = env.unwrapped
     env.reset(seed=seed)
     if held:
@@ -239,7 +240,7 @@ def steps_per_second(env, steps: int, seed: int, held: bool = False) -> float:
     t0 = time.perf_counter()
     for i in range(steps):
         _, _, term, trunc, _ = env.step(actions[i])
-        if bool(term.any() or trunc.any()):
+        if bool(term.any() or trunc.any()) or (reset_every and (i + 1) % reset_every == 0):
             env.reset()
             if held:
                 u.set_held()
@@ -609,29 +610,15 @@ def make_training_env(obstacles: Optional[str], share: float):
     return env
 
 
-def episodes_per_second(env, steps: int, seed: int, episode_steps: int) -> float:
-    """Env steps/s of uniform random actions, a seeded reset every `episode_steps` steps (and where one ends)."""
-    gen = torch.Generator().manual_seed(seed)
-    low, high = torch.as_tensor(env.action_space.low), torch.as_tensor(env.action_space.high)
-    actions = low + (high - low) * torch.rand((steps, *low.shape), generator=gen)
-    t0 = time.perf_counter()
-    env.reset(seed=seed)
-    for i in range(steps):
-        _, _, term, trunc, _ = env.step(actions[i])
-        if bool(term.any() or trunc.any()) or (i + 1) % episode_steps == 0:
-            env.reset(seed=seed * steps + i)
-    return steps / (time.perf_counter() - t0)
-
-
 def obstacle_section(args: Args) -> str:
     envs = {label: make_training_env(scene, share) for label, scene, share in OBSTACLE_SCENES}
     for env in envs.values():  # warm-up: the planners and each goal slot's path points (once per env) made
-        episodes_per_second(env, args.steps, 10_000, args.obstacle_episode_steps)
+        steps_per_second(env, args.steps, 10_000, reset_every=args.obstacle_episode_steps)
     sps = {label: [] for label in envs}
     with tqdm(total=args.rounds * len(envs), desc="obstacles", unit="run") as bar:
         for r in range(args.rounds):
             for label, env in envs.items():
-                sps[label].append(episodes_per_second(env, args.steps, r, args.obstacle_episode_steps))
+                sps[label].append(steps_per_second(env, args.steps, r, reset_every=args.obstacle_episode_steps))
                 bar.update()
     for env in envs.values():
         env.close()
@@ -647,7 +634,7 @@ def obstacle_section(args: Args) -> str:
         f"when it ended: {os.getloadavg()[0]:.1f} on {os.cpu_count()} cores.",
         "",
         f"One env of SAC's recipe as it trains ({GENERAL}, its dense reward and observation, near-goal starts in "
-        f"{sac_args().near_goal_share:.0%} of the episodes), uniform random actions, a seeded reset every "
+        f"{sac_args().near_goal_share:.0%} of the episodes), uniform random actions from a seeded reset, a reset every "
         f"{args.obstacle_episode_steps} steps (about a trained agent's episode among obstacles); median of "
         f"{args.rounds} runs of {args.steps} steps after a warm-up run each, alternating the scenes in the same "
         "process, beside whatever else runs on the machine (the load average above). Where the obstacles cost: an "
