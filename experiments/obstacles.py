@@ -90,6 +90,15 @@ TRAIN_SEEDS = (1, 2)
 TRAIN_CURVE = Path("docs/images/obstacles_training.png")
 TRAINED = " (trained among obstacles)"
 """what the label of an agent trained on the moving scene (`--train`) ends with in summary.json."""
+SHOWN = (  # (--train, --learner, --share, --obstacle-reward, --train-seed, env steps)
+    ("shipped", None, 1.0, 1, 1, 460_000),
+    ("nothing", "sac", 1.0, 1, 1, 500_018),
+    ("nothing", "sac", 0.5, 1, 1, 918_090),
+    ("shipped", "sac", 0.5, 1, 1, 1_000_606),
+    ("shipped", "sac", 0.5, 1, 2, 500_000),
+    ("shipped", "sac", 0.5, 3, 1, 650_000),
+)
+"""the trained runs' snapshots that RESULTS shows beside AGENTS (each an evaluated candidate, `candidate_path`)."""
 
 
 def training_run(start: str, seed: int = 1, num_envs: Optional[int] = None, learner: Optional[str] = None,
@@ -117,6 +126,24 @@ def training_run(start: str, seed: int = 1, num_envs: Optional[int] = None, lear
                                  learner, obstacles=TRAIN_SCENE, **({"obstacle_share": share} if mixed else {}))
 
 
+def trained_label(start: str, learner: Optional[str], share: float, reward: int, seed: int, step: int) -> str:
+    """The row label of a training run's snapshot at `step`: its learner and start, scene and reward, seed, steps."""
+    scene = f"{TRAIN_SCENE} scene" + ("" if share == 1 else f" in {share:.0%} of episodes")
+    return f"{transfer.start_name(start, learner)}, {scene}, reward {reward}, seed {seed}, {step:,} env steps{TRAINED}"
+
+
+def candidate_path(run: Run, step: int) -> Path:
+    """Where a training run's policy at `step` is kept (committed once evaluated)."""
+    return checkpoint_of(run).parent / "candidates" / f"candidate_{step}.pt"
+
+
+def shown_agents() -> dict[str, str]:
+    """label -> candidate policy of each snapshot of SHOWN."""
+    return {trained_label(start, learner, share, reward, seed, step):
+            str(candidate_path(training_run(start, seed, None, learner, share, reward), step))
+            for start, learner, share, reward, seed, step in SHOWN}
+
+
 def trained_policy(run: Run) -> tuple[int, Path]:
     """The env steps of a training run's checkpoint, and its policy kept (committed) as
     campaign/<run>/candidates/candidate_<env steps>.pt: its rows are named for it, so an evaluation of a run still
@@ -126,7 +153,7 @@ def trained_policy(run: Run) -> tuple[int, Path]:
         raise SystemExit(f"--evaluate: {run.name} has no checkpoint at {ckpt}; train it first: {run.command}")
     saved = load_checkpoint(ckpt)
     step = int(saved["progress"]["global_step"])
-    policy = ckpt.parent / "candidates" / f"candidate_{step}.pt"
+    policy = candidate_path(run, step)
     if not policy.is_file():
         policy.parent.mkdir(parents=True, exist_ok=True)
         torch.save(policy_only(saved), policy)
@@ -152,8 +179,8 @@ class Args(transfer.TrainOptions):
     """processes, one env each."""
     out: Path = Path("docs/data/obstacles")
     """where each row's episodes go (one JSON per row and task)."""
-    agents: dict[str, str] = field(default_factory=lambda: dict(AGENTS))
-    """label -> checkpoint of the agents to run."""
+    agents: dict[str, str] = field(default_factory=lambda: {**AGENTS, **shown_agents()})
+    """label -> checkpoint of the agents to run: the shipped ones, and the trained snapshots RESULTS shows."""
     more_agents: tuple[str, ...] = ()
     """more agents to run after those, LABEL=CHECKPOINT each (a seed's candidate snapshot, say)."""
     obstacle_reward: int = OBSTACLE_REWARD
@@ -426,7 +453,8 @@ def main(args: Args) -> dict:
                                  f"evaluated (--evaluate) and tabulated, and trained on today's ({OBSTACLE_REWARD}) only")
             return transfer.train(run, args.dry_run)
         step, policy = trained_policy(run)
-        args.agents = {**args.agents, f"{run.what}, {step:,} env steps{TRAINED}": str(policy)}
+        label = trained_label(args.train, args.learner, args.share, args.obstacle_reward, args.train_seed, step)
+        args.agents = {**args.agents, label: str(policy)}
     command = " ".join(["python -m experiments.obstacles", *map(shlex.quote, sys.argv[1:])])
     rows: dict[tuple[str, str], dict[str, dict]] = {}
     giving_way = []

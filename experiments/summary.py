@@ -14,8 +14,8 @@ from typing import Optional
 
 from baselines.ppo import evaluation
 from baselines.ppo.evaluation import EXPERT_RESULTS, PAPER_TABLE_II, RESULTS_PATH
-from experiments import from_scratch, paneling, unseen_openings
-from experiments.obstacles import TRAINED, scene_rows as obstacles_scene_rows
+from experiments import from_scratch, obstacles, paneling, transfer, unseen_openings
+from experiments.obstacles import scene_rows as obstacles_scene_rows
 from ms_construction.reporting import update_section
 
 TASKS = tuple(PAPER_TABLE_II)
@@ -96,27 +96,32 @@ def generalization_table() -> list[str]:
 
 def trained_table() -> list[str]:
     """A row per generalization run that has been evaluated: trained on paneling (its placed %), with an opening of
-    each task type held out (placed on the openings it never saw), or among moving obstacles (placed there)."""
-    lines = ["| trained run | paneling: placed % | the openings it never saw: placed % (ceiling / window / flooring) | "
-             "moving obstacles: placed % (ceiling / window / flooring) | source |", "|---|---|---|---|---|"]
+    each task type held out (placed on the openings it never saw), or among moving obstacles (placed there; the
+    snapshots of obstacles.SHOWN)."""
+    lines = ["| trained on | learner, from | seed | env steps | placed %: paneling, or ceiling / window / flooring "
+             "| source |", "|---|---|---|---|---|---|"]
     for learner, start, seed in paneling.TRAIN_PLAN:
-        run = paneling.training_run(start, seed, learner=learner)
-        path = paneling.train_eval_json(run)
+        path = paneling.train_eval_json(paneling.training_run(start, seed, learner=learner))
         if (data := _read(path)) is not None:
             task = evaluation.task_results(data)[paneling.ENV_ID]
-            steps = f", {data['checkpoint_step']:,} env steps" if "checkpoint_step" in data else ""
-            lines.append(f"| {run.what}{steps} | {100 * task['place_success']:.1f} | - | - | {path} |")
+            steps = f"{data['checkpoint_step']:,}" if "checkpoint_step" in data else "-"
+            lines.append(f"| paneling | {transfer.start_name(start, learner)} | {seed} | {steps} | "
+                         f"{100 * task['place_success']:.1f} | {path} |")
+    held_out = (f"openings {' and '.join(map(str, unseen_openings.TRAINED))} (placed at "
+                f"{' and '.join(map(str, unseen_openings.HELD_OUT))}, never trained on)")
     for seed in unseen_openings.EVALUATED:
         path = unseen_openings.evaluation_json(seed, seen=False)
         if (data := _read(path)) is not None:
-            steps = unseen_openings.trained_steps(seed, data)
-            steps += " env steps" if steps.replace(",", "").isdigit() else ""
-            lines.append(f"| {unseen_openings.run_label(seed)}, {steps} | - | "
-                         + " / ".join(_placed(data["tasks"])) + f" | - | {path} |")
-    for label, row in obstacles_scene_rows(_read(OBSTACLES) or {}, "moving").items():
-        if label.endswith(TRAINED):
-            lines.append(f"| {label.removesuffix(TRAINED)} | - | - | " + " / ".join(_placed(row))
-                         + f" | {OBSTACLES} |")
+            learner, number = unseen_openings.learner_and_seed(seed)
+            lines.append(f"| {held_out} | {learner} | {number or '-'} | {unseen_openings.trained_steps(seed, data)} | "
+                         + " / ".join(_placed(data["tasks"])) + f" | {path} |")
+    moving = obstacles_scene_rows(_read(OBSTACLES) or {}, "moving")
+    for start, learner, share, reward, seed, step in obstacles.SHOWN:
+        row = moving.get(obstacles.trained_label(start, learner, share, reward, seed, step))
+        if row is not None:
+            scene = "moving obstacles" + ("" if share == 1 else f" in {share:.0%} of episodes")
+            lines.append(f"| {scene}, reward {reward} | {transfer.start_name(start, learner)} | {seed} | {step:,} | "
+                         + " / ".join(_placed(row)) + f" | {OBSTACLES} |")
     return lines
 
 
@@ -130,7 +135,9 @@ def summary() -> str:
         *generalization_table(), "",
         "Generalization, trained: the recipe's learners trained on the new setting (or, for openings, on the others); "
         "the same protocols (paneling: 50,000 env steps; openings: 50,000 env steps per task; obstacles: the expert's "
-        "solvable seeds):", "", *trained_table(), "",
+        "solvable seeds, the moving scene). From SAC's agent: the networks of the run the shipped reward-only agent "
+        f"comes from ({transfer.SAC_STARTS['shipped']}); from PPO's: {transfer.STARTS['shipped']}. Obstacle rewards: "
+        "experiments/obstacles.py OBSTACLE_REWARDS (3, today's).", "", *trained_table(), "",
         "*Made by `python -m experiments.summary` from the files named; each section below gives the command that "
         "wrote them, its intervals and its failures.*"])
 

@@ -80,6 +80,13 @@ def learner_for(start: str, learner: Optional[str] = None) -> str:
     return learner
 
 
+def start_name(start: str, learner: Optional[str] = None) -> str:
+    """How the tables name a run's learner and start: "SAC from nothing", "SAC from SAC's agent" (SAC_STARTS),
+    "PPO from PPO's agent" (STARTS), ..."""
+    learner = learner_for(start, learner).upper()
+    return f"{learner} from " + ("nothing" if start == "nothing" else f"{learner}'s agent")
+
+
 def transfer_run(name: str, start: str, seed: int, num_envs: Optional[int], budget: int, command: str, what: str,
                  learner: Optional[str] = None, **setting) -> Run:
     """The recipe (experiments/from_scratch.py's `scratch_args`) from `start` (STARTS) to `budget` env steps on

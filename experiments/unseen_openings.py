@@ -72,7 +72,7 @@ def seed_run(seed: int, num_envs: Optional[int] = None) -> Run:
     """The recipe from nothing on `seed`, its training envs never drawing the HELD_OUT openings."""
     name = f"unseen_s{seed}"
     return Run(name, scratch_args(num_envs, seed=seed, exp_name=name, goal_slot_weights=training_slot_weights(TRAINED)),
-               f"the recipe from nothing, seed {seed}, goal openings {', '.join(map(str, HELD_OUT))} held out",
+               f"PPO's recipe from nothing, seed {seed}, goal openings {', '.join(map(str, HELD_OUT))} held out",
                f"{COMMAND} --seed {seed} --learner ppo", None, method=METHOD)
 
 
@@ -281,11 +281,20 @@ EVALUATED = (*SEEDS, *(f"sac_s{s}" for s in SEEDS), *IMITATION_POLICIES)
 imitation twin's policies."""
 
 
+def learner_and_seed(seed) -> tuple[str, Optional[int]]:
+    """The learner (and its start) of `evaluation_json`'s `seed`, and the training seed (None: the imitation
+    twin's one run)."""
+    if isinstance(seed, int):
+        return "PPO from nothing", seed
+    if seed.startswith("sac_s"):
+        return "SAC from nothing", int(seed.removeprefix("sac_s"))
+    return ("imitation: its clone alone" if seed == "imitation_clone" else "imitation (clone + residual PPO)"), None
+
+
 def run_label(seed) -> str:
     """How RESULTS names the run of `evaluation_json`'s `seed`."""
-    return (f"the recipe from nothing, seed {seed}" if isinstance(seed, int) else
-            f"SAC from nothing, seed {seed.removeprefix('sac_s')}" if seed.startswith("sac_s") else
-            "imitation: its clone alone" if seed == "imitation_clone" else "imitation (clone + residual PPO)")
+    learner, number = learner_and_seed(seed)
+    return learner if number is None else f"{learner}, seed {number}"
 
 
 def trained_steps(seed, data: dict) -> str:

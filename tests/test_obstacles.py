@@ -4,6 +4,7 @@ them."""
 
 import dataclasses
 import json
+from pathlib import Path
 
 import pytest
 import torch
@@ -446,6 +447,27 @@ def test_more_agents_join_the_shipped_ones_and_a_bad_one_is_refused():
     for spec in ("no checkpoint", "label=missing.pt"):
         with pytest.raises(SystemExit, match="LABEL=CHECKPOINT"):
             obstacles.with_more_agents({}, (spec,))
+
+
+def test_each_trained_snapshot_results_shows_is_committed_and_labelled_by_its_run():
+    """SHOWN, the trained rows of RESULTS' obstacle table and summary: each an evaluated candidate kept in git (a fresh
+    clone runs `python -m experiments.obstacles` with them), each label naming its learner, start, scene, reward,
+    seed and env steps, every label its own."""
+    import subprocess
+
+    from experiments import obstacles
+
+    agents = obstacles.shown_agents()
+    assert len(agents) == len(obstacles.SHOWN) and set(agents.items()) <= set(obstacles.Args().agents.items())
+    for (start, learner, share, reward, seed, step), (label, policy) in zip(obstacles.SHOWN, agents.items()):
+        run = obstacles.training_run(start, seed, None, learner, share, reward)
+        assert Path(policy) == obstacles.candidate_path(run, step) and Path(policy).is_file()
+        assert subprocess.run(["git", "ls-files", "--error-unmatch", policy], capture_output=True).returncode == 0
+        assert label.endswith(obstacles.TRAINED) and f"reward {reward}, seed {seed}, {step:,} env steps" in label
+    assert obstacles.trained_label("shipped", "sac", 0.5, 3, 2, 400_000) == (
+        "SAC from SAC's agent, moving scene in 50% of episodes, reward 3, seed 2, 400,000 env steps"
+        " (trained among obstacles)")
+    assert obstacles.trained_label("shipped", None, 1.0, 1, 1, 460_000).startswith("PPO from PPO's agent, moving scene,")
 
 
 def test_sac_on_a_mixed_scene_is_its_own_run_unchanged_but_for_the_share_and_refuses_ppo():

@@ -64,7 +64,7 @@ def test_a_file_not_there_yet_shows_a_dash_and_the_section_lands_between_its_mar
     assert "old" not in text and text.index("## At a glance") < text.index("## next") and text.startswith("# Results")
 
 
-def test_the_trained_generalization_rows_are_the_runs_evaluated_each_in_its_own_column(tmp_path, monkeypatch):
+def test_the_trained_generalization_rows_are_the_runs_evaluated_their_setting_learner_seed_and_steps_in_columns(tmp_path, monkeypatch):
     from experiments import paneling
     from experiments import unseen_openings as uo
 
@@ -81,18 +81,23 @@ def test_the_trained_generalization_rows_are_the_runs_evaluated_each_in_its_own_
     # the imitation clone had no RL: its row says so, not "0 env steps"
     uo.evaluation_json("imitation_clone", seen=False).write_text(json.dumps({"tasks": _tasks(0.0),
                                                                              "checkpoint_step": 0}))
+    from experiments import obstacles
+
+    shown = ("shipped", "sac", 0.5, 3, 2, 100)
+    monkeypatch.setattr(obstacles, "SHOWN", (shown, ("nothing", "sac", 1.0, 3, 1, 200)))  # the second not evaluated
+    label = obstacles.trained_label(*shown)
     (tmp_path / "obstacles.json").write_text(json.dumps({"rows": {
-        "SAC among obstacles, 100 env steps (trained among obstacles) | moving (solvable seeds)": _tasks(0.5),
-        "SAC among obstacles, 100 env steps (trained among obstacles) | none (solvable seeds)": _tasks(0.0),
+        f"{label} | moving (solvable seeds)": _tasks(0.5), f"{label} | none (solvable seeds)": _tasks(0.0),
         "planning expert | moving (solvable seeds)": _tasks(1.0)}}))
     rows = sm.trained_table()[2:]
     assert rows == [
-        f"| SAC on paneling from nothing, seed 2, 250,000 env steps | 95.0 | - | - | {paneling.train_eval_json(sac)} |",
-        f"| SAC from nothing, seed 1, 300,000 env steps | - | 25.0 / 25.0 / 25.0 | - | "
+        f"| paneling | SAC from nothing | 2 | 250,000 | 95.0 | {paneling.train_eval_json(sac)} |",
+        f"| openings 0 and 2 (placed at 1, never trained on) | SAC from nothing | 1 | 300,000 | 25.0 / 25.0 / 25.0 | "
         f"{uo.evaluation_json('sac_s1', seen=False)} |",
-        f"| imitation: its clone alone, none: demonstrations only | - | 0.0 / 0.0 / 0.0 | - | "
-        f"{uo.evaluation_json('imitation_clone', seen=False)} |",
-        f"| SAC among obstacles, 100 env steps | - | - | 50.0 / 50.0 / 50.0 | {tmp_path / 'obstacles.json'} |"]
+        f"| openings 0 and 2 (placed at 1, never trained on) | imitation: its clone alone | - | "
+        f"none: demonstrations only | 0.0 / 0.0 / 0.0 | {uo.evaluation_json('imitation_clone', seen=False)} |",
+        f"| moving obstacles in 50% of episodes, reward 3 | SAC from SAC's agent | 2 | 100 | 50.0 / 50.0 / 50.0 | "
+        f"{tmp_path / 'obstacles.json'} |"]
 
 
 def test_the_seeds_evaluation_table_shows_each_seed_s_chosen_snapshot_or_its_latest(tmp_path, monkeypatch):

@@ -59,8 +59,8 @@ def test_the_report_tables_unseen_and_seen_openings_per_seed(tmp_path, monkeypat
         tasks = {e: dict(place_success=placed, place_success_ci95=(placed - 0.1, placed + 0.05)) for e in TASK_ENV_IDS.values()}
         uo.evaluation_json(1, seen).write_text(json.dumps({"tasks": tasks}))
     body = uo.report(tmp_path / "RESULTS.md")
-    assert "| the recipe from nothing, seed 1 | - | never trained on (1) | 50.0 [40.0, 55.0] |" in body
-    assert "| the recipe from nothing, seed 1 | - | trained on (0, 2) | 90.0" in body
+    assert "| PPO from nothing, seed 1 | - | never trained on (1) | 50.0 [40.0, 55.0] |" in body
+    assert "| PPO from nothing, seed 1 | - | trained on (0, 2) | 90.0" in body
     uo.evaluation_json("imitation", False).write_text(json.dumps({"tasks": tasks}))
     assert uo.evaluation_json("imitation", False).name == "unseen_imitation_unseen.json"
     body = uo.report(tmp_path / "RESULTS.md")
