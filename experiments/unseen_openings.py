@@ -12,6 +12,7 @@ held out of training, evaluated with the paper's protocol on the openings it nev
                                                                  # the refined policy evaluated
     python -m experiments.unseen_openings --seed 1 --curve       # the held-out and trained openings placed at each
                                                                  # snapshot the run kept (30 episodes per task)
+    python -m experiments.unseen_openings --expert               # the planning expert on the same openings
     python -m experiments.unseen_openings --report               # RESULTS' section from the evaluations
 
 The recipe is experiments/from_scratch.py's, unchanged, but for the goal openings its training envs draw (HELD_OUT
@@ -49,7 +50,7 @@ import tyro
 
 from baselines.ppo import evaluation
 from baselines.ppo.args import command_line
-from baselines.ppo.evaluation import pct, training_slot_weights
+from baselines.ppo.evaluation import pct, training_slot_weights, wilson
 from baselines.ppo.start_states import GOAL_SLOTS
 from experiments import sac_recipe, transfer
 from experiments.campaign import (Run, checkpoint_of, checkpoint_step, describe, record_checkpoint_step,
@@ -66,6 +67,9 @@ COMMAND = "python -m experiments.unseen_openings"
 EVAL_DIR = Path("docs/data/unseen_openings")
 EVAL_STEPS = 50_000
 """env steps per task and set of openings: the paper's protocol."""
+EXPERT_EPISODES = 60
+"""test seeds per task and set of openings the planning expert runs (`--expert`): it plans for whatever goal it meets,
+so it has no trained and held-out openings, only the same two sets to compare with."""
 
 
 def seed_run(seed: int, num_envs: Optional[int] = None) -> Run:
@@ -182,6 +186,35 @@ def evaluation_json(seed, seen: bool) -> Path:
     """A run's evaluation on the unseen or the seen openings: `seed` is the recipe's seed, "sac_s<seed>" or
     one of IMITATION_POLICIES."""
     return EVAL_DIR / f"unseen_{'s' if isinstance(seed, int) else ''}{seed}_{'seen' if seen else 'unseen'}.json"
+
+
+def expert_json(seen: bool) -> Path:
+    """The planning expert's episodes on the held-out or the trained openings (`evaluate_expert`)."""
+    return EVAL_DIR / f"unseen_expert_{'seen' if seen else 'unseen'}.json"
+
+
+def evaluate_expert(episodes: int = EXPERT_EPISODES, workers: int = 2) -> None:
+    """The planning expert (scripts/run_expert.py) on `episodes` test seeds per task drawing the held-out openings
+    only, then the trained ones only, cp4; each JSON in the shape of an agent's evaluation (`tasks`), written once
+    per number of episodes."""
+    from scripts import run_expert
+
+    for seen, slots in ((False, HELD_OUT), (True, TRAINED)):
+        out = expert_json(seen)
+        if out.is_file() and json.loads(out.read_text())["episodes_per_task"] == episodes:
+            continue
+        args = run_expert.Args(episodes=episodes, seed=evaluation.Args.seed, goal_slots=slots, workers=workers)
+        episodes_of = {env_id: run_expert.run_env(args, env_id) for env_id in PAPER_TASK_ENV_IDS.values()}
+        tasks = {}
+        for env_id, results in episodes_of.items():
+            picked, placed = sum(r["picked"] for r in results), sum(r["placed"] for r in results)
+            tasks[env_id] = dict(episodes=len(results), pick_success=picked / len(results),
+                                 place_success=placed / len(results), place_success_ci95=wilson(placed, len(results)),
+                                 planning_time_mean_s=sum(r["planning_time"] for r in results) / len(results))
+        out.parent.mkdir(parents=True, exist_ok=True)
+        out.write_text(json.dumps({"command": f"{COMMAND} --expert", "goal_slots": slots, "seed": args.seed,
+                                   "episodes_per_task": episodes, "tasks": tasks, "episodes": episodes_of},
+                                  indent=0) + "\n")
 
 
 def earlier_json(latest: Path, step: int) -> Path:
@@ -312,20 +345,29 @@ def report(results: Path = Path("docs/RESULTS.md")) -> str:
     """RESULTS' section: per run evaluated (EVALUATED), place success on the unseen and the seen openings per task."""
     lines = ["| run | its env steps | openings | " + " | ".join(f"{k}: placed % [95% CI]" for k in PAPER_TASK_ENV_IDS)
              + " |", "|---|---|---|" + "---|" * len(PAPER_TASK_ENV_IDS)]
+
+    def cells(tasks: dict) -> str:
+        return " | ".join(pct(tasks[e]["place_success"], tasks[e]["place_success_ci95"]) for e in PAPER_TASK_ENV_IDS.values())
+
+    def openings(seen: bool) -> str:
+        return f"{'trained on' if seen else 'never trained on'} ({', '.join(map(str, TRAINED if seen else HELD_OUT))})"
+
+    for seen in (False, True):
+        if (path := expert_json(seen)).is_file():
+            data = json.loads(path.read_text())
+            lines.append(f"| planning expert | none: it plans each episode ({data['episodes_per_task']} per task) | "
+                         f"{openings(seen)} | {cells(data['tasks'])} |")
     for seed in EVALUATED:
         rows = [(d.get("checkpoint_step", 0), seen, d) for seen in (False, True) for d in evaluations_of(seed, seen)]
         for _, seen, data in sorted(rows, key=lambda r: r[:2]):  # a row per evaluation, in order of env steps
-            tasks = data["tasks"]
-            cells = [pct(tasks[e]["place_success"], tasks[e]["place_success_ci95"]) for e in PAPER_TASK_ENV_IDS.values()]
-            slots = ", ".join(map(str, TRAINED if seen else HELD_OUT))
-            which = f"{'trained on' if seen else 'never trained on'} ({slots})"
-            lines.append(f"| {run_label(seed)} | {trained_steps(seed, data)} | {which} | " + " | ".join(cells) + " |")
+            lines.append(f"| {run_label(seed)} | {trained_steps(seed, data)} | {openings(seen)} | {cells(data['tasks'])} |")
     table = "\n".join(lines) if len(lines) > 2 else "No run has been evaluated yet."
     body = ("## Openings no agent trained on\n\n"
             f"Commands: `{COMMAND} --seed S` (training SAC; `--learner ppo`: PPO's recipe), `{COMMAND} --seed S "
-            f"--evaluate`, `{COMMAND} --imitation`, `{COMMAND} --report`. The from-scratch recipe, SAC and the imitation recipe, "
-            "their training never drawing the held-out goal opening of any task type; the "
-            f"paper's protocol ({EVAL_STEPS:,} env steps per task, cp4, test seeds) on each set of openings.\n\n"
+            f"--evaluate`, `{COMMAND} --imitation`, `{COMMAND} --expert`, `{COMMAND} --report`. The from-scratch recipe, SAC and "
+            "the imitation recipe, their training never drawing the held-out goal opening of any task type; the "
+            f"paper's protocol ({EVAL_STEPS:,} env steps per task, cp4, test seeds) on each set of openings; the "
+            "planning expert, which plans for whatever goal it meets, on test seeds drawing each set alone.\n\n"
             f"{table}\n")
     if any(curve_points(seed) for seed in SEEDS):
         body += (f"\n![the openings over training]({CURVE_PLOT.relative_to('docs')})\n\n*Made by `{COMMAND} --seed S "
@@ -348,6 +390,9 @@ class Args:
     """evaluate the seed's run (the paper's protocol on unseen and seen openings), and exit."""
     report: bool = False
     """write RESULTS' section from the evaluations there are, and exit."""
+    expert: bool = False
+    """run the planning expert on EXPERT_EPISODES test seeds per task of the held-out openings and of the trained ones
+    (`evaluate_expert`), write RESULTS' section, and exit."""
     imitation: bool = False
     """run (or resume) the imitation twin (`imitation`) and evaluate its clone and its refined policy, then exit."""
     learner: str = LEARNER
@@ -362,6 +407,10 @@ class Args:
 
 def main(args: Args) -> None:
     if args.report:
+        print(report())
+        return
+    if args.expert:
+        evaluate_expert()
         print(report())
         return
     if args.imitation:

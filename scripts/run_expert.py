@@ -3,6 +3,7 @@
     python scripts/run_expert.py --env-id Flooring-v1 --episodes 100 --seed 0
     python scripts/run_expert.py --env-id CeilingInstallation-v1 --episodes 3 --save-trajectory --save-video
     python scripts/run_expert.py --env-id all --episodes 100 --workers 2 --write-results   # docs/RESULTS.md
+    python scripts/run_expert.py --env-id Flooring-v1 --goal-slots 1 --episodes 60     # the middle recess only
 
 Episodes use seeds seed, seed + 1, ...; physx_cpu, one env, pd_joint_pos, state observations.
 Saved trajectories (ManiSkill's RecordEpisode: <out>/<env id>.expert.h5 and .json) replay from their
@@ -29,6 +30,7 @@ from mani_skill.utils.wrappers import RecordEpisode
 from tqdm import tqdm
 
 import ms_construction  # noqa: F401  (registration)
+from baselines.ppo.evaluation import slot_weights
 from ms_construction.envs import ENV_IDS
 from ms_construction.planning import ExpertConfig, MotionPlanningExpert
 from ms_construction.reporting import update_section
@@ -51,6 +53,9 @@ class Args:
     obstacles: Optional[str] = None
     """the tasks' `obstacles` option: 'static' (a material stack, a scaffold post, a standing worker) or 'moving'
     (the worker walks across); the expert plans around them and replans around the walking worker."""
+    goal_slots: tuple[int, ...] = ()
+    """only these goal slots (openings, recesses, bays) of every task type (the tasks' `goal_slot_weights`); default:
+    every one, as the tasks draw them."""
     save_trajectory: bool = False
     """record the episodes as ManiSkill trajectories (h5 + json) under --out."""
     save_video: bool = False
@@ -70,21 +75,23 @@ class Args:
     docs/RESULTS.md reports."""
 
 
-def make_env(env_id: str, stage: str, render: bool = False, obstacles: Optional[str] = None):
+def make_env(env_id: str, stage: str, render: bool = False, obstacles: Optional[str] = None,
+             goal_slots: tuple[int, ...] = ()):
     return gym.make(env_id, num_envs=1, obs_mode="state", control_mode="pd_joint_pos", reward_mode="sparse",
                     sim_backend="physx_cpu", curriculum_stage=stage, render_mode="rgb_array" if render else None,
-                    obstacles=obstacles)
+                    obstacles=obstacles, goal_slot_weights=slot_weights(goal_slots))
 
 
 _worker_experts: dict = {}
 
 
-def _solve(job: tuple[str, str, int, ExpertConfig, Optional[str]]) -> dict:
+def _solve(job: tuple[str, str, int, ExpertConfig, Optional[str], tuple[int, ...]]) -> dict:
     """One episode in a worker process, its env and expert kept for the next one."""
-    env_id, stage, seed, config, obstacles = job
-    key = (env_id, obstacles)
+    env_id, stage, seed, config, obstacles, goal_slots = job
+    key = (env_id, obstacles, goal_slots)
     if key not in _worker_experts:
-        _worker_experts[key] = MotionPlanningExpert(make_env(env_id, stage, obstacles=obstacles), config)
+        _worker_experts[key] = MotionPlanningExpert(make_env(env_id, stage, obstacles=obstacles, goal_slots=goal_slots),
+                                                    config)
     return _worker_experts[key].run(seed).to_dict()
 
 
@@ -94,12 +101,14 @@ def run_env(args: Args, env_id: str) -> list[dict]:
     results = []
     if args.workers > 1:
         with mp.get_context("spawn").Pool(args.workers) as pool:
-            for r in pool.imap(_solve, [(env_id, args.curriculum_stage, s, args.expert, args.obstacles) for s in seeds]):
+            jobs = [(env_id, args.curriculum_stage, s, args.expert, args.obstacles, args.goal_slots) for s in seeds]
+            for r in pool.imap(_solve, jobs):
                 results.append(r)
                 bar.update()
                 bar.set_postfix(placed=sum(x["placed"] for x in results))
     else:
-        env = make_env(env_id, args.curriculum_stage, render=args.save_video, obstacles=args.obstacles)
+        env = make_env(env_id, args.curriculum_stage, render=args.save_video, obstacles=args.obstacles,
+                       goal_slots=args.goal_slots)
         record = args.save_trajectory or args.save_video
         if record:
             env = RecordEpisode(env, str(args.out), save_trajectory=args.save_trajectory, save_video=args.save_video,

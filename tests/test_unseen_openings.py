@@ -11,7 +11,7 @@ import torch
 from baselines.ppo import ppo
 from experiments import from_scratch as fs
 from experiments import unseen_openings as uo
-from ms_construction.envs import TASK_ENV_IDS
+from ms_construction.envs import PAPER_TASK_ENV_IDS, TASK_ENV_IDS
 
 
 def test_the_run_is_the_recipe_with_the_held_out_openings_never_drawn_in_training(monkeypatch):
@@ -74,6 +74,11 @@ def test_the_report_tables_unseen_and_seen_openings_per_seed(tmp_path, monkeypat
     assert uo.evaluation_json("sac_s2", True).name == "unseen_sac_s2_seen.json"
     assert "| SAC from nothing, seed 2 | 350,000 | trained on (0, 2) | 90.0" in uo.report(tmp_path / "RESULTS.md")
     assert "unseen-openings" in (tmp_path / "RESULTS.md").read_text()
+    # the planning expert's rows lead: it trains on none, and says how many episodes it ran
+    uo.expert_json(False).write_text(json.dumps({"tasks": tasks, "episodes_per_task": 60}))
+    body = uo.report(tmp_path / "RESULTS.md")
+    expert = "| planning expert | none: it plans each episode (60 per task) | never trained on (1) | 90.0"
+    assert expert in body and body.index(expert) < body.index("| PPO from nothing, seed 1 |")
     with pytest.raises(SystemExit, match="--seed S"):
         uo.main(uo.Args())
 
@@ -265,3 +270,22 @@ def test_a_policy_evaluated_as_it_is_is_not_evaluated_again(tmp_path, monkeypatc
     assert uo.evaluated(policy, "imitation")
     policy.write_bytes(b"a policy trained again")
     assert not uo.evaluated(policy, "imitation")
+
+
+def test_the_expert_runs_on_the_openings_it_is_given_and_its_json_has_the_report_s_shape(tmp_path, monkeypatch):
+    """`--expert`: scripts/run_expert.py with `goal_slots` draws those openings only (here on one real episode per
+    task), and the JSON holds per task what the report reads."""
+    from scripts import run_expert
+
+    monkeypatch.setattr(uo, "EVAL_DIR", tmp_path)
+    monkeypatch.setattr(uo, "HELD_OUT", (2,))
+    monkeypatch.setattr(uo, "TRAINED", (0,))
+    uo.evaluate_expert(episodes=1, workers=1)
+    for seen, slot in ((False, 2), (True, 0)):
+        data = json.loads(uo.expert_json(seen).read_text())
+        assert data["goal_slots"] == [slot] and data["episodes_per_task"] == 1
+        assert {e["goal_slot"] for results in data["episodes"].values() for e in results} == {slot}
+        for env_id in PAPER_TASK_ENV_IDS.values():
+            task = data["tasks"][env_id]
+            assert task["episodes"] == 1 and task["place_success"] in (0.0, 1.0) and len(task["place_success_ci95"]) == 2
+    assert run_expert.Args().goal_slots == (), "every opening unless asked"
