@@ -109,6 +109,9 @@ def trained_table() -> list[str]:
                          f"{100 * task['place_success']:.1f} | {path} |")
     held_out = (f"openings {' and '.join(map(str, unseen_openings.TRAINED))} (placed at "
                 f"{' and '.join(map(str, unseen_openings.HELD_OUT))}, never trained on)")
+    if (data := _read(path := unseen_openings.expert_json(seen=False))) is not None:
+        lines.append(f"| {held_out} | planning expert (plans each episode, trains on none) | - | - | "
+                     + " / ".join(_placed(data["tasks"])) + f" | {path} |")
     for seed in unseen_openings.EVALUATED:
         path = unseen_openings.evaluation_json(seed, seen=False)
         if (data := _read(path)) is not None:

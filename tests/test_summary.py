@@ -86,12 +86,15 @@ def test_the_trained_generalization_rows_are_the_runs_evaluated_their_setting_le
     shown = ("shipped", "sac", 0.5, 3, 2, 100)
     monkeypatch.setattr(obstacles, "SHOWN", (shown, ("nothing", "sac", 1.0, 3, 1, 200)))  # the second not evaluated
     label = obstacles.trained_label(*shown)
+    uo.expert_json(seen=False).write_text(json.dumps({"tasks": _tasks(1.0)}))  # the expert beside the learners
     (tmp_path / "obstacles.json").write_text(json.dumps({"rows": {
         f"{label} | moving (solvable seeds)": _tasks(0.5), f"{label} | none (solvable seeds)": _tasks(0.0),
         "planning expert | moving (solvable seeds)": _tasks(1.0)}}))
     rows = sm.trained_table()[2:]
     assert rows == [
         f"| paneling | SAC from nothing | 2 | 250,000 | 95.0 | {paneling.train_eval_json(sac)} |",
+        f"| openings 0 and 2 (placed at 1, never trained on) | planning expert (plans each episode, trains on none) | "
+        f"- | - | 100.0 / 100.0 / 100.0 | {uo.expert_json(seen=False)} |",
         f"| openings 0 and 2 (placed at 1, never trained on) | SAC from nothing | 1 | 300,000 | 25.0 / 25.0 / 25.0 | "
         f"{uo.evaluation_json('sac_s1', seen=False)} |",
         f"| openings 0 and 2 (placed at 1, never trained on) | imitation: its clone alone | - | "
