@@ -205,12 +205,9 @@ def evaluate_expert(episodes: int = EXPERT_EPISODES, workers: int = 2) -> None:
             continue
         args = run_expert.Args(episodes=episodes, seed=evaluation.Args.seed, goal_slots=slots, workers=workers)
         episodes_of = {env_id: run_expert.run_env(args, env_id) for env_id in PAPER_TASK_ENV_IDS.values()}
-        tasks = {}
-        for env_id, results in episodes_of.items():
-            picked, placed = sum(r["picked"] for r in results), sum(r["placed"] for r in results)
-            tasks[env_id] = dict(episodes=len(results), pick_success=picked / len(results),
-                                 place_success=placed / len(results), place_success_ci95=wilson(placed, len(results)),
-                                 planning_time_mean_s=sum(r["planning_time"] for r in results) / len(results))
+        tasks = {env_id: {**run_expert.summarize(results),
+                          "place_success_ci95": wilson(sum(r["placed"] for r in results), len(results))}
+                 for env_id, results in episodes_of.items()}
         out.parent.mkdir(parents=True, exist_ok=True)
         out.write_text(json.dumps({"command": f"{COMMAND} --expert", "goal_slots": slots, "seed": args.seed,
                                    "episodes_per_task": episodes, "tasks": tasks, "episodes": episodes_of},
