@@ -127,10 +127,15 @@ def training_run(start: str, seed: int = 1, num_envs: Optional[int] = None, lear
                                  learner, obstacles=TRAIN_SCENE, **({"obstacle_share": share} if mixed else {}))
 
 
+def scene_name(share: float) -> str:
+    """The scene a run trained on, in words: TRAIN_SCENE's obstacles, and in what share of its training episodes."""
+    return f"{TRAIN_SCENE} obstacles" + ("" if share == 1 else f" in {share:.0%} of episodes")
+
+
 def trained_label(start: str, learner: Optional[str], share: float, reward: int, seed: int, step: int) -> str:
     """The row label of a training run's snapshot at `step`: its learner and start, scene and reward, seed, steps."""
-    scene = f"{TRAIN_SCENE} scene" + ("" if share == 1 else f" in {share:.0%} of episodes")
-    return f"{transfer.start_name(start, learner)}, {scene}, reward {reward}, seed {seed}, {step:,} env steps{TRAINED}"
+    return (f"{transfer.start_name(start, learner)}, {scene_name(share)}, reward {reward}, seed {seed}, {step:,} "
+            f"env steps{TRAINED}")
 
 
 def candidate_path(run: Run, step: int) -> Path:
