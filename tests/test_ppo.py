@@ -307,7 +307,7 @@ def test_a_stopped_run_saves_its_checkpoint_and_exits_with_one_line(tmp_path, ho
     assert proc.returncode == 128 + sig, (proc.returncode, stderr)
     assert "Traceback" not in stderr, stderr
     last = stderr.strip().splitlines()[-1]
-    assert last.startswith(f"stopped by {sig.name} after iteration ") and "--resume" in last, stderr
+    assert last.startswith(f"stopped by {sig.name} at step ") and "--resume" in last, stderr
     rows = read_csv(csv_path)
     ckpt = tmp_path / "stopped" / "checkpoint.pt"
     run = ppo.setup(ppo.Args.of(resume=str(ckpt)))

@@ -3,6 +3,12 @@ success is absorbing in the critics' target, and scripts/evaluate.py's loader re
 
 import csv
 import dataclasses
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
 
 import pytest
 import torch
@@ -14,6 +20,9 @@ TINY = dict(env_id="ConstructionPickPlace-v1", num_envs=1, hidden_size=32, num_l
             learning_starts=100, buffer_size=1000, utd=1.0, log_freq=100, eval_freq=0, torch_threads=1)
 """a run that takes seconds: one env in the learner's process, tiny networks, 1 thread (the resume test compares
 weights bit for bit)."""
+
+
+ROOT = Path(__file__).resolve().parents[1]
 
 
 def tiny_args(tmp_path, **kw) -> sac.Args:
@@ -90,6 +99,40 @@ def test_a_run_resumed_halfway_ends_with_the_uninterrupted_run_s_weights(tmp_pat
     assert (tmp_path / "i" / "replay_buffer_600.pt").is_file()
     rows = read_csv(tmp_path / "i" / "progress.csv")
     assert [int(r["global_step"]) for r in rows] == list(range(100, 601, 100)), "the resumed run appends its rows"
+
+
+def test_sigterm_ends_a_run_with_a_checkpoint_and_its_buffer_at_that_step_and_one_line_on_how_to_resume(tmp_path):
+    """SIGTERM (a session's end) to a run between checkpoints: it stops after the iteration under way, saves the
+    checkpoint and the replay buffer at that step, exits with 128 + SIGTERM and says how to resume (then its time
+    split); the checkpoint resumes there."""
+    cmd = [sys.executable, "baselines/sac/sac.py", *[f"--{k.replace('_', '-')}={v}" for k, v in TINY.items()],
+           "--total-timesteps=1000000", "--checkpoint-freq=1000000", f"--log-dir={tmp_path}", "--exp-name=stopped"]
+    proc = subprocess.Popen(cmd, cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                            env={**os.environ, "PYTHONPATH": str(ROOT)})
+    csv_path = tmp_path / "stopped" / "progress.csv"
+    try:
+        deadline = time.monotonic() + 240
+        while not (csv_path.exists() and len(read_csv(csv_path)) >= 2):
+            assert proc.poll() is None and time.monotonic() < deadline, proc.communicate()[1] if proc.poll() else ""
+            time.sleep(0.5)
+        proc.send_signal(signal.SIGTERM)
+        _, stderr = proc.communicate(timeout=120)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+    assert proc.returncode == 128 + signal.SIGTERM, (proc.returncode, stderr)
+    assert "Traceback" not in stderr, stderr
+    stopped, split = stderr.strip().splitlines()[-2:]
+    assert stopped.startswith("stopped by SIGTERM at step ") and "checkpoint saved; resume with: " in stopped, stderr
+    assert "--resume" in stopped and "env steps/s" in split, stderr
+    step = int(stopped.removeprefix("stopped by SIGTERM at step ").split()[0])
+    assert step >= int(read_csv(csv_path)[-1]["global_step"]) >= 200
+    resumed = sac.setup(sac.Args(resume=str(tmp_path / "stopped" / "checkpoint.pt")))
+    try:
+        assert resumed.progress.global_step == step and resumed.buffer.count == min(step, TINY["buffer_size"])
+        assert (tmp_path / "stopped" / f"replay_buffer_{step}.pt").is_file()
+    finally:
+        sac.close(resumed.envs, resumed.eval_envs)
 
 
 def test_table_i_s_stages_follow_env_steps_in_the_envs_and_the_csv_and_a_resume_mid_curriculum_is_exact(tmp_path,

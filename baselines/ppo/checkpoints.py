@@ -13,6 +13,8 @@ import dataclasses
 import os
 import pickle
 import random
+import signal
+import sys
 import zipfile
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -110,6 +112,44 @@ def upgrade_args(saved: dict) -> dict:
     if args.get("base_args") is not None:  # a refined agent's base that is itself a residual (ppo.py --residual-of)
         args["base_args"] = upgrade_args(args["base_args"])
     return args
+
+
+class StopRequest:
+    """Ctrl-C or SIGTERM while a run trains: made before the loop (it installs the handlers), it is true once asked,
+    the loop (`while ... and not stop`) ends after the iteration under way and `report` saves a checkpoint; a second
+    Ctrl-C ends it at once (KeyboardInterrupt, which the loop catches: that iteration is lost, the last checkpoint
+    stands). `restore` (in the loop's `finally`) puts the previous handlers back."""
+
+    def __init__(self) -> None:
+        self.signals: list[int] = []
+        self._handlers = {signum: signal.signal(signum, self._ask) for signum in (signal.SIGINT, signal.SIGTERM)}
+
+    def __bool__(self) -> bool:
+        return bool(self.signals)
+
+    def _ask(self, signum, _frame) -> None:
+        self.signals.append(signum)
+        signal.signal(signal.SIGINT, signal.default_int_handler)
+
+    def restore(self) -> None:
+        for signum, handler in self._handlers.items():
+            signal.signal(signum, handler)
+
+    def report(self, interrupted: bool, progress: Progress, save, save_model: bool, resume: str) -> None:
+        """After the loop: where a signal stopped it, `save()` the checkpoint; say how to resume either way."""
+        if interrupted:
+            print(f"interrupted during iteration {progress.iteration}, which is lost; resume from the last checkpoint "
+                  f"with: {resume}", file=sys.stderr)
+        elif self.signals:
+            save()
+            saved = f"checkpoint saved; resume with: {resume}" if save_model else "no checkpoint (--no-save-model)"
+            print(f"stopped by {signal.Signals(self.signals[0]).name} at step {progress.global_step} (iteration "
+                  f"{progress.iteration}): {saved}", file=sys.stderr)
+
+    def exit(self) -> None:
+        """End the process as the signal asked (exit status 128 + its number), if one did."""
+        if self.signals:
+            raise SystemExit(128 + self.signals[0])
 
 
 @dataclass

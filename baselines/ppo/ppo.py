@@ -30,8 +30,6 @@ import functools
 import math
 import random
 import shutil
-import signal
-import sys
 import time
 from collections import defaultdict
 from dataclasses import dataclass
@@ -50,7 +48,7 @@ from mani_skill.vector.wrappers.gymnasium import ManiSkillVectorEnv
 
 from baselines.ppo.args import Args, resolve_defaults, validate
 from baselines.ppo.checkpoints import (CSVLog, Progress, check_fit, load_checkpoint, make_agent, policy_env_kwargs,
-                                       restore_rng, save_checkpoint, value_heads, with_obstacle_inputs,
+                                       restore_rng, save_checkpoint, StopRequest, value_heads, with_obstacle_inputs,
                                        with_path_offset_inputs)
 from baselines.ppo.curiosity import ICM, make_icm
 from baselines.ppo.evaluation import evaluate_envs, finished_episodes, reset
@@ -474,13 +472,7 @@ def train(run: Run) -> Progress:
     buf = Rollout.zeros(args.num_steps, args.num_envs, run.obs_dim, run.act_dim, device)
     intrinsic_running = torch.zeros(args.num_envs, device=device)
 
-    stop: list[int] = []  # the signal that asked the run to end
-
-    def request_stop(signum, _frame):
-        stop.append(signum)
-        signal.signal(signal.SIGINT, signal.default_int_handler)  # a second Ctrl-C ends the run at once
-
-    handlers = {signum: signal.signal(signum, request_stop) for signum in (signal.SIGINT, signal.SIGTERM)}
+    stop = StopRequest()
     interrupted = False
     next_obs = reset(envs, seed=args.seed + progress.iteration * 1000)
     bar = tqdm(total=args.total_timesteps, initial=min(progress.global_step, args.total_timesteps), unit="step",
@@ -537,23 +529,14 @@ def train(run: Run) -> Progress:
     except KeyboardInterrupt:
         interrupted = True
     finally:
-        for signum, handler in handlers.items():
-            signal.signal(signum, handler)
+        stop.restore()
         bar.close()
         envs.close()
         run.eval_envs.close()
         writer.close()
-    resume = f"python baselines/ppo/ppo.py --resume {checkpoint_path(args)}"
-    if interrupted:
-        print(f"interrupted during iteration {progress.iteration}, which is lost; resume from the last checkpoint "
-              f"with: {resume}", file=sys.stderr)
-    elif stop:
-        run.save()
-        saved = f"checkpoint saved; resume with: {resume}" if args.save_model else "no checkpoint (--no-save-model)"
-        print(f"stopped by {signal.Signals(stop[0]).name} after iteration {progress.iteration} "
-              f"(step {progress.global_step}): {saved}", file=sys.stderr)
-    if stop:
-        raise SystemExit(128 + stop[0])
+    stop.report(interrupted, progress, run.save, args.save_model,
+                f"python baselines/ppo/ppo.py --resume {checkpoint_path(args)}")
+    stop.exit()
     return progress
 
 

@@ -48,7 +48,6 @@ import dataclasses
 import math
 import os
 import random
-import signal
 import sys
 import time
 from collections import defaultdict
@@ -65,7 +64,7 @@ import tyro
 from tqdm import tqdm
 
 from baselines.ppo.checkpoints import (CSVLog, Progress, check_fit, insert_filled, load_checkpoint, make_agent,
-                                       policy_env_kwargs, restore_rng, save_checkpoint)
+                                       policy_env_kwargs, restore_rng, save_checkpoint, StopRequest)
 from baselines.ppo.evaluation import evaluate_envs, finished_episodes, reset, run_episodes, slot_weights, summarize
 from baselines.ppo.networks import RunningMeanStd, layer_init, mlp, rotation_features
 from baselines.ppo.ppo import EPISODE_STATS
@@ -921,13 +920,7 @@ def train(run: Run) -> Progress:
     log = CSVLog(run.path.with_name("progress.csv"), progress.global_step if args.resume else None, fields=CSV_FIELDS)
     stage = None  # the tolerance stage the envs are in: set before the first step, again where it changes
 
-    stop: list[int] = []
-
-    def request_stop(signum, _frame):
-        stop.append(signum)
-        signal.signal(signal.SIGINT, signal.default_int_handler)  # a second Ctrl-C ends the run at once
-
-    handlers = {signum: signal.signal(signum, request_stop) for signum in (signal.SIGINT, signal.SIGTERM)}
+    stop = StopRequest()
     interrupted = False
     obs = reset(envs, segment_seed(args, progress.global_step))
     logged = dict(step=progress.global_step, wall=clock.wall_s)  # where the last row was
@@ -990,21 +983,12 @@ def train(run: Run) -> Progress:
     except KeyboardInterrupt:
         interrupted = True
     finally:
-        for signum, handler in handlers.items():
-            signal.signal(signum, handler)
+        stop.restore()
         bar.close()
         close(envs, eval_envs)
-    resume = f"python baselines/sac/sac.py --resume {run.path}"
-    if interrupted:
-        print(f"interrupted during iteration {progress.iteration}, which is lost; resume from the last checkpoint "
-              f"with: {resume}", file=sys.stderr)
-    elif stop:
-        run.save()
-        saved = f"checkpoint saved; resume with: {resume}" if args.save_model else "no checkpoint (--no-save-model)"
-        print(f"stopped by {signal.Signals(stop[0]).name} at step {progress.global_step}: {saved}", file=sys.stderr)
+    stop.report(interrupted, progress, run.save, args.save_model, f"python baselines/sac/sac.py --resume {run.path}")
     print(time_split(clock, progress.global_step), file=sys.stderr)
-    if stop:
-        raise SystemExit(128 + stop[0])
+    stop.exit()
     return progress
 
 
