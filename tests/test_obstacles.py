@@ -467,7 +467,8 @@ def test_each_trained_snapshot_results_shows_is_committed_and_labelled_by_its_ru
     assert obstacles.trained_label("shipped", "sac", 0.5, 3, 2, 400_000) == (
         "SAC from SAC's agent, moving obstacles in 50% of episodes, reward 3, seed 2, 400,000 env steps"
         " (trained among obstacles)")
-    assert obstacles.trained_label("shipped", None, 1.0, 1, 1, 460_000).startswith("PPO from PPO's agent, moving obstacles,")
+    assert obstacles.trained_label("shipped", None, 1.0, 1, 1, 460_000).startswith(
+        "PPO from PPO's agent, moving obstacles,")
 
 
 def test_sac_on_a_mixed_scene_is_its_own_run_unchanged_but_for_the_share_and_refuses_ppo():

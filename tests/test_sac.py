@@ -113,7 +113,8 @@ def test_sigterm_ends_a_run_with_a_checkpoint_and_its_buffer_at_that_step_and_on
     try:
         deadline = time.monotonic() + 240
         while not (csv_path.exists() and len(read_csv(csv_path)) >= 2):
-            assert proc.poll() is None and time.monotonic() < deadline, proc.communicate()[1] if proc.poll() else ""
+            ended = proc.poll() is not None
+            assert not ended and time.monotonic() < deadline, proc.communicate()[1] if ended else "no row yet"
             time.sleep(0.5)
         proc.send_signal(signal.SIGTERM)
         _, stderr = proc.communicate(timeout=120)
