@@ -139,6 +139,8 @@ class TableRow:
     command: str = ""
     pending: str = ""
     """why the JSON is not there yet."""
+    kept: bool = True
+    """False where the policy the row judges was not kept, so that its JSON never will be there."""
     paper: Optional[dict] = None
     env_ids: tuple[str, ...] = tuple(PAPER_TASK_ENV_IDS.values())
     """the tasks the agent is judged on (a control group: its own only)."""
@@ -166,12 +168,15 @@ def table_ii_rows(campaign_dir: Path, eval_dir: Path = EVAL_DIR) -> list[TableRo
                             general.name, tuple(PAPER_TASK_ENV_IDS.values()), done(general), eval_dir)]
     for k, stage in enumerate(general.args.stages.curriculum[:-1], start=1):
         snapshot = campaign_dir / general.name / f"checkpoint_stage{k}_{stage}.pt"
-        reached = (f"the end of {stage} comes at step {k * STAGE_STEPS:,}" if not k * STAGE_STEPS <= last_step(
-            campaign_dir / general.name / "progress.csv") else "that stage's final policy was not kept (ppo.py keeps them since 3.42M)")
-        rows.append(_evaluation_row(f"ours: paper setting, end of {stage}", f"the general agent after {k * STAGE_STEPS:,} env "
-                                    f"steps, judged at cp4", snapshot, f"{general.name}_stage{k}_{stage}",
-                                    tuple(PAPER_TASK_ENV_IDS.values()), reached if not snapshot.is_file() else "not evaluated yet",
-                                    eval_dir))
+        passed = k * STAGE_STEPS <= last_step(campaign_dir / general.name / "progress.csv")
+        reached = ("that stage's final policy was not kept (ppo.py keeps them since 3.42M)" if passed
+                   else f"the end of {stage} comes at step {k * STAGE_STEPS:,}")
+        row = _evaluation_row(f"ours: paper setting, end of {stage}", f"the general agent after {k * STAGE_STEPS:,} env "
+                              f"steps, judged at cp4", snapshot, f"{general.name}_stage{k}_{stage}",
+                              tuple(PAPER_TASK_ENV_IDS.values()), reached if not snapshot.is_file() else "not evaluated yet",
+                              eval_dir)
+        row.kept = snapshot.is_file() or not passed
+        rows.append(row)
     for total in (STAGE_STEPS, 4 * STAGE_STEPS):
         runs = control_group_runs(total)
         for run in runs:
@@ -243,7 +248,10 @@ def table_ii(campaign_dir: Path, eval_dir: Path = EVAL_DIR) -> tuple[str, str]:
     notes = []
     for row in table_ii_rows(campaign_dir, eval_dir):
         cells = _cells(row)
-        if cells is None:
+        if cells is None and not row.kept:
+            cells = {e: "not kept" for e in row.env_ids}
+            notes.append(f"- {row.agent}: not kept ({row.pending})")
+        elif cells is None:
             cells = {e: "not yet" for e in row.env_ids}
             notes.append(f"- {row.agent}: not yet ({row.pending}); then `{row.command}`")
         elif row.json is not None:

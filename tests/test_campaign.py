@@ -170,6 +170,11 @@ def test_the_campaign_report_summarizes_each_run_and_stage_and_draws_figure_3_an
             "(python -m experiments.paper)); then `python scripts/evaluate.py --checkpoint "
             "assets/checkpoints/paper_general_agent.pt --all --steps 50000") in sources
     assert "ours: paper setting, end of cp3: not yet (the end of cp3 comes at step 6,000,000)" in sources
+    # a stage passed whose final policy was not kept: its row says so, with no command that could not run
+    assert "| ours: paper setting, end of cp1 | the general agent after 2,000,000 env steps, judged at cp4 | " \
+           "not kept | not kept | not kept |" in table
+    assert "ours: paper setting, end of cp1: not kept (that stage's final policy was not kept" in sources
+    assert "--checkpoint campaign/paper_general_agent/checkpoint_stage1_cp1.pt" not in sources
     assert "--checkpoint assets/checkpoints/control_window_8m.pt --env-id WindowInstallation-v1 --steps 50000" in sources
     # a control group is judged on its own task alone
     assert "| ours: controlGroup4.2, 2M | controlGroup4.2: WindowInstallation-v1, cp4 from the first step; 2M env steps " \
