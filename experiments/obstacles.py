@@ -97,7 +97,7 @@ SHOWN = (  # (--train, --learner, --share, --obstacle-reward, --train-seed, env 
     ("shipped", "sac", 0.5, 1, 1, 1_000_606),
     ("shipped", "sac", 0.5, 1, 2, 500_000),
     ("shipped", "sac", 0.5, 3, 1, 1_200_000),
-    ("shipped", "sac", 0.5, 3, 2, 500_000),
+    ("shipped", "sac", 0.5, 3, 2, 1_000_000),
 )
 """the trained runs' snapshots that RESULTS shows beside AGENTS (each an evaluated candidate, `candidate_path`)."""
 
