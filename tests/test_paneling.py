@@ -300,8 +300,8 @@ def test_the_training_section_reads_each_run_s_progress_and_evaluation(tmp_path,
     evaluated.write_text(json.dumps({"env_id": paneling.ENV_ID, "place_success": 0.95, "place_success_ci95": [0.9, 0.97],
                                      "place_success_by_goal_slot": {"0": 1.0, "1": 0.9, "2": 0.95}}))
     body = paneling.training_report(tmp_path / "RESULTS.md", tmp_path / "images" / "curve.png")
-    # the 50-iteration mean first reaches 90% 45 iterations into the ones: 290,000 env steps
-    assert "scratch_general_agent_ppo.pt, seed 1 | 400,000 | 290,000 | 0.1 | 95.0 [90.0, 97.0] | 100 / 90 / 95 |" in body
+    # the 50-iteration mean first reaches 50% 25 iterations into the ones (250,000 env steps), 90% 45 (290,000)
+    assert "scratch_general_agent_ppo.pt, seed 1 | 400,000 | 250,000 / 290,000 | 0.1 | 95.0 [90.0, 97.0] | 100 / 90 / 95 |" in body
     assert "| not run: `python -m experiments.paneling --train nothing --train-seed 1 --learner ppo` |" in body
     assert "| SAC on paneling from nothing, seed 1 | not run: `python -m experiments.paneling --train nothing " \
            "--learner sac --train-seed 1` |" in body
@@ -309,26 +309,29 @@ def test_the_training_section_reads_each_run_s_progress_and_evaluation(tmp_path,
            "--learner sac --train-seed 2` |" in body  # SAC's two seeds, PPO's one from each start
     assert "| SAC on paneling from the weights of campaign/sac_s1/checkpoint.pt, seed 1 | not run: " \
            "`python -m experiments.paneling --train shipped --learner sac --train-seed 1` |" in body
-    assert body.count("| not run: ") == 4
+    assert "| SAC on paneling from the weights of campaign/sac_s1/checkpoint.pt, seed 2 | not run: " \
+           "`python -m experiments.paneling --train shipped --learner sac --train-seed 2` |" in body  # and two from SAC's
+    assert body.count("| not run: ") == 5
     assert (tmp_path / "images" / "curve.png").stat().st_size > 0 and "](images/curve.png)" in body
     assert "<!-- begin paneling-training (generated) -->" in (tmp_path / "RESULTS.md").read_text()
 
 
 def test_a_run_that_used_its_whole_budget_short_of_the_target_says_so(tmp_path, monkeypatch):
-    """A run whose training episodes never placed 90% reads "not within <budget>" once it has trained its budget,
-    "not yet" before that; a run not evaluated yet says how to evaluate it."""
+    """A run whose training episodes never placed 90% reads "not within <budget>" there once it has trained its
+    budget (after the env steps to 50% where they got that far), "not yet" before that; a run not evaluated yet says
+    how to evaluate it."""
     from experiments import paneling
     from experiments.campaign import checkpoint_of
 
     monkeypatch.chdir(tmp_path)
     monkeypatch.setattr(paneling, "TRAIN_BUDGET", 20_000)
-    for start, iterations in (("shipped", 10), ("nothing", 5)):
+    for start, iterations, placed in (("shipped", 10, 0.5), ("nothing", 5, 0.4)):
         progress = checkpoint_of(paneling.training_run(start, learner="ppo")).parent / "progress.csv"
         progress.parent.mkdir(parents=True)
         progress.write_text("global_step,ordinary_place_success,sps\n"
-                            + "".join(f"{2000 * (i + 1)},0.5,1000\n" for i in range(iterations)))
+                            + "".join(f"{2000 * (i + 1)},{placed},1000\n" for i in range(iterations)))
     body = paneling.training_report(tmp_path / "RESULTS.md", tmp_path / "images" / "curve.png")
-    assert "scratch_general_agent_ppo.pt, seed 1 | 20,000 | not within 20,000 | 0.0 | not yet: `" in body
+    assert "scratch_general_agent_ppo.pt, seed 1 | 20,000 | 2,000 / not within 20,000 | 0.0 | not yet: `" in body
     assert "from nothing, seed 1 | 10,000 | not yet | 0.0 | not yet: `python -m experiments.paneling --train nothing" in body
 
 
