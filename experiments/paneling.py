@@ -166,7 +166,7 @@ def train(args: Args) -> None:
 
 def training_report(results: Path = RESULTS_PATH, curve: Path = TRAIN_CURVE) -> str:
     """RESULTS' section on the recipe trained on paneling, from each run's progress.csv and its evaluation (where
-    there is one): the env steps its training episodes took to place 90%, and its curve."""
+    there is one): the env steps its training episodes took to place 50% and 90% (MARKS), and its curve."""
     head = ("| run | env steps trained | env steps to 50% / 90% placed (its training episodes) | training wall time (h) | "
             "placed % [95% CI], the paper's protocol | placed % by bay (x = -0.68 / 0 / +0.68 m) |\n|---|---|---|---|---|---|")
     lines, curves = [head], {}
