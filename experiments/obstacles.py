@@ -7,6 +7,8 @@
     python -m experiments.obstacles --train shipped --evaluate   # that run's rows beside the zero-shot ones
     python -m experiments.obstacles --share 0.5 --train nothing   # SAC on a mixed scene: half of its training
                                                                   # episodes among obstacles, half without
+    python -m experiments.obstacles --share 1 --train shipped --learner sac   # SAC from its reward-only agent's
+                                                  # run, every training episode among obstacles
     python -m experiments.obstacles --training-curve      # the training runs' curves (docs/images/)
     python -m experiments.obstacles --share 0.5 --train shipped --learner sac --snapshot-table   # that run's
                                                           # evaluated snapshots, each seed
@@ -82,6 +84,7 @@ TRAIN_RUNS = {
     "SAC from SAC's reward-only agent, mixed scene (--share 0.5), reward 1": ("shipped", "sac", 0.5, 1),
     "the same, reward 2 (detours)": ("shipped", "sac", 0.5, 2),
     "the same, reward 3 (the grasp side's ways first)": ("shipped", "sac", 0.5, 3),
+    "the same, every episode among obstacles (--share 1)": ("shipped", "sac", 1.0, 3),
 }
 """the runs among obstacles `--training-curve` draws, each seed of TRAIN_SEEDS it has: label -> (--train, --learner,
 --share, --obstacle-reward)."""
@@ -98,6 +101,7 @@ SHOWN = (  # (--train, --learner, --share, --obstacle-reward, --train-seed, env 
     ("shipped", "sac", 0.5, 1, 2, 500_000),
     ("shipped", "sac", 0.5, 3, 1, 1_200_000),
     ("shipped", "sac", 0.5, 3, 2, 1_000_000),
+    ("shipped", "sac", 1.0, 3, 1, 700_000),
 )
 """the trained runs' snapshots that RESULTS shows beside AGENTS (each an evaluated candidate, `candidate_path`)."""
 
@@ -354,7 +358,8 @@ def snapshot_table(start: str, learner: Optional[str], share: float, out: Path,
     [95% CI] / touched an obstacle %, read from the episodes' JSONs in `out` ("-" where a task's is not there). Then,
     per seed, where its latest snapshot's static scene was evaluated: how many of the episodes it touched an obstacle
     in the shipped reward-only agent, blind to them (BLIND), touched too: whether training taught it to avoid what
-    the blind agent hits."""
+    the blind agent hits; and how many of each's touches came before it picked its element up (on the reach, which
+    the dense reward measures in joint space, not along a way clear of the obstacles)."""
     tasks = list(PAPER_TASK_ENV_IDS)
     notes = []
     lines = ["| seed | env steps | scene | " + " | ".join(f"{k}: placed % [95% CI] / touched %" for k in tasks) + " |",
@@ -371,14 +376,18 @@ def snapshot_table(start: str, learner: Optional[str], share: float, out: Path,
         static = {k: out / f"{name}_candidate_{steps[-1]}_static_{k}.json" for k in tasks} if steps else {}
         blind = {k: out / f"{row_name(AGENTS[BLIND])}_static_{k}.json" for k in tasks}
         if static and all(path.is_file() for path in [*static.values(), *blind.values()]):
-            touched = {k: {e["seed"] for e in json.loads(static[k].read_text())["episodes"] if e["collided"]}
-                       for k in tasks}
-            hit = {k: {e["seed"] for e in json.loads(blind[k].read_text())["episodes"] if e["collided"]} for k in tasks}
-            notes.append(f"Seed {seed} at {steps[-1]:,} env steps, static scene: touched an obstacle in "
-                         + " / ".join(str(len(touched[k])) for k in tasks) + " episodes (ceiling / window / flooring), "
-                         + "of which the blind reward-only agent touched " + " / ".join(
-                             str(len(touched[k] & hit[k])) for k in tasks) + " too (it touched "
-                         + " / ".join(str(len(hit[k])) for k in tasks) + ").")
+            touched, hit = ({k: {e["seed"]: e["picked"] for e in json.loads(files[k].read_text())["episodes"]
+                                 if e["collided"]} for k in tasks} for files in (static, blind))
+
+            def counts(seeds: dict) -> str:
+                return " / ".join(str(len(seeds[k])) for k in tasks)
+
+            unpicked = counts({k: [s for s, picked in touched[k].items() if not picked] for k in tasks})
+            blind_unpicked = counts({k: [s for s, picked in hit[k].items() if not picked] for k in tasks})
+            notes.append(f"Seed {seed} at {steps[-1]:,} env steps, static scene: touched an obstacle in {counts(touched)} "
+                         f"episodes (ceiling / window / flooring; {unpicked} before picking its element up), of which "
+                         f"the blind reward-only agent touched {counts({k: touched[k].keys() & hit[k] for k in tasks})} "
+                         f"too (it touched {counts(hit)}; {blind_unpicked} before picking it up).")
     return lines + ([""] + notes if notes else [])
 
 

@@ -557,8 +557,8 @@ def test_the_snapshot_table_reads_each_seed_s_evaluated_candidates_from_their_ep
 
     def write(seed: int, step: int, scene: str, kind: str, placed: int, touched: int, n: int = 4) -> None:
         name = checkpoint_of(obstacles.training_run("shipped", seed, None, "sac", 0.5)).parent.name
-        episodes = [{"seed": i, "placed": i < placed, "collided": placed <= i < placed + touched, "length": 10,
-                     "policy_time_s": 0.01} for i in range(n)]
+        episodes = [{"seed": i, "placed": i < placed, "picked": i <= placed,
+                     "collided": placed <= i < placed + touched, "length": 10, "policy_time_s": 0.01} for i in range(n)]
         (tmp_path / f"{name}_candidate_{step}_{scene}_{kind}.json").write_text(json.dumps({"episodes": episodes}))
 
     for kind in ("ceiling", "window", "flooring"):
@@ -579,11 +579,12 @@ def test_the_snapshot_table_reads_each_seed_s_evaluated_candidates_from_their_ep
     for kind in ("ceiling", "window", "flooring"):
         write(1, 300_000, "static", kind, 2, 2)  # touched in the episodes of seeds 2 and 3
         (tmp_path / f"{blind}_static_{kind}.json").write_text(json.dumps({"episodes": [
-            {"seed": i, "collided": i in (1, 3)} for i in range(4)]}))
+            {"seed": i, "collided": i in (1, 3), "picked": i == 1} for i in range(4)]}))
     notes = obstacles.snapshot_table("shipped", "sac", 0.5, tmp_path)[9:]
     assert notes == ["Seed 1 at 300,000 env steps, static scene: touched an obstacle in 2 / 2 / 2 episodes (ceiling / "
-                     "window / flooring), of which the blind reward-only agent touched 1 / 1 / 1 too (it touched "
-                     "2 / 2 / 2)."], "seed 2's static scene was not evaluated: no note"
+                     "window / flooring; 1 / 1 / 1 before picking its element up), of which the blind reward-only "
+                     "agent touched 1 / 1 / 1 too (it touched 2 / 2 / 2; 1 / 1 / 1 before picking it up)."], \
+        "seed 2's static scene was not evaluated: no note; each one's touch in seed 3's episode came before the pick"
 
 
 def test_the_touches_by_post_side_count_each_agent_s_static_episodes_on_each_side(tmp_path, monkeypatch):
