@@ -382,12 +382,14 @@ def snapshot_table(start: str, learner: Optional[str], share: float, out: Path,
             def counts(seeds: dict) -> str:
                 return " / ".join(str(len(seeds[k])) for k in tasks)
 
-            unpicked = counts({k: [s for s, picked in touched[k].items() if not picked] for k in tasks})
-            blind_unpicked = counts({k: [s for s, picked in hit[k].items() if not picked] for k in tasks})
+            def unpicked(seeds: dict) -> str:  # of the touched episodes, those before the pick
+                return counts({k: [s for s, picked in seeds[k].items() if not picked] for k in tasks})
+
             notes.append(f"Seed {seed} at {steps[-1]:,} env steps, static scene: touched an obstacle in {counts(touched)} "
-                         f"episodes (ceiling / window / flooring; {unpicked} before picking its element up), of which "
-                         f"the blind reward-only agent touched {counts({k: touched[k].keys() & hit[k] for k in tasks})} "
-                         f"too (it touched {counts(hit)}; {blind_unpicked} before picking it up).")
+                         f"episodes (ceiling / window / flooring; {unpicked(touched)} before picking its element up), "
+                         f"of which the blind reward-only agent touched "
+                         f"{counts({k: touched[k].keys() & hit[k] for k in tasks})} too (it touched {counts(hit)}; "
+                         f"{unpicked(hit)} before picking it up).")
     return lines + ([""] + notes if notes else [])
 
 
