@@ -12,6 +12,8 @@
     python -m experiments.obstacles --training-curve      # the training runs' curves (docs/images/)
     python -m experiments.obstacles --share 0.5 --train shipped --learner sac --snapshot-table   # that run's
                                                           # evaluated snapshots, each seed
+    python -m experiments.obstacles --share 1 --train shipped --learner sac --reach-touches   # which way its
+                                                          # latest snapshot turned where it touched before the pick
 
 Protocol, per task (ceiling, window, flooring), on evaluation seeds (from 1,000,000: never trained on):
 1. the planning expert solves each seed's static scene (a material stack and a scaffold post, seeded per episode):
@@ -69,14 +71,18 @@ TRAIN_SCENE = "moving"
 """the scene a training run among obstacles draws: the stack and the post, and the worker walking across."""
 TRAIN_BUDGET = 3_000_000
 """env steps of each training run among obstacles."""
-OBSTACLE_REWARDS = (1, 2, 3)
+OBSTACLE_REWARDS = (1, 2, 3, 4)
 OBSTACLE_REWARD = OBSTACLE_REWARDS[-1]
-"""the version of the obstacle scenes' dense reward that `--train` trains on, named in the run's folder: 1, the carry
+"""the version of what `--train` trains on among obstacles, the dense reward and the value of a touch, named in the
+run's folder: 1, the carry
 measured along the usable start paths clear of the stack and the post, and along all usable ones (into them) where
 none is clear (the runs before 2026-12-06, folders without a suffix); 2, a clear detour from the other turret side
 before that last resort (CarryGeometry.clear_ways), even after a grasp from the side it does not leave from, which the
 turret cannot reach holding the element (one probe, `_r2`); 3, after a grasp, that side's clear ways first, else its
-usable paths (CarryGeometry.carry_paths; `_r3`). The site as built measures the same in all three."""
+usable paths (CarryGeometry.carry_paths; `_r3`); 4, reward 3, and a touch of an obstacle (`info["fail"]`) is an
+end with nothing after it in the learners' targets (baselines/ppo/evaluation.py `failed_ends`); until 2026-12-07 they
+valued it as they value success, the touching step's reward for ever, so that a touch while holding the element was
+worth about as much as carrying on (`_r4`). The site as built measures the same in all four."""
 TRAIN_RUNS = {
     "PPO from PPO's reward-only agent, reward 1": ("shipped", None, 1.0, 1),
     "SAC from nothing, reward 1": ("nothing", "sac", 1.0, 1),
@@ -85,6 +91,7 @@ TRAIN_RUNS = {
     "the same, reward 2 (detours)": ("shipped", "sac", 0.5, 2),
     "the same, reward 3 (the grasp side's ways first)": ("shipped", "sac", 0.5, 3),
     "the same, every episode among obstacles (--share 1)": ("shipped", "sac", 1.0, 3),
+    "the same, reward 4 (a touch ends with nothing after it)": ("shipped", "sac", 1.0, 4),
 }
 """the runs among obstacles `--training-curve` draws, each seed of TRAIN_SEEDS it has: label -> (--train, --learner,
 --share, --obstacle-reward)."""
@@ -209,6 +216,11 @@ class Args(transfer.TrainOptions):
     agent (BLIND), touched an obstacle in (static scene), by the side of the arm the scaffold post stands on
     (post-side) or by the ways the dense reward finds clear of the obstacles (clear-way: LAYOUT_GROUPS); and exit.
     It resets an env per seed to read the layout (a minute or two per task)."""
+    reach_touches: bool = False
+    """with --train: per task, the static scene's episodes that the blind reward-only agent (BLIND) and each seed's
+    latest evaluated snapshot of that run touched an obstacle in before the pick, replayed to the touch: which way the
+    turret had turned, against the turret sides the dense reward's reach measures toward (`reach_distance`); and
+    exit."""
     snapshot_table: bool = False
     """with --train: print the table of that run's evaluated snapshots, each seed of TRAIN_SEEDS (from the JSONs in
     --out that --evaluate or --more-agents wrote for its candidates), and exit."""
@@ -448,6 +460,66 @@ def touches_by(group: str, start: str, learner: Optional[str], share: float, out
     return lines
 
 
+def first_touches(checkpoint: str, env_id: str, seeds: list[int]) -> list[dict]:
+    """Each seed's static-scene episode of a policy (its mean action, as evaluated) replayed to its first touch of
+    an obstacle or its end: the control step, whether it touched one and had picked its element up by then, the
+    turret's angle (joint 1) there, and whether the dense reward's reach measures toward the turret side it had
+    turned to (`CarryGeometry.path_sides`: +pi for a turret at or above 0, -pi below). Not always quite the
+    evaluated episode: the physics carries state from one episode to the next, and the evaluation ran the seeds in
+    another order, in two processes (a touch may come a step later, or not at all)."""
+    import gymnasium as gym
+    from mani_skill.utils.gym_utils import find_max_episode_steps_value
+
+    from baselines.ppo.checkpoints import load_policy
+
+    agent, env_kwargs = load_policy(Path(checkpoint), env_id)
+    env = gym.make(env_id, num_envs=1, obs_mode="state", reward_mode="sparse", sim_backend="physx_cpu",
+                   curriculum_stage=FINAL_STAGE, obstacles="static", **{"obs_obstacles": False, **env_kwargs})
+    u, found = env.unwrapped, []
+    for seed in seeds:
+        obs, _ = env.reset(seed=seed)
+        sides = u.geometry.path_sides(u.task_id, u.goal_slot, u.clear_paths())[0]
+        for step in range(1, find_max_episode_steps_value(env) + 1):
+            with torch.no_grad():
+                obs, _, terminated, truncated, info = env.step(agent.get_action(obs, deterministic=True))
+            if bool(info["obstacle_collision"][0] | terminated[0] | truncated[0]):
+                break
+        turret = float(u.agent.robot.get_qpos()[0, 0])
+        found.append(dict(seed=seed, step=step, touched=bool(info["obstacle_collision"][0]),
+                          picked=bool(info["picked"][0]), turret=turret, toward=bool(sides[0 if turret >= 0 else 1])))
+    env.close()
+    return found
+
+
+def reach_touches(start: str, learner: Optional[str], share: float, out: Path,
+                  reward: int = OBSTACLE_REWARD) -> list[str]:
+    """A row per task and agent (BLIND, then each seed's latest evaluated snapshot of the run): of the static
+    scene's episodes it touched an obstacle in before picking its element up (its JSONs in `out`), replayed by
+    `first_touches`, how many the replay touched before the pick too, and of those how many with the turret turned
+    toward a side the dense reward's reach measures toward and how many away from it, and the control steps of the
+    touches."""
+    agents = {BLIND: AGENTS[BLIND]}
+    for seed, (name, steps) in evaluated_snapshots(start, learner, share, out, reward).items():
+        if steps:
+            agents[f"seed {seed} at {steps[-1]:,} env steps"] = str(
+                candidate_path(training_run(start, seed, None, learner, share, reward), steps[-1]))
+    lines = ["| task | agent | touched before the pick | replayed to a touch before the pick | turret turned toward the "
+             "reach's side | away from it | control step of the touch (median, range) |", "|---|---|---|---|---|---|---|"]
+    for kind, env_id in PAPER_TASK_ENV_IDS.items():
+        for label, checkpoint in agents.items():
+            path = out / f"{row_name(checkpoint)}_static_{kind}.json"
+            if not path.is_file():
+                continue
+            seeds = [e["seed"] for e in json.loads(path.read_text())["episodes"] if e["collided"] and not e["picked"]]
+            found = first_touches(checkpoint, env_id, seeds) if seeds else []
+            same = [f for f in found if f["touched"] and not f["picked"]]
+            toward = sum(f["toward"] for f in same)
+            steps = sorted(f["step"] for f in same)
+            when = f"{int(np.median(steps))} ({steps[0]}-{steps[-1]})" if steps else "-"
+            lines.append(f"| {kind} | {label} | {len(seeds)} | {len(same)} | {toward} | {len(same) - toward} | {when} |")
+    return lines
+
+
 def main(args: Args) -> dict:
     if args.training_curve:
         print(f"wrote {training_curve()}")
@@ -458,6 +530,9 @@ def main(args: Args) -> dict:
     if args.train is not None:
         if args.snapshot_table:
             print("\n".join(snapshot_table(args.train, args.learner, args.share, args.out, args.obstacle_reward)))
+            return {}
+        if args.reach_touches:
+            print("\n".join(reach_touches(args.train, args.learner, args.share, args.out, args.obstacle_reward)))
             return {}
         if args.touches_by:
             print("\n".join(touches_by(args.touches_by, args.train, args.learner, args.share, args.out,

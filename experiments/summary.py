@@ -139,7 +139,7 @@ def summary() -> str:
         "the same protocols (paneling: 50,000 env steps; openings: 50,000 env steps per task; obstacles: the expert's "
         "solvable seeds, the moving scene). From SAC's agent: the networks of the run the shipped reward-only agent "
         f"comes from ({transfer.SAC_STARTS['shipped']}); from PPO's: {transfer.STARTS['shipped']}. Obstacle rewards: "
-        "experiments/obstacles.py OBSTACLE_REWARDS (3, today's).", "", *trained_table(), "",
+        f"experiments/obstacles.py OBSTACLE_REWARDS ({obstacles.OBSTACLE_REWARD}, today's).", "", *trained_table(), "",
         "*Made by `python -m experiments.summary` from the files named; each section below gives the command that "
         "wrote them, its intervals and its failures.*"])
 

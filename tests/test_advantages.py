@@ -27,7 +27,7 @@ def rollout():
                 values=torch.tensor([[[1.0, 0.5]], [[2.0, 1.0]], [[0.5, 0.2]]]),
                 next_value=torch.tensor([[4.0, 0.4]]),
                 final_values=torch.tensor([[[0.0, 0.0]], [[10.0, 2.0]], [[0.0, 0.0]]]),
-                dones=t(0, 1, 0), terminated=t(0, 1, 0))
+                dones=t(0, 1, 0), terminated=t(0, 1, 0), failed=t(0, 0, 0))
 
 
 def args(**kw):
@@ -85,3 +85,13 @@ def test_an_absorbing_success_is_worth_its_reward_for_ever_not_the_critic_s_gues
     # without a bootstrap at success (the sparse reward's default) it changes nothing
     _, ret = signal_advantages(args(bootstrap_at_done="truncated", success_value="absorbing"), **rollout())
     assert torch.allclose(ret[:, 0, 0], torch.tensor([2.0, 2.0, 2.5]))
+
+
+@pytest.mark.parametrize("bootstrap_at_done", ["always", "terminated", "truncated"])
+def test_an_episode_that_ended_by_failure_has_nothing_after_it(bootstrap_at_done):
+    failed = {**rollout(), "failed": rollout()["terminated"]}  # the end at step 1 was a touch of an obstacle
+    _, ret = signal_advantages(args(bootstrap_at_done=bootstrap_at_done, success_value="absorbing"), **failed)
+    # G1 = 2, neither 2 / (1 - 0.5) for ever nor V(final obs) = 10;  G0 = 1 + 0.5 * 2 = 2
+    assert torch.allclose(ret[:, 0, 0], torch.tensor([2.0, 2.0, 2.5]))
+    # curiosity ignores how an episode ended (it bootstraps at every end)
+    assert torch.allclose(ret[:, 0, 1], torch.tensor([1.54, 1.8, 0.62]))

@@ -477,10 +477,10 @@ def test_sac_on_a_mixed_scene_is_its_own_run_unchanged_but_for_the_share_and_ref
     from experiments import obstacles
 
     full, mixed = obstacles.training_run("nothing"), obstacles.training_run("nothing", share=0.5)  # SAC by default
-    assert full == obstacles.training_run("nothing", learner="sac") and full.name == "obstacles_moving_r3_sac_s1"
+    assert full == obstacles.training_run("nothing", learner="sac") and full.name == "obstacles_moving_r4_sac_s1"
     changed = {k for k, v in vars(mixed.args).items() if v != vars(full.args)[k]}
     assert changed == {"obstacle_share", "exp_name"} and mixed.args.obstacle_share == 0.5
-    assert mixed.name == "obstacles_moving_share50_r3_sac_s1" != full.name
+    assert mixed.name == "obstacles_moving_share50_r4_sac_s1" != full.name
     assert mixed.command == "python -m experiments.obstacles --share 0.5 --train nothing --learner sac --train-seed 1"
     assert "in 50% of its training episodes" in mixed.what
     with pytest.raises(SystemExit, match="SAC's option"):
@@ -492,21 +492,24 @@ def test_sac_on_a_mixed_scene_is_its_own_run_unchanged_but_for_the_share_and_ref
 
 
 def test_the_runs_on_the_earlier_obstacle_reward_keep_their_folders_and_are_not_trained_on():
-    """OBSTACLE_REWARD names the obstacle scenes' reward a run trains on: today's runs' folders carry it (`_r3`), the
-    runs on rewards 1 (before the detours) and 2 keep theirs, for --evaluate and the tables; training one is refused."""
+    """OBSTACLE_REWARD names what a run among obstacles trains on: today's runs' folders carry it (`_r4`), the runs
+    on rewards 1 (before the detours), 2 and 3 (a touch valued as success is) keep theirs, for --evaluate and the
+    tables; training one is refused."""
     from experiments import obstacles
 
     old = obstacles.training_run("shipped", 1, None, "sac", 0.5, reward=1)
     assert old.name == "obstacles_moving_share50_shipped_sac_s1" and "obstacle reward" not in old.what
     assert old.command.startswith("python -m experiments.obstacles --share 0.5 --obstacle-reward 1 --train shipped")
     new = obstacles.training_run("shipped", 1, None, "sac", 0.5)
-    assert new.name == "obstacles_moving_share50_r3_shipped_sac_s1" and "(obstacle reward 3)" in new.what
+    assert new.name == "obstacles_moving_share50_r4_shipped_sac_s1" and "(obstacle reward 4)" in new.what
     assert "--obstacle-reward" not in new.command
     probe = obstacles.training_run("shipped", 1, None, "sac", 0.5, reward=2)
     assert probe.name == "obstacles_moving_share50_r2_shipped_sac_s1" and "--obstacle-reward 2" in probe.command
-    with pytest.raises(SystemExit, match="--obstacle-reward 4"):
-        obstacles.training_run("shipped", reward=4)
-    for earlier in (1, 2):
+    r3 = obstacles.training_run("shipped", 1, None, "sac", 0.5, reward=3)
+    assert r3.name == "obstacles_moving_share50_r3_shipped_sac_s1" and "--obstacle-reward 3" in r3.command
+    with pytest.raises(SystemExit, match="--obstacle-reward 5"):
+        obstacles.training_run("shipped", reward=5)
+    for earlier in (1, 2, 3):
         with pytest.raises(SystemExit, match="that reward is gone"):
             obstacles.main(obstacles.Args(train="shipped", learner="sac", share=0.5, obstacle_reward=earlier))
 
@@ -610,6 +613,49 @@ def test_the_touches_by_post_side_count_each_agent_s_static_episodes_on_each_sid
     by_way = obstacles.touches_by("clear-way", "shipped", "sac", 0.5, tmp_path)
     assert by_way[2] == "| ceiling | scratch general agent (reward alone, shipped) | 0 / 0 | 0 / 0 | 3 / 4 |"
 
+
+def test_the_reach_touches_count_which_way_the_turret_turned_where_each_agent_touched_before_the_pick(
+        tmp_path, monkeypatch):
+    """`--train S --reach-touches`: per task, the blind reward-only agent and each seed's latest evaluated snapshot,
+    only the static episodes touched before the pick are replayed (`first_touches`), and those whose replay touched
+    before the pick too counted by the turret's way against the reach's side, with their control steps."""
+    from experiments import obstacles
+    from experiments.campaign import checkpoint_of
+
+    replayed = []
+
+    def first_touches(checkpoint, env_id, seeds):
+        replayed.append((Path(checkpoint).name, env_id, seeds))
+        return [{"seed": s, "step": 10 * (s + 1), "touched": True, "picked": s == 1, "turret": -1.0, "toward": s == 0}
+                for s in seeds]
+
+    monkeypatch.setattr(obstacles, "first_touches", first_touches)
+    blind = obstacles.row_name(obstacles.AGENTS[obstacles.BLIND])
+    name = checkpoint_of(obstacles.training_run("shipped", 1, None, "sac", 0.5)).parent.name
+    for kind in ("ceiling", "window", "flooring"):
+        for row, touched in ((blind, {0, 1, 2}), (f"{name}_candidate_300", set())):
+            (tmp_path / f"{row}_static_{kind}.json").write_text(json.dumps({"episodes": [
+                {"seed": s, "collided": s in touched, "picked": s == 2} for s in range(4)]}))
+    rows = obstacles.reach_touches("shipped", "sac", 0.5, tmp_path)[2:]
+    assert rows[:2] == ["| ceiling | scratch general agent (reward alone, shipped) | 2 | 1 | 1 | 0 | 10 (10-10) |",
+                        "| ceiling | seed 1 at 300 env steps | 0 | 0 | 0 | 0 | - |"], \
+        "seed 1's replay picked its element up before its touch: not counted"
+    assert len(rows) == 6 and replayed[0] == ("scratch_general_agent.pt", "CeilingInstallation-v1", [0, 1])
+    assert len(replayed) == 3, "an agent without touches before the pick replays nothing"
+
+
+def test_a_replayed_episode_is_the_evaluated_one_to_its_first_touch():
+    """`first_touches` on the blind reward-only agent's first window episode that touched before the pick (its
+    evaluation JSON): the replay touches before the pick too, within a control step of the evaluated episode's end
+    (the physics carries state from one episode to the next), the turret turned there."""
+    from experiments import obstacles
+
+    episodes = json.loads((Path("docs/data/obstacles") / "scratch_general_agent_static_window.json").read_text())
+    first = next(e for e in episodes["episodes"] if e["collided"] and not e["picked"])
+    [found] = obstacles.first_touches(obstacles.AGENTS[obstacles.BLIND], "WindowInstallation-v1", [first["seed"]])
+    assert found["seed"] == first["seed"] and found["touched"] and not found["picked"]
+    assert abs(found["step"] - first["length"]) <= 1
+    assert abs(found["turret"]) > 0.1 and isinstance(found["toward"], bool)
 
 def test_the_layouts_of_a_scene_name_the_post_s_side_and_the_ways_the_reward_finds_clear():
     """`layouts` (what `--touches-by` groups by) on real window scenes: each seed's post side is the sign of its

@@ -14,6 +14,7 @@ import pytest
 import torch
 
 from baselines.ppo.checkpoints import load_policy
+from baselines.ppo.evaluation import failed_ends
 from baselines.sac import sac
 
 TINY = dict(env_id="ConstructionPickPlace-v1", num_envs=1, hidden_size=32, num_layers=1, batch_size=32,
@@ -279,16 +280,37 @@ def test_held_out_goal_slots_are_never_drawn_in_training_and_obstacles_are_met_i
     assert not {"goal_slot_weights", "obstacles", "obs_obstacles"} & set(plain)
 
 
-def test_success_is_absorbing_in_the_critics_target_and_truncations_bootstrap():
+def test_success_is_absorbing_in_the_critics_target_a_failure_ends_it_and_truncations_bootstrap():
     gamma, alpha = 0.95, torch.tensor(0.2)
-    rewards = torch.tensor([1.0, 0.5, 0.5, 0.0])
-    terminated = torch.tensor([True, False, True, False])
-    next_q = torch.tensor([100.0, 2.0, -7.0, 3.0])  # the critic's guess at s' (ignored where s' is success)
-    next_log_pi = torch.tensor([5.0, -1.0, 5.0, 0.5])
-    y = sac.soft_q_target(rewards, terminated, next_q, next_log_pi, alpha, gamma)
-    expected = torch.tensor([1.0 / 0.05, 0.5 + 0.95 * (2.0 + 0.2), 0.5 / 0.05, 0.95 * (3.0 - 0.1)])
+    rewards = torch.tensor([1.0, 0.5, 0.5, 0.0, 3.0])
+    terminated = torch.tensor([True, False, True, False, True])
+    failed = torch.tensor([False, False, False, False, True])  # the last one touched an obstacle
+    next_q = torch.tensor([100.0, 2.0, -7.0, 3.0, 50.0])  # the critic's guess at s' (ignored where the episode ended)
+    next_log_pi = torch.tensor([5.0, -1.0, 5.0, 0.5, 5.0])
+    y = sac.soft_q_target(rewards, terminated, failed, next_q, next_log_pi, alpha, gamma)
+    expected = torch.tensor([1.0 / 0.05, 0.5 + 0.95 * (2.0 + 0.2), 0.5 / 0.05, 0.95 * (3.0 - 0.1), 3.0])
     torch.testing.assert_close(y, expected)
 
+
+
+def test_the_buffer_tells_a_touch_of_an_obstacle_from_success_and_reads_a_buffer_saved_before_it_did():
+    """What the learners store of an episode end (evaluation.failed_ends): among the envs that terminated, those
+    whose final info says `fail`; a step without ended episodes or without obstacles (no `fail`) marks none."""
+    terminated = torch.tensor([True, True, False])
+    infos = {"final_info": {"fail": torch.tensor([True, False, True])}, "_final_info": terminated}
+    assert failed_ends(terminated, infos).tolist() == [True, False, False]
+    assert failed_ends(terminated, {"final_info": {"success": terminated}}).tolist() == [False] * 3
+    assert failed_ends(torch.zeros(3, dtype=torch.bool), {}).tolist() == [False] * 3
+    buffer = sac.ReplayBuffer(8, obs_dim=2, act_dim=1)
+    buffer.add(torch.zeros(3, 2), torch.ones(3, 2), torch.zeros(3, 1), torch.ones(3), terminated,
+               failed_ends(terminated, infos))
+    state = buffer.state_dict()
+    assert state["failed"].tolist() == [True, False, False]
+    older = {k: v for k, v in state.items() if k != "failed"}
+    again = sac.ReplayBuffer(8, obs_dim=2, act_dim=1)
+    again.failed[:] = True
+    again.load_state_dict(older)
+    assert again.count == 3 and not again.failed.any() and torch.equal(again.terminated[:3], terminated)
 
 def test_the_squashed_gaussian_s_log_probability_is_the_change_of_variables():
     torch.manual_seed(0)

@@ -146,6 +146,17 @@ def finished_episodes(infos: dict) -> dict:
                 reach_start_grasped=fin.get("reach_start_grasped", torch.zeros_like(fin["task_id"], dtype=torch.bool)))
 
 
+def failed_ends(terminations: torch.Tensor, infos: dict) -> torch.Tensor:
+    """[num_envs] bool: the episodes of a vector env's step that ended by failure (ManiSkill's `info["fail"]`: among
+    obstacles, a touch of one), not by success. The learners value such an end as nothing after it, where success
+    is absorbing (it pays its reward for ever): a touch valued like success would pay the touching step's reward
+    for ever."""
+    fin = infos.get("final_info", {})
+    if "fail" not in fin:
+        return torch.zeros_like(terminations, dtype=torch.bool)
+    return terminations.bool() & fin["fail"].to(terminations.device).bool()
+
+
 def run_episodes(agent, envs, num_steps: int, seed: int, deterministic: bool = True) -> list[dict]:
     """The one evaluation loop, for ppo.py's evaluation during training and scripts/evaluate.py's seeded
     episodes: `rollout` of every env of `envs` (a vector env of either backend, or ManiSkillVectorEnv without auto

@@ -51,7 +51,7 @@ from baselines.ppo.checkpoints import (CSVLog, Progress, check_fit, load_checkpo
                                        restore_rng, save_checkpoint, StopRequest, value_heads, with_obstacle_inputs,
                                        with_path_offset_inputs)
 from baselines.ppo.curiosity import ICM, make_icm
-from baselines.ppo.evaluation import evaluate_envs, finished_episodes, reset
+from baselines.ppo.evaluation import evaluate_envs, failed_ends, finished_episodes, reset
 from baselines.ppo.networks import Agent
 from baselines.ppo.update import adam, hold_log_std_floor, ppo_update, signal_advantages
 from baselines.ppo.start_states import GOAL_SLOTS, StartFromStates, failure_task_weights, widen_near_goal, widen_reach_starts
@@ -284,7 +284,8 @@ def main(args: Args) -> Progress:
 @dataclass
 class Rollout:
     """One iteration's samples, [num_steps, num_envs, ...]: s_t, s_{t+1} (the final observation where an episode
-    ended there), a_t, r_t, whether the episode ended at t and whether it ended by termination (success)."""
+    ended there), a_t, r_t, whether the episode ended at t, whether it ended by termination (success or failure) and
+    whether by failure (`info["fail"]`: among obstacles, a touch)."""
 
     obs: torch.Tensor
     next_obs: torch.Tensor
@@ -292,12 +293,13 @@ class Rollout:
     rewards: torch.Tensor
     dones: torch.Tensor
     terminated: torch.Tensor
+    failed: torch.Tensor
 
     @classmethod
     def zeros(cls, num_steps: int, num_envs: int, obs_dim: int, act_dim: int, device: torch.device) -> "Rollout":
         obs, steps = torch.zeros((num_steps, num_envs, obs_dim), device=device), torch.zeros((num_steps, num_envs), device=device)
         return cls(obs, torch.zeros_like(obs), torch.zeros((num_steps, num_envs, act_dim), device=device), steps,
-                   torch.zeros_like(steps), torch.zeros_like(steps))
+                   torch.zeros_like(steps), torch.zeros_like(steps), torch.zeros_like(steps))
 
 
 def flat(x: torch.Tensor) -> torch.Tensor:
@@ -319,6 +321,7 @@ def collect(agent: Agent, envs: Envs, buf: Rollout, next_obs: torch.Tensor, args
         next_obs, reward, terminations, truncations, infos = envs.step(action.clamp(-1, 1))
         buf.rewards[step] = reward * args.ppo.reward_scale
         buf.dones[step], buf.terminated[step] = (terminations | truncations).float(), terminations.float()
+        buf.failed[step] = failed_ends(terminations, infos).float()
         buf.next_obs[step] = next_obs
         if "final_info" in infos:
             ep = finished_episodes(infos)
@@ -355,7 +358,7 @@ def update_batch(run: Run, buf: Rollout, next_obs: torch.Tensor, episodes: dict,
         # V(last observation) where an episode ended and bootstraps (see bootstrap_mask)
         v_final = agent.get_value(flat(buf.next_obs)).view(num_steps, num_envs, heads)
         advantages, returns = signal_advantages(args, buf.rewards, intrinsic, values, next_value, v_final, buf.dones,
-                                                buf.terminated)
+                                                buf.terminated, buf.failed)
     return dict(obs=flat(buf.obs), next_obs=flat(buf.next_obs), actions=flat(buf.actions), logprobs=logprobs.reshape(-1),
                 advantages=advantages.reshape(-1), returns=returns.reshape(-1, heads), values=values.reshape(-1, heads))
 

@@ -40,7 +40,7 @@ def gae(rewards: torch.Tensor, values: torch.Tensor, next_value: torch.Tensor, f
 
 def signal_advantages(args, rewards: torch.Tensor, intrinsic: torch.Tensor, values: torch.Tensor,
                       next_value: torch.Tensor, final_values: torch.Tensor, dones: torch.Tensor,
-                      terminated: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+                      terminated: torch.Tensor, failed: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
     """The advantages [steps, envs] and the value heads' returns [steps, envs, heads] of a rollout, one GAE per
     reward signal with the settings of `args` (ppo.py's Args): the extrinsic signal (`rewards`, plus the
     `intrinsic` reward for `icm_normalized`) with `gamma`, bootstrapping at the episode ends
@@ -50,13 +50,16 @@ def signal_advantages(args, rewards: torch.Tensor, intrinsic: torch.Tensor, valu
     `success_value="absorbing"` an episode that ended by success and bootstraps there (dense rewards) takes the
     value of staying in its last state for ever, its reward / (1 - gamma), not the critic's guess: the critic
     never trains on a state after success (the env resets), and a guess below that lets holding near the goal
-    outvalue placing."""
+    outvalue placing. An episode that ended by failure (`failed`, among `terminated`: a touch of an obstacle) has
+    nothing after it on the extrinsic signal, whatever `bootstrap_at_done` says."""
     truncated = dones - terminated
     extrinsic = rewards + intrinsic if joins_extrinsic_reward(args.icm.curiosity) else rewards
     if args.ppo.success_value == "absorbing":
         final_values = final_values.clone()
-        final_values[..., 0] = torch.where(terminated.bool(), extrinsic / (1 - args.ppo.gamma), final_values[..., 0])
-    signals = [(extrinsic, args.ppo.gamma, bootstrap_mask(terminated, truncated, args.ppo.bootstrap_at_done))]
+        success = terminated.bool() & ~failed.bool()
+        final_values[..., 0] = torch.where(success, extrinsic / (1 - args.ppo.gamma), final_values[..., 0])
+    extrinsic_mask = bootstrap_mask(terminated, truncated, args.ppo.bootstrap_at_done) * (1 - failed)
+    signals = [(extrinsic, args.ppo.gamma, extrinsic_mask)]
     if values.shape[-1] == 2:
         signals.append((intrinsic, args.icm.icm_gamma, dones))
     advantages = torch.stack([gae(r, values[..., h], next_value[:, h], final_values[..., h] * mask, dones, gamma,

@@ -14,7 +14,8 @@ recipe (experiments/from_scratch.py `scratch_args`):
   (baselines/ppo/start_states.py `widen_near_goal`), such an episode cut after 80 steps (NearGoalTimeLimit);
   evaluation resets as usual;
 - episode ends: success is absorbing, its reward for ever (target r / (1 - gamma), PPO's
-  `success_value="absorbing"`); a time limit (or the near-goal cut) bootstraps from the final observation; gamma 0.95;
+  `success_value="absorbing"`); a failure (`info["fail"]`: among obstacles, a touch) has nothing after it (target r);
+  a time limit (or the near-goal cut) bootstraps from the final observation; gamma 0.95;
 - observations normalized by running statistics, quaternions fed as rotation-matrix columns (networks.py);
 - progress.csv with ppo.py's columns (checkpoints.CSVLog) plus the wall time split and SAC's losses; atomic
   checkpoints (checkpoints.save_checkpoint) with the replay buffer in a file beside them, and an exact `--resume`;
@@ -65,7 +66,7 @@ from tqdm import tqdm
 
 from baselines.ppo.checkpoints import (CSVLog, Progress, check_fit, insert_filled, load_checkpoint, make_agent,
                                        policy_env_kwargs, restore_rng, save_checkpoint, StopRequest)
-from baselines.ppo.evaluation import evaluate_envs, finished_episodes, reset, run_episodes, slot_weights, summarize
+from baselines.ppo.evaluation import evaluate_envs, failed_ends, finished_episodes, reset, run_episodes, slot_weights, summarize
 from baselines.ppo.networks import RunningMeanStd, layer_init, mlp, rotation_features
 from baselines.ppo.ppo import EPISODE_STATS
 from baselines.ppo.start_states import GOAL_SLOTS, widen_near_goal
@@ -470,7 +471,10 @@ class Batch(NamedTuple):
     actions: torch.Tensor
     rewards: torch.Tensor
     terminated: torch.Tensor
-    """bool: the episode ended there by success (absorbing); truncations are not marked (they bootstrap)."""
+    """bool: the episode ended there (success or failure); truncations are not marked (they bootstrap)."""
+    failed: torch.Tensor
+    """bool: of those, the ones that ended by failure (`info["fail"]`): nothing after it; the others, success,
+    absorbing."""
 
 
 class ReplayBuffer:
@@ -483,9 +487,10 @@ class ReplayBuffer:
         self.obs, self.next_obs = torch.zeros(size, obs_dim), torch.zeros(size, obs_dim)
         self.actions, self.rewards = torch.zeros(size, act_dim), torch.zeros(size)
         self.terminated = torch.zeros(size, dtype=torch.bool)
+        self.failed = torch.zeros(size, dtype=torch.bool)
 
     def add(self, *transitions: torch.Tensor) -> None:
-        """One step of every env: obs, next_obs, actions, rewards, terminated, each [num_envs, ...]."""
+        """One step of every env: obs, next_obs, actions, rewards, terminated, failed, each [num_envs, ...]."""
         n = len(transitions[0])
         idx = (self.pos + torch.arange(n)) % self.size
         for key, value in zip(self.KEYS, transitions):
@@ -508,19 +513,24 @@ class ReplayBuffer:
             raise SystemExit(f"the saved replay buffer holds {state['size']} transitions, this run's {self.size}")
         self.pos, self.count = state["pos"], state["count"]
         for key in self.KEYS:
+            if key == "failed" and key not in state:  # a buffer saved before failures were told apart: none marked
+                self.failed.zero_()
+                continue
             getattr(self, key)[:self.count] = state[key]
 
 
 # ------------------------------------------------------------------------------------------------- #
 # The update
 # ------------------------------------------------------------------------------------------------- #
-def soft_q_target(rewards: torch.Tensor, terminated: torch.Tensor, next_q: torch.Tensor, next_log_pi: torch.Tensor,
-                  alpha: torch.Tensor, gamma: float) -> torch.Tensor:
+def soft_q_target(rewards: torch.Tensor, terminated: torch.Tensor, failed: torch.Tensor, next_q: torch.Tensor,
+                  next_log_pi: torch.Tensor, alpha: torch.Tensor, gamma: float) -> torch.Tensor:
     """The critics' target y for transitions (s, a, r, s'): r + gamma (min Q'(s', a') - alpha log pi(a'|s')) with
     a' ~ pi(s'), where the episode goes on or was cut by a time limit (s' its final observation); r / (1 - gamma)
     where it ended by success: the success state is absorbing and pays its reward for ever (PPO's
-    `success_value="absorbing"`), not the critic's guess about a state it never trains on."""
-    return torch.where(terminated, rewards / (1 - gamma), rewards + gamma * (next_q - alpha * next_log_pi))
+    `success_value="absorbing"`), not the critic's guess about a state it never trains on; r where it ended by
+    failure (`failed`, a touch of an obstacle): nothing after it."""
+    return torch.where(failed, rewards, torch.where(terminated, rewards / (1 - gamma),
+                                                    rewards + gamma * (next_q - alpha * next_log_pi)))
 
 
 @dataclass
@@ -574,7 +584,7 @@ def sac_update(learner: Learner, batch: Batch, args: Args, update_index: int) ->
     with torch.no_grad():
         next_actions, next_log_pi = actor.sample(z_next)
         next_q = torch.min(*learner.critics_target(z_next, next_actions))
-        y = soft_q_target(batch.rewards, batch.terminated, next_q, next_log_pi, alpha, args.gamma)
+        y = soft_q_target(batch.rewards, batch.terminated, batch.failed, next_q, next_log_pi, alpha, args.gamma)
     q1, q2 = critics(z, batch.actions)
     qf1_loss, qf2_loss = F.mse_loss(q1, y), F.mse_loss(q2, y)
     learner.q_optimizer.zero_grad()
@@ -828,7 +838,7 @@ def collect(run: Run, envs: CPUVectorEnv, obs: torch.Tensor, episodes: dict) -> 
                 actions = actor.get_action(obs)
         next_obs, reward, terminated, _truncated, infos = envs.step(actions)
         progress.global_step += args.num_envs
-        final_obs = next_obs
+        final_obs, failed = next_obs, failed_ends(terminated, infos)
         if "final_info" in infos:
             ep = finished_episodes(infos)
             ended = ep["ended"]
@@ -839,7 +849,7 @@ def collect(run: Run, envs: CPUVectorEnv, obs: torch.Tensor, episodes: dict) -> 
             episodes["near_goal"] += ep["near_goal_start"][ended].tolist()
             episodes["task_id"] += ep["task_id"][ended].tolist()
             episodes["collided"] += ep["collided"][ended].tolist()
-        run.buffer.add(obs, final_obs, actions, reward * args.reward_scale, terminated)
+        run.buffer.add(obs, final_obs, actions, reward * args.reward_scale, terminated, failed)
         seen.append(obs)
         obs = next_obs
     if args.norm_obs:

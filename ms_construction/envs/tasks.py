@@ -109,7 +109,9 @@ and each other; `obstacles="moving"` adds a worker (a cylinder of radius {WORKER
 cell once, along the -y barrier at {WORKER_SPEED[0]:g}-{WORKER_SPEED[1]:g} m/s, entering within the first {WORKER_START_S[1]:g} s. Drawn after the arm,
 the element and the goal (before the training start states), so a seed gives the same episode with and without
 them where no start states are set (as in every evaluation). A touch of the arm or the element on one is
-`info["obstacle_collision"]` and fails the episode (`info["fail"]`). The observation ends with their state
+`info["obstacle_collision"]` and fails the episode (`info["fail"]`): an end with nothing after it, where success
+is absorbing (the shipped learners do not bootstrap there: baselines/ppo/evaluation.py `failed_ends`). The
+observation ends with their state
 (`extra/obstacles`, {OBSTACLE_OBS_SIZE} numbers: the stack's place, height and turn, the post's place, the worker's place and
 velocity): `obs_obstacles=None` (the default) where there are obstacles, `True` always (zeros without them),
 `False` never (how a policy trained without them meets them). `obstacle_share` below 1 gives only that share of
