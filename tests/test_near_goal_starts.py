@@ -129,6 +129,25 @@ def test_near_goal_starts_are_valid_held_states(kind):
     env.close()
 
 
+def test_near_goal_starts_take_a_share_per_task_type():
+    """One share per task type (ELEMENT_KINDS order): the general task's episodes of a type whose share is 1 all
+    start near the goal, of a type whose share is 0 none; a share list of the wrong length is refused."""
+    env = make_env("ConstructionPickPlace-v1", control_mode="pd_joint_delta_pos", reward_mode="dense")
+    u = env.unwrapped
+    shares = [1.0 if k == "window" else 0.0 for k in ELEMENT_KINDS]
+    u.set_near_goal_starts(shares, 1.0)
+    seen = set()
+    for seed in range(12):
+        env.reset(seed=seed)
+        kind = ELEMENT_KINDS[int(u.task_id[0])]
+        seen.add(kind)
+        assert bool(u.near_goal_start[0]) == (kind == "window") and bool(u.held[0]) == (kind == "window"), (seed, kind)
+    assert "window" in seen and len(seen) > 1
+    with pytest.raises(ValueError, match="give one share or 4"):
+        u.set_near_goal_starts([1.0, 0.0], 1.0)
+    env.close()
+
+
 def test_the_env_s_batched_path_points_are_the_reference_s():
     from ms_construction.envs.carry_geometry import path_points
     from ms_construction.goal_configurations import path_point, start_paths

@@ -373,8 +373,8 @@ def test_ppo_trains_among_obstacles_and_its_policy_sees_them_wherever_it_is_eval
 
 def test_the_recipe_trains_among_obstacles_from_the_shipped_weights_unchanged_but_for_the_scene_and_budget(tmp_path):
     """`--train shipped`: the from-scratch recipe's arguments, but for the tasks' `obstacles`, the budget, the run's
-    name and the initial weights: the shipped reward-only agent's, which gain the obstacle inputs (at zero weight)
-    and train among them; its row files are named for its run."""
+    name, the hand-back of near-goal starts (version 5) and the initial weights: the shipped reward-only agent's, which
+    gain the obstacle inputs (at zero weight) and train among them; its row files are named for its run."""
     from baselines.ppo import ppo
     from baselines.ppo.checkpoints import load_checkpoint
     from experiments import from_scratch, obstacles
@@ -382,7 +382,9 @@ def test_the_recipe_trains_among_obstacles_from_the_shipped_weights_unchanged_bu
     run = obstacles.training_run("shipped", num_envs=2)
     recipe = from_scratch.scratch_args(2, seed=1)
     changed = {k for k, v in vars(run.args).items() if v != vars(recipe)[k]}
-    assert changed <= {"obstacles", "total_timesteps", "exp_name", "checkpoint"} and run.args.obstacles == "moving"
+    assert changed <= {"obstacles", "total_timesteps", "exp_name", "checkpoint", "starts"}
+    assert run.args.obstacles == "moving" and run.args.starts.near_goal_share_end == obstacles.HAND_BACK_END
+    assert dataclasses.replace(run.args.starts, near_goal_share_end=None) == recipe.starts
     assert obstacles.row_name(str(from_scratch.CAMPAIGN_DIR / run.name / "checkpoint.pt")) == run.name
     assert obstacles.row_name("campaign/scratch_s2/candidates/candidate_5000000.pt") == "scratch_s2_candidate_5000000"
     assert obstacles.row_name("assets/checkpoints/general_agent.pt") == "general_agent"
@@ -477,10 +479,10 @@ def test_sac_on_a_mixed_scene_is_its_own_run_unchanged_but_for_the_share_and_ref
     from experiments import obstacles
 
     full, mixed = obstacles.training_run("nothing"), obstacles.training_run("nothing", share=0.5)  # SAC by default
-    assert full == obstacles.training_run("nothing", learner="sac") and full.name == "obstacles_moving_r4_sac_s1"
+    assert full == obstacles.training_run("nothing", learner="sac") and full.name == "obstacles_moving_r5_sac_s1"
     changed = {k for k, v in vars(mixed.args).items() if v != vars(full.args)[k]}
     assert changed == {"obstacle_share", "exp_name"} and mixed.args.obstacle_share == 0.5
-    assert mixed.name == "obstacles_moving_share50_r4_sac_s1" != full.name
+    assert mixed.name == "obstacles_moving_share50_r5_sac_s1" != full.name
     assert mixed.command == "python -m experiments.obstacles --share 0.5 --train nothing --learner sac --train-seed 1"
     assert "in 50% of its training episodes" in mixed.what
     with pytest.raises(SystemExit, match="SAC's option"):
@@ -492,23 +494,29 @@ def test_sac_on_a_mixed_scene_is_its_own_run_unchanged_but_for_the_share_and_ref
 
 
 def test_the_runs_on_the_earlier_obstacle_reward_keep_their_folders_and_are_not_trained_on():
-    """OBSTACLE_REWARD names what a run among obstacles trains on: today's runs' folders carry it (`_r4`), the runs
+    """OBSTACLE_REWARD names what a run among obstacles trains on: today's runs' folders carry it (`_r5`), the runs
     on rewards 1 (before the detours), 2 and 3 (a touch valued as success is) keep theirs, for --evaluate and the
-    tables; training one is refused."""
+    tables, and training one is refused; version 4 (without the hand-back of near-goal starts) can still be trained,
+    and 5 differs from it in that alone."""
     from experiments import obstacles
 
     old = obstacles.training_run("shipped", 1, None, "sac", 0.5, reward=1)
     assert old.name == "obstacles_moving_share50_shipped_sac_s1" and "obstacle reward" not in old.what
     assert old.command.startswith("python -m experiments.obstacles --share 0.5 --obstacle-reward 1 --train shipped")
     new = obstacles.training_run("shipped", 1, None, "sac", 0.5)
-    assert new.name == "obstacles_moving_share50_r4_shipped_sac_s1" and "(obstacle reward 4)" in new.what
+    assert new.name == "obstacles_moving_share50_r5_shipped_sac_s1" and "(obstacle reward 5)" in new.what
     assert "--obstacle-reward" not in new.command
+    r4 = obstacles.training_run("shipped", 1, None, "sac", 0.5, reward=4)
+    assert r4.name == "obstacles_moving_share50_r4_shipped_sac_s1" and "--obstacle-reward 4" in r4.command
+    changed = {k for k, v in vars(new.args).items() if v != vars(r4.args)[k]}
+    assert changed == {"exp_name", "near_goal_share_end"} and r4.args.near_goal_share_end is None
+    assert new.args.near_goal_share_end == obstacles.HAND_BACK_END < new.args.near_goal_share
     probe = obstacles.training_run("shipped", 1, None, "sac", 0.5, reward=2)
     assert probe.name == "obstacles_moving_share50_r2_shipped_sac_s1" and "--obstacle-reward 2" in probe.command
     r3 = obstacles.training_run("shipped", 1, None, "sac", 0.5, reward=3)
     assert r3.name == "obstacles_moving_share50_r3_shipped_sac_s1" and "--obstacle-reward 3" in r3.command
-    with pytest.raises(SystemExit, match="--obstacle-reward 5"):
-        obstacles.training_run("shipped", reward=5)
+    with pytest.raises(SystemExit, match="--obstacle-reward 6"):
+        obstacles.training_run("shipped", reward=6)
     for earlier in (1, 2, 3):
         with pytest.raises(SystemExit, match="that reward is gone"):
             obstacles.main(obstacles.Args(train="shipped", learner="sac", share=0.5, obstacle_reward=earlier))

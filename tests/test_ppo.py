@@ -523,8 +523,9 @@ def test_near_goal_starts_widen_per_task_with_success_and_a_resumed_run_goes_on_
     assert float(rows[0]["near_goal_radius_flooring"]) == 0.0 and int(rows[0]["near_goal_episodes"]) > 0
     assert float(rows[0]["near_goal_place_success"]) == 1.0
     assert progress.near_goal_radius[:2] == [0.0, 0.0] and progress.near_goal_radius[2] >= 0.05
-    assert ("set_near_goal_starts", (1.0, (0.0, 0.0, 0.0, 0.0), None)) in calls  # a radius per task type, paneling's too
-    assert ("set_near_goal_starts", (1.0, (0.0, 0.0, 0.05, 0.0), None)) in calls
+    shares = (1.0,) * 4  # a share and a radius per task type, paneling's too
+    assert ("set_near_goal_starts", (shares, (0.0, 0.0, 0.0, 0.0), None)) in calls
+    assert ("set_near_goal_starts", (shares, (0.0, 0.0, 0.05, 0.0), None)) in calls
     ckpt = torch.load(tmp_path / "near" / "checkpoint.pt", weights_only=False)
     assert ckpt["progress"]["near_goal_radius"] == progress.near_goal_radius
     assert ckpt["progress"]["near_goal_recent"] == progress.near_goal_recent and len(progress.near_goal_recent[2]) < 4
@@ -537,8 +538,37 @@ def test_near_goal_starts_widen_per_task_with_success_and_a_resumed_run_goes_on_
     resumed = ppo.main(ppo.Args.of(resume=str(tmp_path / "near" / "checkpoint.pt"), extend=True, total_timesteps=240,
                                 curriculum=("cp4",)))
     first = next(c for c in calls if c[0] == "set_near_goal_starts")
-    assert first == ("set_near_goal_starts", (1.0, tuple(progress.near_goal_radius), None)), calls
+    assert first == ("set_near_goal_starts", (shares, tuple(progress.near_goal_radius), None)), calls
     assert resumed.global_step == 240
+
+
+def test_once_a_radius_is_whole_its_promotions_hand_near_goal_starts_back_to_ordinary_resets():
+    """--near-goal-share-end: a task type whose radius is 1 lowers its share of near-goal starts by the step at each
+    promotion (a full window placing often enough), down to the end, the other types' shares and radii as they were;
+    a type still widening widens; without an end the share stays."""
+    from types import SimpleNamespace
+
+    from baselines.ppo.args import validate
+    from baselines.ppo.start_states import widen_near_goal
+
+    def run(end, rounds):
+        starts = SimpleNamespace(near_goal_window=4, near_goal_promote=0.5, near_goal_step=0.25, near_goal_share_end=end)
+        progress = SimpleNamespace(near_goal_radius=[1.0, 1.0, 0.5, 1.0], near_goal_share=[0.8] * 4,
+                                   near_goal_recent=[[] for _ in range(4)])
+        changed = [widen_near_goal(SimpleNamespace(starts=starts), progress, [1] * 4 + [2] * 4, [1.0] * 8)
+                   for _ in range(rounds)]
+        return progress, changed
+
+    progress, changed = run(0.2, 4)  # the window's: 0.8 -> 0.55 -> 0.3 -> 0.2; the floor's radius 0.5 -> 0.75 -> 1.0,
+    # then its share 0.8 -> 0.55 -> 0.3
+    assert progress.near_goal_share == [0.8, 0.2, 0.3, 0.8] and progress.near_goal_radius == [1.0] * 4
+    assert changed == [True] * 4
+    progress, changed = run(0.2, 6)
+    assert progress.near_goal_share == [0.8, 0.2, 0.2, 0.8] and changed == [True] * 5 + [False]
+    progress, changed = run(None, 3)
+    assert progress.near_goal_share == [0.8] * 4 and changed == [True, True, False]  # the floor's widening only
+    with pytest.raises(SystemExit, match="--near-goal-share-end 0.9"):
+        validate(ppo.Args.of(near_goal_share=0.8, near_goal_share_end=0.9))
 
 
 def test_reach_starts_widen_per_goal_slot_as_they_grasp_from_their_side_and_a_resumed_run_sets_the_radii(tmp_path, monkeypatch):
@@ -646,7 +676,8 @@ def test_progress_csv_keeps_every_task_type_s_columns_paneling_s_too():
 
     args = scratch_args(2, env_id="PanelInstallation-v1")
     kinds = len(ELEMENT_KINDS)
-    progress = checkpoints.Progress(near_goal_radius=[0.3] * kinds, near_goal_recent=[[] for _ in range(kinds)],
+    progress = checkpoints.Progress(near_goal_radius=[0.3] * kinds, near_goal_share=[0.8] * kinds,
+                                    near_goal_recent=[[] for _ in range(kinds)],
                                     reach_start_radius=[0.2] * (3 * kinds),
                                     reach_start_recent=[[] for _ in range(3 * kinds)])
     paneling = ELEMENT_KINDS.index("paneling")

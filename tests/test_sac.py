@@ -75,8 +75,11 @@ def test_a_short_run_changes_the_actor_and_writes_the_csv_columns(tmp_path):
 
 def test_a_run_resumed_halfway_ends_with_the_uninterrupted_run_s_weights(tmp_path):
     """Run U: 600 env steps with a checkpoint at 300. Run I: 300 steps, then --resume --extend to 600. Every weight,
-    optimizer moment, log alpha, the replay buffer and the curriculum's progress end the same, bit for bit."""
-    common = dict(checkpoint_freq=300, learning_starts=100)
+    optimizer moment, log alpha, the replay buffer and the curriculum's progress end the same, bit for bit (every
+    near-goal episode promotes its type: the first widens the radius to 1, the next hands its starts back, so the
+    shares move)."""
+    common = dict(checkpoint_freq=300, learning_starts=100, near_goal_window=1, near_goal_promote=0.0,
+                  near_goal_step=1.0, near_goal_share_end=0.2)
     u = sac.setup(tiny_args(tmp_path, total_timesteps=600, exp_name="u", **common))
     sac.train(u)
     i = sac.setup(tiny_args(tmp_path, total_timesteps=300, exp_name="i", **common))
@@ -96,6 +99,7 @@ def test_a_run_resumed_halfway_ends_with_the_uninterrupted_run_s_weights(tmp_pat
         assert torch.equal(getattr(u.buffer, key), getattr(resumed.buffer, key)), key
     assert resumed.progress.near_goal_radius == u.progress.near_goal_radius
     assert resumed.progress.near_goal_recent == u.progress.near_goal_recent
+    assert resumed.progress.near_goal_share == u.progress.near_goal_share and min(u.progress.near_goal_share) == 0.2
     assert not (tmp_path / "i" / "replay_buffer_300.pt").exists(), "the old buffer goes once the new checkpoint is in"
     assert (tmp_path / "i" / "replay_buffer_600.pt").is_file()
     rows = read_csv(tmp_path / "i" / "progress.csv")
@@ -251,6 +255,7 @@ def test_resume_refuses_a_checkpoint_without_its_buffer_and_a_ppo_checkpoint(tmp
     (dict(gamma=1.0), "--gamma"),
     (dict(tau=0.0), "--tau"),
     (dict(near_goal_share=1.5), "--near-goal-share"),
+    (dict(near_goal_share_end=0.9), "--near-goal-share-end 0.9: a share in \\[0, --near-goal-share \\(0.8\\)\\]"),
     (dict(env_id="PickCube-v1"), "--env-id"),
     (dict(num_layers=0), "--num-layers"),
     (dict(checkpoint="x.pt"), "--evaluate"),
@@ -369,7 +374,7 @@ def test_among_obstacles_the_csv_counts_per_task_type_the_ordinary_episodes_that
     episodes = {key: [0.0] * 5 for key in EPISODE_STATS.values()}
     episodes.update(task_id=[0, 0, 0, 1, 0], near_goal=[False, False, False, False, True],
                     collided=[True, False, False, False, True], success=[0.0, 1.0, 1.0, 1.0, 0.0])
-    progress = SimpleNamespace(near_goal_radius=[0.1] * len(ELEMENT_KINDS))
+    progress = SimpleNamespace(near_goal_radius=[0.1] * len(ELEMENT_KINDS), near_goal_share=[0.8] * len(ELEMENT_KINDS))
     row = sac.episode_columns(sac.Args(obstacles="moving"), progress, episodes)
     ceiling, window = ELEMENT_KINDS[0], ELEMENT_KINDS[1]
     assert row[f"ordinary_collided_{ceiling}"] == pytest.approx(1 / 3) and row[f"ordinary_collided_{window}"] == 0.0

@@ -301,6 +301,10 @@ class StartStateArgs:
     """success from near-goal starts that widens a task type's radius."""
     near_goal_window: int = 20
     """near-goal episodes of a task type whose success decides a widening."""
+    near_goal_share_end: Optional[float] = None
+    """once a task type's radius is 1, each further promotion lowers its share of near-goal starts by
+    `near_goal_step`, down to this (the curriculum handing its episodes back to ordinary resets); None: the share
+    stays `near_goal_share`."""
     near_goal_max_steps: Optional[int] = None
     """a near-goal episode that has not placed within this many steps is truncated (None: the task's step limit)."""
     goal_slot_weights: Optional[tuple[float, ...]] = None
@@ -439,6 +443,9 @@ def validate(args: Args) -> None:
     for name in ("near_goal_share", "near_goal_radius", "near_goal_promote", "reach_start_share"):
         if not 0 <= values[name] <= 1:
             raise SystemExit(f"--{name.replace('_', '-')} must lie in [0, 1], got {values[name]}")
+    end = args.starts.near_goal_share_end
+    if end is not None and not 0 <= end <= values["near_goal_share"]:
+        raise SystemExit(f"--near-goal-share-end {end}: a share in [0, --near-goal-share ({values['near_goal_share']})]")
     if not 0 <= args.starts.start_states_share <= 1:
         raise SystemExit(f"--start-states-share must lie in [0, 1], got {args.starts.start_states_share}")
     if args.starts.start_states_keep_clock and not args.starts.start_states:

@@ -166,6 +166,9 @@ class Progress:
     near_goal_radius: Optional[list] = None
     """the start-state curriculum's radius now per task type (ELEMENT_KINDS order; --near-goal-share); None before
     it starts."""
+    near_goal_share: Optional[list] = None
+    """the share of training episodes that start near the goal now per task type (--near-goal-share, lowered by
+    --near-goal-share-end's rule); None before it starts."""
     near_goal_recent: Optional[list] = None
     """per task type, whether each of its latest near-goal episodes placed (the window a widening looks at)."""
     ordinary_recent: Optional[list] = None
@@ -448,6 +451,7 @@ CSV_FIELDS = [
     # the fourth task type's, after the paper's three so that the columns of earlier runs keep their places
     "ordinary_place_paneling", "ordinary_pick_paneling", "near_goal_radius_paneling", "task_weight_paneling",
     "reach_start_radius_paneling0", "reach_start_radius_paneling1", "reach_start_radius_paneling2",
+    *[f"near_goal_share_{kind}" for kind in ELEMENT_KINDS],  # --near-goal-share-end's shares, newer still
 ]
 """`end_*` and `held_at_end`: where the iteration's training episodes ended (mean place distance in m and
 angle error in degrees to the goal at the last step, share with the element held), what a run that

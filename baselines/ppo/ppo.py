@@ -391,9 +391,10 @@ def episode_columns(args: Args, progress: Progress, episodes: dict, envs: Envs) 
         row.update(near_goal_radius=float(np.mean(radii)), near_goal_episodes=int(near.sum()),
                    near_goal_place_success=float(placed[near].mean()) if near.any() else float("nan"),
                    ordinary_place_success=float(placed[ordinary].mean()) if ordinary.any() else float("nan"),
-                   **{f"near_goal_radius_{kind}": r for kind, r in zip(ELEMENT_KINDS, progress.near_goal_radius)})
+                   **{f"near_goal_radius_{kind}": r for kind, r in zip(ELEMENT_KINDS, progress.near_goal_radius)},
+                   **{f"near_goal_share_{kind}": s for kind, s in zip(ELEMENT_KINDS, progress.near_goal_share)})
         if widen_near_goal(args, progress, task[near].tolist(), placed[near].tolist()):
-            call_task(envs, "set_near_goal_starts", args.starts.near_goal_share, tuple(progress.near_goal_radius),
+            call_task(envs, "set_near_goal_starts", tuple(progress.near_goal_share), tuple(progress.near_goal_radius),
                       args.starts.near_goal_max_steps)
     if args.starts.reach_start_radius is not None:
         grasped = np.asarray(episodes["reach_start_grasped"], dtype=float)
@@ -449,7 +450,9 @@ def train(run: Run) -> Progress:
         if progress.near_goal_radius is None:
             progress.near_goal_radius = [args.starts.near_goal_radius] * len(ELEMENT_KINDS)
             progress.near_goal_recent = [[] for _ in ELEMENT_KINDS]
-        call_task(envs, "set_near_goal_starts", args.starts.near_goal_share, tuple(progress.near_goal_radius),
+        if progress.near_goal_share is None:  # also a checkpoint saved before the share was part of the progress
+            progress.near_goal_share = [args.starts.near_goal_share] * len(ELEMENT_KINDS)
+        call_task(envs, "set_near_goal_starts", tuple(progress.near_goal_share), tuple(progress.near_goal_radius),
                   args.starts.near_goal_max_steps)
     if args.starts.reach_start_radius is not None:
         if progress.reach_start_radius is None:

@@ -24,7 +24,7 @@ from __future__ import annotations
 import multiprocessing as mp
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Optional, Sequence
+from typing import Callable, Optional, Sequence
 
 import gymnasium as gym
 import numpy as np
@@ -139,9 +139,20 @@ class StartFromStates(gym.Wrapper):
 
 def widen_near_goal(args: PPOArgs, progress: Progress, task_ids: list[int], placed: list[float]) -> bool:
     """Record the near-goal episodes that ended (their task types and whether they placed) and widen each task
-    type's radius whose last --near-goal-window episodes placed often enough (--near-goal-promote); whether any
-    radius widened. The windows are part of the progress: a resumed run goes on with them."""
-    return _widen(args, progress.near_goal_radius, progress.near_goal_recent, task_ids, placed)
+    type's radius whose last --near-goal-window episodes placed often enough (--near-goal-promote). Once a type's
+    radius is 1, with --near-goal-share-end, each such promotion lowers its share of near-goal starts by
+    --near-goal-step instead, down to that end: its starts cover the whole way to the goal, and the reverse curriculum
+    hands its episodes back to ordinary resets, the start distribution it is for (Florensa et al. 2017). Whether any
+    radius or share changed. The windows are part of the progress: a resumed run goes on with them."""
+    end, share = args.starts.near_goal_share_end, progress.near_goal_share
+
+    def hand_back(k: int) -> bool:
+        if end is None or share[k] <= end:
+            return False
+        share[k] = round(max(end, share[k] - args.starts.near_goal_step), 6)
+        return True
+
+    return _widen(args, progress.near_goal_radius, progress.near_goal_recent, task_ids, placed, hand_back)
 
 
 GOAL_SLOTS = 3
@@ -155,7 +166,10 @@ def widen_reach_starts(args: PPOArgs, progress: Progress, slots: list[int], gras
     return _widen(args, progress.reach_start_radius, progress.reach_start_recent, slots, grasped)
 
 
-def _widen(args: PPOArgs, radius: list, recent: list, keys: list[int], ok: list[float]) -> bool:
+def _widen(args: PPOArgs, radius: list, recent: list, keys: list[int], ok: list[float],
+           beyond: Callable[[int], bool] = lambda k: False) -> bool:
+    """The widening rule; a key whose radius is already 1 is promoted by `beyond(key)` (whether it changed
+    anything)."""
     widened = set()  # the rest of this iteration's episodes of a widened key started at the old radius
     for k, good in zip(keys, ok):
         if k in widened:
@@ -163,8 +177,11 @@ def _widen(args: PPOArgs, radius: list, recent: list, keys: list[int], ok: list[
         window = recent[k]
         window.append(float(good))
         del window[:-args.starts.near_goal_window]
-        if len(window) == args.starts.near_goal_window and np.mean(window) >= args.starts.near_goal_promote and radius[k] < 1:
-            radius[k] = round(min(1.0, radius[k] + args.starts.near_goal_step), 6)
+        if len(window) == args.starts.near_goal_window and np.mean(window) >= args.starts.near_goal_promote:
+            if radius[k] < 1:
+                radius[k] = round(min(1.0, radius[k] + args.starts.near_goal_step), 6)
+            elif not beyond(k):
+                continue
             window.clear()
             widened.add(k)
     return bool(widened)

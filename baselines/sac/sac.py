@@ -12,7 +12,8 @@ recipe (experiments/from_scratch.py `scratch_args`):
 - the start-state curriculum: 80% of the training episodes start near the goal (the tasks' `set_near_goal_starts`),
   each task type's radius from 0.1 widened by 0.1 once 60% of its last 20 such episodes placed
   (baselines/ppo/start_states.py `widen_near_goal`), such an episode cut after 80 steps (NearGoalTimeLimit);
-  evaluation resets as usual;
+  evaluation resets as usual; with --near-goal-share-end (off in the recipe), a type whose radius is 1 hands its
+  near-goal starts back to ordinary resets at each further promotion, down to that share;
 - episode ends: success is absorbing, its reward for ever (target r / (1 - gamma), PPO's
   `success_value="absorbing"`); a failure (`info["fail"]`: among obstacles, a touch) has nothing after it (target r);
   a time limit (or the near-goal cut) bootstraps from the final observation; gamma 0.95;
@@ -166,6 +167,10 @@ class Args:
     """success from near-goal starts that widens a task type's radius."""
     near_goal_window: int = 20
     """near-goal episodes of a task type whose success decides a widening."""
+    near_goal_share_end: Optional[float] = None
+    """once a task type's radius is 1, each further promotion lowers its share of near-goal starts by
+    `near_goal_step`, down to this (the curriculum handing its episodes back to ordinary resets); None: the share
+    stays `near_goal_share`."""
     near_goal_max_steps: Optional[int] = 80
     """a near-goal episode that has not placed within this many steps is cut (truncated; None: the task's limit)."""
 
@@ -254,7 +259,7 @@ CSV_FIELDS = [
     "eval_extrinsic_return", "near_goal_radius", "near_goal_episodes", "near_goal_place_success",
     "ordinary_place_success", *[f"ordinary_place_{kind}" for kind in ELEMENT_KINDS],
     *[f"ordinary_pick_{kind}" for kind in ELEMENT_KINDS], *[f"ordinary_collided_{kind}" for kind in ELEMENT_KINDS],
-    *[f"near_goal_radius_{kind}" for kind in ELEMENT_KINDS],
+    *[f"near_goal_radius_{kind}" for kind in ELEMENT_KINDS], *[f"near_goal_share_{kind}" for kind in ELEMENT_KINDS],
     "sps", "wall_s", "env_s", "update_s", "eval_s", "checkpoint_s", "update_share", "updates", "buffer_fill",
     "alpha", "entropy", "qf1_loss", "qf2_loss", "q_value", "actor_loss", "alpha_loss",
 ]
@@ -318,6 +323,9 @@ def validate(args: Args) -> None:
     for name in ("near_goal_share", "near_goal_radius", "near_goal_promote"):
         if not 0 <= getattr(args, name) <= 1:
             raise SystemExit(f"--{name.replace('_', '-')} must lie in [0, 1], got {getattr(args, name)}")
+    if args.near_goal_share_end is not None and not 0 <= args.near_goal_share_end <= args.near_goal_share:
+        raise SystemExit(f"--near-goal-share-end {args.near_goal_share_end}: a share in [0, --near-goal-share "
+                         f"({args.near_goal_share})]")
     if not 0 < args.near_goal_step <= 1:
         raise SystemExit(f"--near-goal-step {args.near_goal_step} must lie in (0, 1]")
     if args.near_goal_max_steps is not None and args.near_goal_max_steps < 1:
@@ -362,7 +370,8 @@ def stage_at(args: Args, global_step: int) -> str:
 
 
 def set_near_goal_starts(args: Args, envs: CPUVectorEnv, progress: Progress) -> None:
-    envs.call("set_near_goal_starts", args.near_goal_share, tuple(progress.near_goal_radius), args.near_goal_max_steps)
+    envs.call("set_near_goal_starts", tuple(progress.near_goal_share), tuple(progress.near_goal_radius),
+              args.near_goal_max_steps)
 
 
 def segment_seed(args: Args, global_step: int) -> int:
@@ -886,7 +895,8 @@ def episode_columns(args: Args, progress: Progress, episodes: dict) -> dict:
         row.update(near_goal_radius=float(np.mean(progress.near_goal_radius)), near_goal_episodes=int(near.sum()),
                    near_goal_place_success=float(placed[near].mean()) if near.any() else float("nan"),
                    ordinary_place_success=float(placed[~near].mean()) if (~near).any() else float("nan"),
-                   **{f"near_goal_radius_{kind}": r for kind, r in zip(ELEMENT_KINDS, progress.near_goal_radius)})
+                   **{f"near_goal_radius_{kind}": r for kind, r in zip(ELEMENT_KINDS, progress.near_goal_radius)},
+                   **{f"near_goal_share_{kind}": s for kind, s in zip(ELEMENT_KINDS, progress.near_goal_share)})
     return row
 
 
@@ -926,6 +936,8 @@ def train(run: Run) -> Progress:
         if progress.near_goal_radius is None:
             progress.near_goal_radius = [args.near_goal_radius] * len(ELEMENT_KINDS)
             progress.near_goal_recent = [[] for _ in ELEMENT_KINDS]
+        if progress.near_goal_share is None:  # also a checkpoint saved before the share was part of the progress
+            progress.near_goal_share = [args.near_goal_share] * len(ELEMENT_KINDS)
         set_near_goal_starts(args, envs, progress)
     log = CSVLog(run.path.with_name("progress.csv"), progress.global_step if args.resume else None, fields=CSV_FIELDS)
     stage = None  # the tolerance stage the envs are in: set before the first step, again where it changes

@@ -299,7 +299,7 @@ class ConstructionTaskEnv(SiteObstacles, StartStates, BaseEnv):
             self._place_obstacles(env_idx)
             if bool((self.reach_start_share > 0).any()):
                 self._start_on_the_way(env_idx)
-            if self.near_goal_share > 0:
+            if bool((self.near_goal_share > 0).any()):
                 self._start_near_goal(env_idx)
 
     def _place_goal_markers(self, env_idx: torch.Tensor) -> None:

@@ -42,34 +42,38 @@ class StartStates:
         if not 0 <= reach_start_share <= 1:
             raise ValueError(f"reach_start_share must lie in [0, 1], got {reach_start_share}")
         self.reach_start_share = torch.tensor(float(reach_start_share)).expand(len(ELEMENT_KINDS))  # per task type
-        self.near_goal_share, self.near_goal_radius, self.near_goal_max_steps = 0.0, None, None
+        self.near_goal_share = torch.zeros(len(ELEMENT_KINDS))  # per task type
+        self.near_goal_radius, self.near_goal_max_steps = None, None
         self.reach_start_radius: Optional[torch.Tensor] = None  # set_reach_starts: [kinds, slots]; None: the kwarg's way
         self._grasp_start_q: Optional[torch.Tensor] = None
 
-    def set_near_goal_starts(self, share: float, radius: Union[float, Sequence[float]],
+    def set_near_goal_starts(self, share: Union[float, Sequence[float]], radius: Union[float, Sequence[float]],
                              max_steps: Optional[int] = None) -> None:
         """From the next reset on, a `share` of episodes start with the element already held, the arm posed a
-        fraction in [0, `radius`] (one for all task types, or one per type in ELEMENT_KINDS order) of the way out
+        fraction in [0, `radius`] (each one for all task types, or one per type in ELEMENT_KINDS order) of the way out
         along a usable start path from its installation configuration (`carry_geometry`: backed off the goal along
         the plate's axis, then on to a lift above the staging table), within the path's collision-free part.
         `info["near_goal_start"]` marks those episodes; with `max_steps`, one that has not placed within that many
         steps is truncated where the env is wrapped in `NearGoalTimeLimit` (a start close to the goal that has
         wandered off teaches little more for the rest of the step limit)."""
-        radii = [float(radius)] * len(ELEMENT_KINDS) if np.isscalar(radius) else [float(r) for r in radius]
-        if len(radii) != len(ELEMENT_KINDS):
-            raise ValueError(f"near-goal starts: give one radius or {len(ELEMENT_KINDS)} ({', '.join(ELEMENT_KINDS)}), got {radius}")
-        for name, value in [("share", share)] + [("radius", r) for r in radii]:
+        kinds = len(ELEMENT_KINDS)
+        radii = [float(radius)] * kinds if np.isscalar(radius) else [float(r) for r in radius]
+        shares = [float(share)] * kinds if np.isscalar(share) else [float(s) for s in share]
+        for name, given, values in (("radius", radius, radii), ("share", share, shares)):
+            if len(values) != kinds:
+                raise ValueError(f"near-goal starts: give one {name} or {kinds} ({', '.join(ELEMENT_KINDS)}), got {given}")
+        for name, value in [("share", s) for s in shares] + [("radius", r) for r in radii]:
             if not 0 <= value <= 1:
                 raise ValueError(f"near-goal starts: {name} must lie in [0, 1], got {value}")
         if max_steps is not None and not 0 < max_steps:
             raise ValueError(f"near-goal starts: max_steps must be a positive step count or None, got {max_steps}")
-        self.near_goal_share = float(share)
+        self.near_goal_share = torch.tensor(shares)
         self.near_goal_max_steps = None if max_steps is None else int(max_steps)
         self.near_goal_radius = torch.tensor(radii, dtype=torch.float32, device=self.device)
 
     def _start_near_goal(self, env_idx: torch.Tensor) -> None:
         paths, b = self.geometry.paths, len(env_idx)
-        chosen = torch.rand(b) < self.near_goal_share
+        chosen = torch.rand(b) < self.near_goal_share[self.task_id[env_idx].cpu()]
         usable = paths["usable"][self.task_id[env_idx], self.goal_slot[env_idx]]
         clear = self._clear_paths_of(env_idx)
         if clear is not None:  # with obstacles: on a way clear of them (a detour where no usable path is), and an
