@@ -101,7 +101,7 @@ TRAIN_RUNS = {
     "the same, reward 3 (the grasp side's ways first)": ("shipped", "sac", 0.5, 3),
     "the same, every episode among obstacles (--share 1)": ("shipped", "sac", 1.0, 3),
     "the same, reward 4 (a touch ends with nothing after it)": ("shipped", "sac", 1.0, 4),
-    "the same, version 5 (near-goal starts handed back)": ("shipped", "sac", 1.0, 5),
+    "the same, near-goal starts handed back (version 5)": ("shipped", "sac", 1.0, 5),
 }
 """the runs among obstacles `--training-curve` draws, each seed of TRAIN_SEEDS it has: label -> (--train, --learner,
 --share, --obstacle-reward)."""
@@ -145,7 +145,7 @@ def training_run(start: str, seed: int = 1, num_envs: Optional[int] = None, lear
                                  + ("" if reward == OBSTACLE_REWARD else f" --obstacle-reward {reward}"),
                                  f"a site with obstacles ({TRAIN_SCENE})"
                                  + (f" in {share:.0%} of its training episodes" if mixed else "")
-                                 + ("" if reward == 1 else f" (obstacle reward {reward})"),
+                                 + ("" if reward == 1 else f" (obstacle {version_name(reward)})"),
                                  learner, obstacles=TRAIN_SCENE, **({"obstacle_share": share} if mixed else {}),
                                  **({"near_goal_share_end": HAND_BACK_END} if reward >= 5 else {}))
 
@@ -155,10 +155,16 @@ def scene_name(share: float) -> str:
     return f"{TRAIN_SCENE} obstacles" + ("" if share == 1 else f" in {share:.0%} of episodes")
 
 
+def version_name(reward: int) -> str:
+    """What an OBSTACLE_REWARDS version trains on, in words for a row label: its reward, and from version 5 on the
+    hand-back of near-goal starts (not a reward of its own)."""
+    return "reward 4, near-goal starts handed back" if reward >= 5 else f"reward {reward}"
+
+
 def trained_label(start: str, learner: Optional[str], share: float, reward: int, seed: int, step: int) -> str:
     """The row label of a training run's snapshot at `step`: its learner and start, scene and reward, seed, steps."""
-    return (f"{transfer.start_name(start, learner)}, {scene_name(share)}, reward {reward}, seed {seed}, {step:,} "
-            f"env steps{TRAINED}")
+    return (f"{transfer.start_name(start, learner)}, {scene_name(share)}, {version_name(reward)}, seed {seed}, "
+            f"{step:,} env steps{TRAINED}")
 
 
 def candidate_path(run: Run, step: int) -> Path:

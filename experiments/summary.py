@@ -122,8 +122,8 @@ def trained_table() -> list[str]:
     for start, learner, share, reward, seed, step in obstacles.SHOWN:
         row = moving.get(obstacles.trained_label(start, learner, share, reward, seed, step))
         if row is not None:
-            lines.append(f"| {obstacles.scene_name(share)}, reward {reward} | {transfer.start_name(start, learner)} | "
-                         f"{seed} | {step:,} | " + " / ".join(_placed(row)) + f" | {OBSTACLES} |")
+            lines.append(f"| {obstacles.scene_name(share)}, {obstacles.version_name(reward)} | "
+                         f"{transfer.start_name(start, learner)} | {seed} | {step:,} | " + " / ".join(_placed(row)) + f" | {OBSTACLES} |")
     return lines
 
 

@@ -465,12 +465,14 @@ def test_each_trained_snapshot_results_shows_is_committed_and_labelled_by_its_ru
         run = obstacles.training_run(start, seed, None, learner, share, reward)
         assert Path(policy) == obstacles.candidate_path(run, step) and Path(policy).is_file()
         assert subprocess.run(["git", "ls-files", "--error-unmatch", policy], capture_output=True).returncode == 0
-        assert label.endswith(obstacles.TRAINED) and f"reward {reward}, seed {seed}, {step:,} env steps" in label
+        assert label.endswith(obstacles.TRAINED) and f"{obstacles.version_name(reward)}, seed {seed}, {step:,} env steps" in label
     assert obstacles.trained_label("shipped", "sac", 0.5, 3, 2, 400_000) == (
         "SAC from SAC's agent, moving obstacles in 50% of episodes, reward 3, seed 2, 400,000 env steps"
         " (trained among obstacles)")
     assert obstacles.trained_label("shipped", None, 1.0, 1, 1, 460_000).startswith(
         "PPO from PPO's agent, moving obstacles,")
+    assert ", moving obstacles, reward 4, near-goal starts handed back, seed 1," in obstacles.trained_label(
+        "shipped", "sac", 1.0, 5, 1, 200_000), "version 5 is no reward of its own"
 
 
 def test_sac_on_a_mixed_scene_is_its_own_run_unchanged_but_for_the_share_and_refuses_ppo():
@@ -504,7 +506,7 @@ def test_the_runs_on_the_earlier_obstacle_reward_keep_their_folders_and_are_not_
     assert old.name == "obstacles_moving_share50_shipped_sac_s1" and "obstacle reward" not in old.what
     assert old.command.startswith("python -m experiments.obstacles --share 0.5 --obstacle-reward 1 --train shipped")
     new = obstacles.training_run("shipped", 1, None, "sac", 0.5)
-    assert new.name == "obstacles_moving_share50_r5_shipped_sac_s1" and "(obstacle reward 5)" in new.what
+    assert new.name == "obstacles_moving_share50_r5_shipped_sac_s1" and "(obstacle reward 4, near-goal starts handed back)" in new.what
     assert "--obstacle-reward" not in new.command
     r4 = obstacles.training_run("shipped", 1, None, "sac", 0.5, reward=4)
     assert r4.name == "obstacles_moving_share50_r4_shipped_sac_s1" and "--obstacle-reward 4" in r4.command
