@@ -451,7 +451,8 @@ CSV_FIELDS = [
     # the fourth task type's, after the paper's three so that the columns of earlier runs keep their places
     "ordinary_place_paneling", "ordinary_pick_paneling", "near_goal_radius_paneling", "task_weight_paneling",
     "reach_start_radius_paneling0", "reach_start_radius_paneling1", "reach_start_radius_paneling2",
-    *[f"near_goal_share_{kind}" for kind in ELEMENT_KINDS],  # --near-goal-share-end's shares, newer still
+    # --near-goal-share-end's shares, newer still (plain names: scripts/plot_training.py reads this list as a literal)
+    "near_goal_share_ceiling", "near_goal_share_window", "near_goal_share_flooring", "near_goal_share_paneling",
 ]
 """`end_*` and `held_at_end`: where the iteration's training episodes ended (mean place distance in m and
 angle error in degrees to the goal at the last step, share with the element held), what a run that
