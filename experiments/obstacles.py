@@ -71,7 +71,7 @@ TRAIN_SCENE = "moving"
 """the scene a training run among obstacles draws: the stack and the post, and the worker walking across."""
 TRAIN_BUDGET = 3_000_000
 """env steps of each training run among obstacles."""
-OBSTACLE_REWARDS = (1, 2, 3, 4, 5)
+OBSTACLE_REWARDS = (1, 2, 3, 4, 5, 6)
 OBSTACLE_REWARD = OBSTACLE_REWARDS[-1]
 """the version of what `--train` trains on among obstacles, the dense reward and the value of a touch, named in the
 run's folder: 1, the carry
@@ -84,14 +84,21 @@ end with nothing after it in the learners' targets (baselines/ppo/evaluation.py 
 valued it as they value success, the touching step's reward for ever, so that a touch while holding the element was
 worth about as much as carrying on (`_r4`); 5, reward 4, and the near-goal starts handed back to ordinary resets
 once they cover the whole way to the goal (HAND_BACK_END; `_r5`): a start-state device, not the reward, but a change
-of what a run trains on all the same. The site as built measures the same in all five."""
-TRAINABLE = (4, 5)
+of what a run trains on all the same; 6, version 5, and half of the training episodes (before near-goal starts draw
+theirs) start on the way to the element, toward a turret side the clear ways leave from (REACH_START_SHARE; `_r6`).
+The site as built measures the same in all six."""
+TRAINABLE = (4, 5, 6)
 """the versions whose code is still here: a run on one of them can be trained (or resumed)."""
 HAND_BACK_END = 0.2
 """version 5: the share of near-goal starts each task type's falls to once its radius is 1 (the learners'
 --near-goal-share-end), from the recipe's 0.8: about 2 in 100 training episodes were the window's reaches that must
 turn away from the scaffold post, and four in five started holding the element at a radius every type reached within
 60,000 env steps and then placed about 95% of the time."""
+REACH_START_SHARE = 0.5
+"""version 6: the learners' --reach-start-share. Handing near-goal starts back (version 5) left windows where they
+were: the same ten static window layouts were touched before the pick by every agent, blind or trained, the turret
+swept the way the site as built taught it, and a sweep the other way round, toward the side the reach measures
+toward, has to be found from the rest pose by chance; a start part of the way along it shows where it leads."""
 TRAIN_RUNS = {
     "PPO from PPO's reward-only agent, reward 1": ("shipped", None, 1.0, 1),
     "SAC from nothing, reward 1": ("nothing", "sac", 1.0, 1),
@@ -102,6 +109,7 @@ TRAIN_RUNS = {
     "the same, every episode among obstacles (--share 1)": ("shipped", "sac", 1.0, 3),
     "the same, reward 4 (a touch ends with nothing after it)": ("shipped", "sac", 1.0, 4),
     "the same, near-goal starts handed back (version 5)": ("shipped", "sac", 1.0, 5),
+    "the same, and reach starts (version 6)": ("shipped", "sac", 1.0, 6),
 }
 """the runs among obstacles `--training-curve` draws, each seed of TRAIN_SEEDS it has: label -> (--train, --learner,
 --share, --obstacle-reward)."""
@@ -147,7 +155,8 @@ def training_run(start: str, seed: int = 1, num_envs: Optional[int] = None, lear
                                  + (f" in {share:.0%} of its training episodes" if mixed else "")
                                  + ("" if reward == 1 else f" (obstacle {version_name(reward)})"),
                                  learner, obstacles=TRAIN_SCENE, **({"obstacle_share": share} if mixed else {}),
-                                 **({"near_goal_share_end": HAND_BACK_END} if reward >= 5 else {}))
+                                 **({"near_goal_share_end": HAND_BACK_END} if reward >= 5 else {}),
+                                 **({"reach_start_share": REACH_START_SHARE} if reward >= 6 else {}))
 
 
 def scene_name(share: float) -> str:
@@ -157,8 +166,9 @@ def scene_name(share: float) -> str:
 
 def version_name(reward: int) -> str:
     """What an OBSTACLE_REWARDS version trains on, in words for a row label: its reward, and from version 5 on the
-    hand-back of near-goal starts (not a reward of its own)."""
-    return "reward 4, near-goal starts handed back" if reward >= 5 else f"reward {reward}"
+    start-state devices (not a reward of their own)."""
+    return ("reward 4, near-goal starts handed back" + (", reach starts" if reward >= 6 else "") if reward >= 5
+            else f"reward {reward}")
 
 
 def trained_label(start: str, learner: Optional[str], share: float, reward: int, seed: int, step: int) -> str:

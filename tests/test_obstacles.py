@@ -373,8 +373,9 @@ def test_ppo_trains_among_obstacles_and_its_policy_sees_them_wherever_it_is_eval
 
 def test_the_recipe_trains_among_obstacles_from_the_shipped_weights_unchanged_but_for_the_scene_and_budget(tmp_path):
     """`--train shipped`: the from-scratch recipe's arguments, but for the tasks' `obstacles`, the budget, the run's
-    name, the hand-back of near-goal starts (version 5) and the initial weights: the shipped reward-only agent's, which
-    gain the obstacle inputs (at zero weight) and train among them; its row files are named for its run."""
+    name, the hand-back of near-goal starts (version 5; its reach starts, version 6, are the recipe's own) and the
+    initial weights: the shipped reward-only agent's, which gain the obstacle inputs (at zero weight) and train among
+    them; its row files are named for its run."""
     from baselines.ppo import ppo
     from baselines.ppo.checkpoints import load_checkpoint
     from experiments import from_scratch, obstacles
@@ -473,6 +474,8 @@ def test_each_trained_snapshot_results_shows_is_committed_and_labelled_by_its_ru
         "PPO from PPO's agent, moving obstacles,")
     assert ", moving obstacles, reward 4, near-goal starts handed back, seed 1," in obstacles.trained_label(
         "shipped", "sac", 1.0, 5, 1, 200_000), "version 5 is no reward of its own"
+    assert ", reward 4, near-goal starts handed back, reach starts, seed 1," in obstacles.trained_label(
+        "shipped", "sac", 1.0, 6, 1, 200_000)
 
 
 def test_sac_on_a_mixed_scene_is_its_own_run_unchanged_but_for_the_share_and_refuses_ppo():
@@ -481,10 +484,10 @@ def test_sac_on_a_mixed_scene_is_its_own_run_unchanged_but_for_the_share_and_ref
     from experiments import obstacles
 
     full, mixed = obstacles.training_run("nothing"), obstacles.training_run("nothing", share=0.5)  # SAC by default
-    assert full == obstacles.training_run("nothing", learner="sac") and full.name == "obstacles_moving_r5_sac_s1"
+    assert full == obstacles.training_run("nothing", learner="sac") and full.name == "obstacles_moving_r6_sac_s1"
     changed = {k for k, v in vars(mixed.args).items() if v != vars(full.args)[k]}
     assert changed == {"obstacle_share", "exp_name"} and mixed.args.obstacle_share == 0.5
-    assert mixed.name == "obstacles_moving_share50_r5_sac_s1" != full.name
+    assert mixed.name == "obstacles_moving_share50_r6_sac_s1" != full.name
     assert mixed.command == "python -m experiments.obstacles --share 0.5 --train nothing --learner sac --train-seed 1"
     assert "in 50% of its training episodes" in mixed.what
     with pytest.raises(SystemExit, match="SAC's option"):
@@ -496,29 +499,33 @@ def test_sac_on_a_mixed_scene_is_its_own_run_unchanged_but_for_the_share_and_ref
 
 
 def test_the_runs_on_the_earlier_obstacle_reward_keep_their_folders_and_are_not_trained_on():
-    """OBSTACLE_REWARD names what a run among obstacles trains on: today's runs' folders carry it (`_r5`), the runs
+    """OBSTACLE_REWARD names what a run among obstacles trains on: today's runs' folders carry it (`_r6`), the runs
     on rewards 1 (before the detours), 2 and 3 (a touch valued as success is) keep theirs, for --evaluate and the
-    tables, and training one is refused; version 4 (without the hand-back of near-goal starts) can still be trained,
-    and 5 differs from it in that alone."""
+    tables, and training one is refused; versions 4 and 5 can still be trained: 5 is 4 with the hand-back of
+    near-goal starts, 6 is 5 with reach starts."""
     from experiments import obstacles
 
     old = obstacles.training_run("shipped", 1, None, "sac", 0.5, reward=1)
     assert old.name == "obstacles_moving_share50_shipped_sac_s1" and "obstacle reward" not in old.what
     assert old.command.startswith("python -m experiments.obstacles --share 0.5 --obstacle-reward 1 --train shipped")
     new = obstacles.training_run("shipped", 1, None, "sac", 0.5)
-    assert new.name == "obstacles_moving_share50_r5_shipped_sac_s1" and "(obstacle reward 4, near-goal starts handed back)" in new.what
-    assert "--obstacle-reward" not in new.command
-    r4 = obstacles.training_run("shipped", 1, None, "sac", 0.5, reward=4)
+    assert new.name == "obstacles_moving_share50_r6_shipped_sac_s1" and "--obstacle-reward" not in new.command
+    assert "(obstacle reward 4, near-goal starts handed back, reach starts)" in new.what
+    r4, r5 = (obstacles.training_run("shipped", 1, None, "sac", 0.5, reward=v) for v in (4, 5))
     assert r4.name == "obstacles_moving_share50_r4_shipped_sac_s1" and "--obstacle-reward 4" in r4.command
-    changed = {k for k, v in vars(new.args).items() if v != vars(r4.args)[k]}
+    assert r5.name == "obstacles_moving_share50_r5_shipped_sac_s1" and "--obstacle-reward 5" in r5.command
+    changed = {k for k, v in vars(r5.args).items() if v != vars(r4.args)[k]}
     assert changed == {"exp_name", "near_goal_share_end"} and r4.args.near_goal_share_end is None
-    assert new.args.near_goal_share_end == obstacles.HAND_BACK_END < new.args.near_goal_share
+    assert r5.args.near_goal_share_end == obstacles.HAND_BACK_END < r5.args.near_goal_share
+    changed = {k for k, v in vars(new.args).items() if v != vars(r5.args)[k]}
+    assert changed == {"exp_name", "reach_start_share"} and r5.args.reach_start_share == 0
+    assert new.args.reach_start_share == obstacles.REACH_START_SHARE
     probe = obstacles.training_run("shipped", 1, None, "sac", 0.5, reward=2)
     assert probe.name == "obstacles_moving_share50_r2_shipped_sac_s1" and "--obstacle-reward 2" in probe.command
     r3 = obstacles.training_run("shipped", 1, None, "sac", 0.5, reward=3)
     assert r3.name == "obstacles_moving_share50_r3_shipped_sac_s1" and "--obstacle-reward 3" in r3.command
-    with pytest.raises(SystemExit, match="--obstacle-reward 6"):
-        obstacles.training_run("shipped", reward=6)
+    with pytest.raises(SystemExit, match="--obstacle-reward 7"):
+        obstacles.training_run("shipped", reward=7)
     for earlier in (1, 2, 3):
         with pytest.raises(SystemExit, match="that reward is gone"):
             obstacles.main(obstacles.Args(train="shipped", learner="sac", share=0.5, obstacle_reward=earlier))

@@ -73,6 +73,34 @@ def test_a_short_run_changes_the_actor_and_writes_the_csv_columns(tmp_path):
     assert (tmp_path / "short" / "checkpoint.pt").is_file() and (tmp_path / "short" / "replay_buffer_400.pt").is_file()
 
 
+def test_reach_starts_are_a_training_device_counted_apart_from_the_ordinary_resets(tmp_path):
+    """--reach-start-share: the training envs get the tasks' `reach_start_share` (evaluation's do not); a run's
+    episodes that started on the way to the element are counted in their own columns, not as ordinary resets."""
+    from types import SimpleNamespace
+
+    from ms_construction.parameters import ELEMENT_KINDS
+
+    args = sac.Args(reach_start_share=0.5)
+    assert sac.env_kwargs(args)["reach_start_share"] == 0.5 and "reach_start_share" not in sac.env_kwargs(args, False)
+    assert "reach_start_share" not in sac.env_kwargs(sac.Args())
+    episodes = {"success": [1.0, 0.0, 0.0], "picked": [1.0, 1.0, 0.0], "task_id": [1, 1, 1], "collided": [False] * 3,
+                "near_goal": [False, False, False], "reach_start": [True, True, False],
+                "reach_start_grasped": [1.0, 0.0, 0.0], "length": [1.0] * 3}
+    episodes.update({key: [0.0] * 3 for key in sac.EPISODE_STATS.values() if key not in episodes})
+    progress = SimpleNamespace(near_goal_radius=[0.1] * len(ELEMENT_KINDS), near_goal_share=[0.8] * len(ELEMENT_KINDS))
+    row = sac.episode_columns(args, progress, episodes)
+    assert row["reach_start_episodes"] == 2 and row["reach_start_grasp_success"] == 0.5
+    assert row["ordinary_place_window"] == 0.0 and row["ordinary_pick_window"] == 0.0  # the one ordinary reset
+    assert row["ordinary_place_success"] == 0.0
+    run = sac.setup(tiny_args(tmp_path, total_timesteps=400, exp_name="reach", checkpoint_freq=400, near_goal_share=0.0,
+                              reach_start_share=1.0))
+    sac.train(run)
+    rows = read_csv(tmp_path / "reach" / "progress.csv")
+    ended = sum(int(r["reach_start_episodes"] or 0) for r in rows)
+    assert ended >= 1 and not any(r[f"ordinary_place_{kind}"] for r in rows for kind in ELEMENT_KINDS), \
+        "every episode started on the way: none is an ordinary reset's"
+
+
 def test_a_run_resumed_halfway_ends_with_the_uninterrupted_run_s_weights(tmp_path):
     """Run U: 600 env steps with a checkpoint at 300. Run I: 300 steps, then --resume --extend to 600. Every weight,
     optimizer moment, log alpha, the replay buffer and the curriculum's progress end the same, bit for bit (every
@@ -255,6 +283,7 @@ def test_resume_refuses_a_checkpoint_without_its_buffer_and_a_ppo_checkpoint(tmp
     (dict(gamma=1.0), "--gamma"),
     (dict(tau=0.0), "--tau"),
     (dict(near_goal_share=1.5), "--near-goal-share"),
+    (dict(reach_start_share=-0.1), "--reach-start-share"),
     (dict(near_goal_share_end=0.9), "--near-goal-share-end 0.9: a share in \\[0, --near-goal-share \\(0.8\\)\\]"),
     (dict(env_id="PickCube-v1"), "--env-id"),
     (dict(num_layers=0), "--num-layers"),

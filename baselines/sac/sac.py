@@ -173,6 +173,11 @@ class Args:
     stays `near_goal_share`."""
     near_goal_max_steps: Optional[int] = 80
     """a near-goal episode that has not placed within this many steps is cut (truncated; None: the task's limit)."""
+    reach_start_share: float = 0.0
+    """this share of the training episodes (before near-goal starts draw theirs) start with the arm a uniform fraction
+    in [0, 0.75) of the joint line from its start configuration to a table grasp configuration on a turret side the
+    goal slot's start paths (among obstacles, the ways clear of them) leave from, the element lying on the table (the
+    tasks' `reach_start_share`); 0 in the recipe. Their episodes are counted apart from the ordinary resets."""
 
     # ---- SAC ----
     gamma: float = 0.95
@@ -260,7 +265,7 @@ CSV_FIELDS = [
     "ordinary_place_success", *[f"ordinary_place_{kind}" for kind in ELEMENT_KINDS],
     *[f"ordinary_pick_{kind}" for kind in ELEMENT_KINDS], *[f"ordinary_collided_{kind}" for kind in ELEMENT_KINDS],
     *[f"near_goal_radius_{kind}" for kind in ELEMENT_KINDS], *[f"near_goal_share_{kind}" for kind in ELEMENT_KINDS],
-    "sps", "wall_s", "env_s", "update_s", "eval_s", "checkpoint_s", "update_share", "updates", "buffer_fill",
+    "reach_start_episodes", "reach_start_grasp_success", "sps", "wall_s", "env_s", "update_s", "eval_s", "checkpoint_s", "update_share", "updates", "buffer_fill",
     "alpha", "entropy", "qf1_loss", "qf2_loss", "q_value", "actor_loss", "alpha_loss",
 ]
 """progress.csv's columns: ppo.py's (the same names, so experiments/from_scratch.py's and scripts/plot_training.py's
@@ -320,7 +325,7 @@ def validate(args: Args) -> None:
             raise SystemExit(f"--{name.replace('_', '-')} must be > 0, got {getattr(args, name)}")
     if args.eval_freq < 0 or args.num_eval_envs < 0 or (args.eval_freq > 0 and args.num_eval_envs < 1):
         raise SystemExit(f"--eval-freq {args.eval_freq} (0: never) with --num-eval-envs {args.num_eval_envs} >= 1")
-    for name in ("near_goal_share", "near_goal_radius", "near_goal_promote"):
+    for name in ("near_goal_share", "near_goal_radius", "near_goal_promote", "reach_start_share"):
         if not 0 <= getattr(args, name) <= 1:
             raise SystemExit(f"--{name.replace('_', '-')} must lie in [0, 1], got {getattr(args, name)}")
     if args.near_goal_share_end is not None and not 0 <= args.near_goal_share_end <= args.near_goal_share:
@@ -353,6 +358,8 @@ def env_kwargs(args: Args, train: bool = True) -> dict:
             kwargs["obstacle_share"] = args.obstacle_share
     if train and args.goal_slots:
         kwargs["goal_slot_weights"] = slot_weights(args.goal_slots)
+    if train and args.reach_start_share:
+        kwargs["reach_start_share"] = args.reach_start_share
     return kwargs
 
 
@@ -856,6 +863,8 @@ def collect(run: Run, envs: CPUVectorEnv, obs: torch.Tensor, episodes: dict) -> 
             for key in EPISODE_STATS.values():
                 episodes[key] += ep[key][ended].float().tolist()
             episodes["near_goal"] += ep["near_goal_start"][ended].tolist()
+            episodes["reach_start"] += ep["reach_start"][ended].tolist()
+            episodes["reach_start_grasped"] += ep["reach_start_grasped"][ended].float().tolist()
             episodes["task_id"] += ep["task_id"][ended].tolist()
             episodes["collided"] += ep["collided"][ended].tolist()
         run.buffer.add(obs, final_obs, actions, reward * args.reward_scale, terminated, failed)
@@ -879,22 +888,29 @@ def widen_starts(run: Run, envs: CPUVectorEnv, episodes: dict) -> None:
 def episode_columns(args: Args, progress: Progress, episodes: dict) -> dict:
     """progress.csv's columns of the episodes that ended since the last row (ppo.py's names): EPISODE_STATS' means,
     the place and pick success of ordinary resets (per task type; with --obstacles, the share that touched one too),
-    the place success of near-goal starts, and the radii now."""
+    the place success of near-goal starts, and the radii now; with --reach-start-share, how many episodes started on
+    the way to the element and the share of them grasped from the side they started on."""
     row = {}
     if episodes["success"]:
         row.update({column: float(np.mean(episodes[key])) for column, key in EPISODE_STATS.items()})
     near, placed = np.asarray(episodes["near_goal"], dtype=bool), np.asarray(episodes["success"], dtype=float)
     task, picked = np.asarray(episodes["task_id"], dtype=int), np.asarray(episodes["picked"], dtype=float)
+    reach = np.asarray(episodes.get("reach_start") or [False] * len(near), dtype=bool)
+    ordinary = ~near & ~reach
     for k, kind in enumerate(ELEMENT_KINDS):
-        if ((task == k) & ~near).any():
-            row[f"ordinary_place_{kind}"] = float(placed[(task == k) & ~near].mean())
-            row[f"ordinary_pick_{kind}"] = float(picked[(task == k) & ~near].mean())
+        if ((task == k) & ordinary).any():
+            row[f"ordinary_place_{kind}"] = float(placed[(task == k) & ordinary].mean())
+            row[f"ordinary_pick_{kind}"] = float(picked[(task == k) & ordinary].mean())
             if args.obstacles is not None:
-                row[f"ordinary_collided_{kind}"] = float(np.mean(np.asarray(episodes["collided"])[(task == k) & ~near]))
+                row[f"ordinary_collided_{kind}"] = float(np.mean(np.asarray(episodes["collided"])[(task == k) & ordinary]))
+    if args.reach_start_share > 0:
+        grasped = np.asarray(episodes["reach_start_grasped"], dtype=float)
+        row.update(reach_start_episodes=int(reach.sum()),
+                   reach_start_grasp_success=float(grasped[reach].mean()) if reach.any() else float("nan"))
     if args.near_goal_share > 0:
         row.update(near_goal_radius=float(np.mean(progress.near_goal_radius)), near_goal_episodes=int(near.sum()),
                    near_goal_place_success=float(placed[near].mean()) if near.any() else float("nan"),
-                   ordinary_place_success=float(placed[~near].mean()) if (~near).any() else float("nan"),
+                   ordinary_place_success=float(placed[ordinary].mean()) if ordinary.any() else float("nan"),
                    **{f"near_goal_radius_{kind}": r for kind, r in zip(ELEMENT_KINDS, progress.near_goal_radius)},
                    **{f"near_goal_share_{kind}": s for kind, s in zip(ELEMENT_KINDS, progress.near_goal_share)})
     return row
