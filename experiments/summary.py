@@ -138,8 +138,9 @@ def summary() -> str:
         "Generalization, trained: the recipe's learners trained on the new setting (or, for openings, on the others); "
         "the same protocols (paneling: 50,000 env steps; openings: 50,000 env steps per task; obstacles: the expert's "
         "solvable seeds, the moving scene). From SAC's agent: the networks of the run the shipped reward-only agent "
-        f"comes from ({transfer.SAC_STARTS['shipped']}); from PPO's: {transfer.STARTS['shipped']}. Obstacle rewards: "
-        f"experiments/obstacles.py OBSTACLE_REWARDS ({obstacles.OBSTACLE_REWARD}, today's).", "", *trained_table(), "",
+        f"comes from ({transfer.SAC_STARTS['shipped']}); from PPO's: {transfer.STARTS['shipped']}. Obstacle rewards "
+        f"and start-state devices: experiments/obstacles.py OBSTACLE_REWARDS (today's: "
+        f"{obstacles.version_name(obstacles.OBSTACLE_REWARD)}).", "", *trained_table(), "",
         "*Made by `python -m experiments.summary` from the files named; each section below gives the command that "
         "wrote them, its intervals and its failures.*"])
 

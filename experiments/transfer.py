@@ -171,7 +171,7 @@ def plot_training(panels: dict[str, dict[str, tuple[np.ndarray, np.ndarray]]], o
     """One panel per key of `panels` (its title; "" for none): each run's training episodes placed from ordinary
     resets (steps, their moving mean) against env steps, and the TARGET line; with `collided` (the same keys), a
     second row of panels: the share of those episodes that touched an obstacle, for the runs that logged it. A run
-    keeps its colour in every panel; the legend below the panels."""
+    keeps its colour and line in every panel; the legend below the panels."""
     import matplotlib
 
     matplotlib.use("Agg")
@@ -181,13 +181,14 @@ def plot_training(panels: dict[str, dict[str, tuple[np.ndarray, np.ndarray]]], o
     if collided is not None:
         rows.append(("of them touched an obstacle, %", collided))
     runs = list(dict.fromkeys(label for curves in panels.values() for label in curves))
-    colour = {label: f"C{i}" for i, label in enumerate(runs)}
+    # matplotlib's ten colours, dashed from the eleventh run on, so that no two runs look alike
+    style = {label: dict(color=f"C{i % 10}", ls="-" if i < 10 else "--") for i, label in enumerate(runs)}
     fig, axes = plt.subplots(len(rows), len(panels), sharex="col", sharey="row", squeeze=False,
                              figsize=(7 if len(panels) == 1 else 3.6 * len(panels), 1.2 + 3.0 * len(rows)))
     for r, (ylabel, grid) in enumerate(rows):
         for ax, (panel, curves) in zip(axes[r], grid.items()):
             for label, (steps, share) in curves.items():
-                ax.plot(steps / 1e6, 100 * share, label=label, color=colour[label])
+                ax.plot(steps / 1e6, 100 * share, label=label, **style[label])
             if r == 0:
                 ax.axhline(100 * TARGET, color="gray", ls="--", lw=1)
                 if panel:
