@@ -129,6 +129,7 @@ SHOWN = (  # (--train, --learner, --share, --obstacle-reward, --train-seed, env 
     ("shipped", "sac", 1.0, 3, 1, 700_000),
     ("shipped", "sac", 1.0, 4, 1, 600_000),
     ("shipped", "sac", 1.0, 5, 1, 400_000),
+    ("shipped", "sac", 1.0, 6, 1, 200_000),
 )
 """the trained runs' snapshots that RESULTS shows beside AGENTS (each an evaluated candidate, `candidate_path`)."""
 
