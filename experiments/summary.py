@@ -123,7 +123,8 @@ def trained_table() -> list[str]:
         row = moving.get(obstacles.trained_label(start, learner, share, reward, seed, step))
         if row is not None:
             lines.append(f"| {obstacles.scene_name(share)}, {obstacles.version_name(reward)} | "
-                         f"{transfer.start_name(start, learner)} | {seed} | {step:,} | " + " / ".join(_placed(row)) + f" | {OBSTACLES} |")
+                         f"{transfer.start_name(start, learner)} | {seed} | {step:,} | " + " / ".join(_placed(row))
+                         + f" | {OBSTACLES} |")
     return lines
 
 

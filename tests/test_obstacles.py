@@ -466,7 +466,8 @@ def test_each_trained_snapshot_results_shows_is_committed_and_labelled_by_its_ru
         run = obstacles.training_run(start, seed, None, learner, share, reward)
         assert Path(policy) == obstacles.candidate_path(run, step) and Path(policy).is_file()
         assert subprocess.run(["git", "ls-files", "--error-unmatch", policy], capture_output=True).returncode == 0
-        assert label.endswith(obstacles.TRAINED) and f"{obstacles.version_name(reward)}, seed {seed}, {step:,} env steps" in label
+        assert label.endswith(obstacles.TRAINED)
+        assert f"{obstacles.version_name(reward)}, seed {seed}, {step:,} env steps" in label
     assert obstacles.trained_label("shipped", "sac", 0.5, 3, 2, 400_000) == (
         "SAC from SAC's agent, moving obstacles in 50% of episodes, reward 3, seed 2, 400,000 env steps"
         " (trained among obstacles)")

@@ -552,7 +552,8 @@ def test_once_a_radius_is_whole_its_promotions_hand_near_goal_starts_back_to_ord
     from baselines.ppo.start_states import widen_near_goal
 
     def run(end, rounds):
-        starts = SimpleNamespace(near_goal_window=4, near_goal_promote=0.5, near_goal_step=0.25, near_goal_share_end=end)
+        starts = SimpleNamespace(near_goal_window=4, near_goal_promote=0.5, near_goal_step=0.25,
+                                 near_goal_share_end=end)
         progress = SimpleNamespace(near_goal_radius=[1.0, 1.0, 0.5, 1.0], near_goal_share=[0.8] * 4,
                                    near_goal_recent=[[] for _ in range(4)])
         changed = [widen_near_goal(SimpleNamespace(starts=starts), progress, [1] * 4 + [2] * 4, [1.0] * 8)

@@ -445,7 +445,8 @@ def validate(args: Args) -> None:
             raise SystemExit(f"--{name.replace('_', '-')} must lie in [0, 1], got {values[name]}")
     end = args.starts.near_goal_share_end
     if end is not None and not 0 <= end <= values["near_goal_share"]:
-        raise SystemExit(f"--near-goal-share-end {end}: a share in [0, --near-goal-share ({values['near_goal_share']})]")
+        raise SystemExit(f"--near-goal-share-end {end}: a share in [0, --near-goal-share "
+                         f"({values['near_goal_share']})]")
     if not 0 <= args.starts.start_states_share <= 1:
         raise SystemExit(f"--start-states-share must lie in [0, 1], got {args.starts.start_states_share}")
     if args.starts.start_states_keep_clock and not args.starts.start_states:

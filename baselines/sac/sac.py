@@ -265,7 +265,8 @@ CSV_FIELDS = [
     "ordinary_place_success", *[f"ordinary_place_{kind}" for kind in ELEMENT_KINDS],
     *[f"ordinary_pick_{kind}" for kind in ELEMENT_KINDS], *[f"ordinary_collided_{kind}" for kind in ELEMENT_KINDS],
     *[f"near_goal_radius_{kind}" for kind in ELEMENT_KINDS], *[f"near_goal_share_{kind}" for kind in ELEMENT_KINDS],
-    "reach_start_episodes", "reach_start_grasp_success", "sps", "wall_s", "env_s", "update_s", "eval_s", "checkpoint_s", "update_share", "updates", "buffer_fill",
+    "reach_start_episodes", "reach_start_grasp_success",
+    "sps", "wall_s", "env_s", "update_s", "eval_s", "checkpoint_s", "update_share", "updates", "buffer_fill",
     "alpha", "entropy", "qf1_loss", "qf2_loss", "q_value", "actor_loss", "alpha_loss",
 ]
 """progress.csv's columns: ppo.py's (the same names, so experiments/from_scratch.py's and scripts/plot_training.py's
@@ -902,7 +903,8 @@ def episode_columns(args: Args, progress: Progress, episodes: dict) -> dict:
             row[f"ordinary_place_{kind}"] = float(placed[(task == k) & ordinary].mean())
             row[f"ordinary_pick_{kind}"] = float(picked[(task == k) & ordinary].mean())
             if args.obstacles is not None:
-                row[f"ordinary_collided_{kind}"] = float(np.mean(np.asarray(episodes["collided"])[(task == k) & ordinary]))
+                collided = np.asarray(episodes["collided"])
+                row[f"ordinary_collided_{kind}"] = float(np.mean(collided[(task == k) & ordinary]))
     if args.reach_start_share > 0:
         grasped = np.asarray(episodes["reach_start_grasped"], dtype=float)
         row.update(reach_start_episodes=int(reach.sum()),

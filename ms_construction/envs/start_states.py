@@ -61,7 +61,8 @@ class StartStates:
         shares = [float(share)] * kinds if np.isscalar(share) else [float(s) for s in share]
         for name, given, values in (("radius", radius, radii), ("share", share, shares)):
             if len(values) != kinds:
-                raise ValueError(f"near-goal starts: give one {name} or {kinds} ({', '.join(ELEMENT_KINDS)}), got {given}")
+                raise ValueError(f"near-goal starts: give one {name} or {kinds} ({', '.join(ELEMENT_KINDS)}), "
+                                 f"got {given}")
         for name, value in [("share", s) for s in shares] + [("radius", r) for r in radii]:
             if not 0 <= value <= 1:
                 raise ValueError(f"near-goal starts: {name} must lie in [0, 1], got {value}")
