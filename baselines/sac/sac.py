@@ -898,12 +898,12 @@ def episode_columns(args: Args, progress: Progress, episodes: dict) -> dict:
     task, picked = np.asarray(episodes["task_id"], dtype=int), np.asarray(episodes["picked"], dtype=float)
     reach = np.asarray(episodes.get("reach_start") or [False] * len(near), dtype=bool)
     ordinary = ~near & ~reach
+    collided = np.asarray(episodes.get("collided") or [False] * len(near), dtype=bool)
     for k, kind in enumerate(ELEMENT_KINDS):
         if ((task == k) & ordinary).any():
             row[f"ordinary_place_{kind}"] = float(placed[(task == k) & ordinary].mean())
             row[f"ordinary_pick_{kind}"] = float(picked[(task == k) & ordinary].mean())
             if args.obstacles is not None:
-                collided = np.asarray(episodes["collided"])
                 row[f"ordinary_collided_{kind}"] = float(np.mean(collided[(task == k) & ordinary]))
     if args.reach_start_share > 0:
         grasped = np.asarray(episodes["reach_start_grasped"], dtype=float)
