@@ -243,7 +243,7 @@ class Args(transfer.TrainOptions):
     """draw the training runs among obstacles (TRAIN_RUNS, those with a progress.csv) to TRAIN_CURVE, and exit."""
     touches_by: Optional[Literal["post-side", "clear-way"]] = None
     """with --train: per task, the episodes each seed's latest evaluated snapshot of that run, and the blind reward-only
-    agent (BLIND), touched an obstacle in (static scene), by the side of the arm the scaffold post stands on
+    agent (BLIND), placed its element in and touched an obstacle in (static scene), by the side of the arm the scaffold post stands on
     (post-side) or by the ways the dense reward finds clear of the obstacles (clear-way: LAYOUT_GROUPS); and exit.
     It resets an env per seed to read the layout (a minute or two per task)."""
     reach_touches: bool = False
@@ -467,14 +467,15 @@ def layouts(env_id: str, seeds: list[int]) -> dict[int, dict[str, str]]:
 def touches_by(group: str, start: str, learner: Optional[str], share: float, out: Path,
                reward: int = OBSTACLE_REWARD) -> list[str]:
     """A row per task and agent (BLIND, then each seed's latest evaluated snapshot of the run, as `snapshot_table`
-    finds them): of the static scene's episodes in each of `group`'s classes (LAYOUT_GROUPS), how many it touched an
-    obstacle in."""
+    finds them): of the static scene's episodes in each of `group`'s classes (LAYOUT_GROUPS), how many it placed its
+    element in and how many it touched an obstacle in (the rest ran out of steps untouched)."""
     agents = {BLIND: row_name(AGENTS[BLIND])}
     for seed, (name, steps) in evaluated_snapshots(start, learner, share, out, reward).items():
         if steps:
             agents[f"seed {seed} at {steps[-1]:,} env steps"] = f"{name}_candidate_{steps[-1]}"
     classes = LAYOUT_GROUPS[group]
-    lines = ["| task | agent | " + " | ".join(f"{group.replace('-', ' ')} {c}: touched / episodes" for c in classes) + " |",
+    lines = ["| task | agent | " + " | ".join(f"{group.replace('-', ' ')} {c}: placed / touched / episodes"
+                                          for c in classes) + " |",
              "|---|---|" + "---|" * len(classes)]
     for kind, env_id in PAPER_TASK_ENV_IDS.items():
         found = None
@@ -484,8 +485,11 @@ def touches_by(group: str, start: str, learner: Optional[str], share: float, out
                 continue
             episodes = json.loads(path.read_text())["episodes"]
             found = found or layouts(env_id, [e["seed"] for e in episodes])
-            cells = [f"{sum(e['collided'] for e in episodes if found[e['seed']][group] == c)} / "
-                     f"{sum(found[e['seed']][group] == c for e in episodes)}" for c in classes]
+            cells = []
+            for c in classes:
+                members = [e for e in episodes if found[e["seed"]][group] == c]
+                cells.append(f"{sum(e['placed'] for e in members)} / {sum(e['collided'] for e in members)} / "
+                             f"{len(members)}")
             lines.append(f"| {kind} | {label} | " + " | ".join(cells) + " |")
     return lines
 

@@ -610,7 +610,7 @@ def test_the_snapshot_table_reads_each_seed_s_evaluated_candidates_from_their_ep
 
 def test_the_touches_by_post_side_count_each_agent_s_static_episodes_on_each_side(tmp_path, monkeypatch):
     """`--train S --touches-by post-side`: per task, the blind reward-only agent and each seed's latest evaluated
-    snapshot, the static episodes touched of those with the post on each side of the arm."""
+    snapshot, the static episodes placed and touched of those with the post on each side of the arm."""
     from experiments import obstacles
     from experiments.campaign import checkpoint_of
 
@@ -621,15 +621,16 @@ def test_the_touches_by_post_side_count_each_agent_s_static_episodes_on_each_sid
     for kind in ("ceiling", "window", "flooring"):
         for row, touched in ((blind, {0, 1, 2}), (f"{name}_candidate_100", {0}), (f"{name}_candidate_300", {2})):
             (tmp_path / f"{row}_static_{kind}.json").write_text(json.dumps({"episodes": [
-                {"seed": s, "collided": s in touched} for s in range(4)]}))
+                {"seed": s, "collided": s in touched, "placed": s == 3} for s in range(4)]}))
     table = obstacles.touches_by("post-side", "shipped", "sac", 0.5, tmp_path)
-    assert table[0] == "| task | agent | post side -y: touched / episodes | post side +y: touched / episodes |"
+    assert table[0] == ("| task | agent | post side -y: placed / touched / episodes | post side +y: placed / touched / "
+                        "episodes |")
     rows = table[2:]
-    assert rows[:2] == ["| ceiling | scratch general agent (reward alone, shipped) | 2 / 2 | 1 / 2 |",
-                        "| ceiling | seed 1 at 300 env steps | 0 / 2 | 1 / 2 |"], "seed 1's latest; seed 2 not there"
+    assert rows[:2] == ["| ceiling | scratch general agent (reward alone, shipped) | 0 / 2 / 2 | 1 / 1 / 2 |",
+                        "| ceiling | seed 1 at 300 env steps | 0 / 0 / 2 | 1 / 1 / 2 |"], "seed 1's latest; seed 2 not there"
     assert len(rows) == 6
     by_way = obstacles.touches_by("clear-way", "shipped", "sac", 0.5, tmp_path)
-    assert by_way[2] == "| ceiling | scratch general agent (reward alone, shipped) | 0 / 0 | 0 / 0 | 3 / 4 |"
+    assert by_way[2] == "| ceiling | scratch general agent (reward alone, shipped) | 0 / 0 / 0 | 0 / 0 / 0 | 1 / 3 / 4 |"
 
 
 def test_the_reach_touches_count_which_way_the_turret_turned_where_each_agent_touched_before_the_pick(
