@@ -129,7 +129,7 @@ SHOWN = (  # (--train, --learner, --share, --obstacle-reward, --train-seed, env 
     ("shipped", "sac", 1.0, 3, 1, 700_000),
     ("shipped", "sac", 1.0, 4, 1, 600_000),
     ("shipped", "sac", 1.0, 5, 1, 400_000),
-    ("shipped", "sac", 1.0, 6, 1, 200_000),
+    ("shipped", "sac", 1.0, 6, 1, 800_000),
 )
 """the trained runs' snapshots that RESULTS shows beside AGENTS (each an evaluated candidate, `candidate_path`)."""
 
@@ -242,7 +242,7 @@ class Args(transfer.TrainOptions):
     training_curve: bool = False
     """draw the training runs among obstacles (TRAIN_RUNS, those with a progress.csv) to TRAIN_CURVE, and exit."""
     touches_by: Optional[Literal["post-side", "clear-way"]] = None
-    """with --train: per task, the episodes each seed's latest evaluated snapshot of that run, and the blind reward-only
+    """with --train: per task, the episodes each evaluated snapshot of that run (each seed's), and the blind reward-only
     agent (BLIND), placed its element in and touched an obstacle in (static scene), by the side of the arm the scaffold post stands on
     (post-side) or by the ways the dense reward finds clear of the obstacles (clear-way: LAYOUT_GROUPS); and exit.
     It resets an env per seed to read the layout (a minute or two per task)."""
@@ -466,13 +466,13 @@ def layouts(env_id: str, seeds: list[int]) -> dict[int, dict[str, str]]:
 
 def touches_by(group: str, start: str, learner: Optional[str], share: float, out: Path,
                reward: int = OBSTACLE_REWARD) -> list[str]:
-    """A row per task and agent (BLIND, then each seed's latest evaluated snapshot of the run, as `snapshot_table`
-    finds them): of the static scene's episodes in each of `group`'s classes (LAYOUT_GROUPS), how many it placed its
+    """A row per task and agent (BLIND, then each seed's evaluated snapshots of the run, as `snapshot_table` finds
+    them): of the static scene's episodes in each of `group`'s classes (LAYOUT_GROUPS), how many it placed its
     element in and how many it touched an obstacle in (the rest ran out of steps untouched)."""
     agents = {BLIND: row_name(AGENTS[BLIND])}
     for seed, (name, steps) in evaluated_snapshots(start, learner, share, out, reward).items():
-        if steps:
-            agents[f"seed {seed} at {steps[-1]:,} env steps"] = f"{name}_candidate_{steps[-1]}"
+        for step in steps:
+            agents[f"seed {seed} at {step:,} env steps"] = f"{name}_candidate_{step}"
     classes = LAYOUT_GROUPS[group]
     lines = ["| task | agent | " + " | ".join(f"{group.replace('-', ' ')} {c}: placed / touched / episodes"
                                           for c in classes) + " |",

@@ -609,8 +609,8 @@ def test_the_snapshot_table_reads_each_seed_s_evaluated_candidates_from_their_ep
 
 
 def test_the_touches_by_post_side_count_each_agent_s_static_episodes_on_each_side(tmp_path, monkeypatch):
-    """`--train S --touches-by post-side`: per task, the blind reward-only agent and each seed's latest evaluated
-    snapshot, the static episodes placed and touched of those with the post on each side of the arm."""
+    """`--train S --touches-by post-side`: per task, the blind reward-only agent and each seed's evaluated snapshots,
+    the static episodes placed and touched of those with the post on each side of the arm."""
     from experiments import obstacles
     from experiments.campaign import checkpoint_of
 
@@ -626,9 +626,10 @@ def test_the_touches_by_post_side_count_each_agent_s_static_episodes_on_each_sid
     assert table[0] == ("| task | agent | post side -y: placed / touched / episodes | post side +y: placed / touched / "
                         "episodes |")
     rows = table[2:]
-    assert rows[:2] == ["| ceiling | scratch general agent (reward alone, shipped) | 0 / 2 / 2 | 1 / 1 / 2 |",
-                        "| ceiling | seed 1 at 300 env steps | 0 / 0 / 2 | 1 / 1 / 2 |"], "seed 1's latest; seed 2 not there"
-    assert len(rows) == 6
+    assert rows[:3] == ["| ceiling | scratch general agent (reward alone, shipped) | 0 / 2 / 2 | 1 / 1 / 2 |",
+                        "| ceiling | seed 1 at 100 env steps | 0 / 1 / 2 | 1 / 0 / 2 |",
+                        "| ceiling | seed 1 at 300 env steps | 0 / 0 / 2 | 1 / 1 / 2 |"], "seed 1's snapshots; seed 2 not there"
+    assert len(rows) == 9
     by_way = obstacles.touches_by("clear-way", "shipped", "sac", 0.5, tmp_path)
     assert by_way[2] == "| ceiling | scratch general agent (reward alone, shipped) | 0 / 0 / 0 | 0 / 0 / 0 | 1 / 3 / 4 |"
 
