@@ -42,6 +42,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Literal, Optional
 
+import gymnasium as gym
 import numpy as np
 import torch
 import tyro
@@ -67,6 +68,9 @@ BLIND = "scratch general agent (reward alone, shipped)"
 the obstacles (SAC's runs from the shipped weights start from its run's networks)."""
 SCENES = ("none", "static", "moving")
 RESULTS_PATH = Path("docs/RESULTS.md")
+VERSIONS_PATH = Path("docs/experiments/generalization.md")
+"""the experiment page whose section `obstacle-versions` tables every snapshot of SHOWN: RESULTS keeps today's
+version's (OBSTACLE_REWARD) beside the expert and the blind agents."""
 TRAIN_SCENE = "moving"
 """the scene a training run among obstacles draws: the stack and the post, and the worker walking across."""
 TRAIN_BUDGET = 3_000_000
@@ -129,9 +133,10 @@ SHOWN = (  # (--train, --learner, --share, --obstacle-reward, --train-seed, env 
     ("shipped", "sac", 1.0, 3, 1, 700_000),
     ("shipped", "sac", 1.0, 4, 1, 600_000),
     ("shipped", "sac", 1.0, 5, 1, 400_000),
-    ("shipped", "sac", 1.0, 6, 1, 800_000),
+    ("shipped", "sac", 1.0, 6, 1, 1_000_000),
 )
-"""the trained runs' snapshots that RESULTS shows beside AGENTS (each an evaluated candidate, `candidate_path`)."""
+"""the trained runs' snapshots evaluated with AGENTS (each an evaluated candidate, `candidate_path`): RESULTS shows
+those of today's version (OBSTACLE_REWARD), VERSIONS_PATH every one."""
 
 
 def training_run(start: str, seed: int = 1, num_envs: Optional[int] = None, learner: Optional[str] = None,
@@ -189,6 +194,12 @@ def shown_agents() -> dict[str, str]:
     return {trained_label(start, learner, share, reward, seed, step):
             str(candidate_path(training_run(start, seed, None, learner, share, reward), step))
             for start, learner, share, reward, seed, step in SHOWN}
+
+
+def earlier_versions() -> set[str]:
+    """The labels of SHOWN's snapshots trained on a version before today's (OBSTACLE_REWARD): the experiment page's
+    rows, not RESULTS'."""
+    return {trained_label(*shown) for shown in SHOWN if shown[3] != OBSTACLE_REWARD}
 
 
 def trained_policy(run: Run) -> tuple[int, Path]:
@@ -251,6 +262,10 @@ class Args(transfer.TrainOptions):
     latest evaluated snapshot of that run touched an obstacle in before the pick, replayed to the touch: which way the
     turret had turned, against the turret sides the dense reward's reach measures toward (`reach_distance`); and
     exit."""
+    carry_along_expert: int = 0
+    """above 0: per task and clear-way class of the static scene's layouts (LAYOUT_GROUPS), how the dense reward's carry
+    distance went along the planning expert's placed episodes of up to this many seeds each (`carry_along_expert`);
+    print the table, and exit."""
     snapshot_table: bool = False
     """with --train: print the table of that run's evaluated snapshots, each seed of TRAIN_SEEDS (from the JSONs in
     --out that --evaluate or --more-agents wrote for its candidates), and exit."""
@@ -261,8 +276,6 @@ _experts: dict = {}
 
 def _expert_episode(job: tuple[str, str, int]) -> dict:
     """One seeded expert episode in a worker process (env and expert kept for the next)."""
-    import gymnasium as gym
-
     from ms_construction.planning import MotionPlanningExpert
 
     env_id, scene, seed = job
@@ -448,8 +461,6 @@ it measures along the usable paths, into the obstacles)."""
 def layouts(env_id: str, seeds: list[int]) -> dict[int, dict[str, str]]:
     """{seed: {group of LAYOUT_GROUPS: its value}} of each seed's static scene (the tasks' `obstacle_layout` and
     `clear_paths`, the same for a seed in every scene)."""
-    import gymnasium as gym
-
     env = gym.make(env_id, num_envs=1, obs_mode="state", reward_mode="sparse", sim_backend="physx_cpu",
                    curriculum_stage=FINAL_STAGE, obstacles="static")
     u, found = env.unwrapped, {}
@@ -462,6 +473,81 @@ def layouts(env_id: str, seeds: list[int]) -> dict[int, dict[str, str]]:
         found[seed] = {"post-side": "-y" if float(u.obstacle_layout[0, 5]) < 0 else "+y", "clear-way": way}
     env.close()
     return found
+
+
+def rank_correlation(values: list[float]) -> float:
+    """Spearman's rank correlation of `values` with their order (ties are rare in a measured distance): -1 where they
+    fall all the way, +1 where they rise all the way; 0 for fewer than three."""
+    if len(values) < 3:
+        return 0.0
+    ranks = np.argsort(np.argsort(values)).astype(float)
+    return float(np.corrcoef(np.arange(len(values)), ranks)[0, 1])
+
+
+def carry_course(carries: list[float], carry_range: float) -> dict:
+    """How the dense reward's carry distance (rad) went over the held steps of one placed episode: its rank correlation
+    with the step, the share of steps it stood beyond `carry_range` (where the carry term pays 0), its value at the
+    grasp and its most."""
+    c = np.asarray(carries, dtype=float)
+    return dict(rho=rank_correlation(carries), beyond=float((c > carry_range).mean()), first=float(c[0]),
+                most=float(c.max()))
+
+
+class HeldCarries(gym.Wrapper):
+    """Records the dense reward's carry distance at each step of a single env that ends with the element held."""
+
+    def __init__(self, env):
+        super().__init__(env)
+        self.carries: list[float] = []
+
+    def step(self, action):
+        result = super().step(action)
+        if bool(result[4]["is_grasped"][0]):
+            self.carries.append(float(self.env.unwrapped.carry_distance()[0]))
+        return result
+
+
+def carry_along_expert(out: Path, per_class: int) -> list[str]:
+    """A row per task, clear-way class of the static scene's layouts (LAYOUT_GROUPS) and scene (the site as built,
+    then the static obstacles): along the planning expert's placed episodes of those seeds (the seeds it solved among
+    the obstacles, by the JSONs in `out`; the first `per_class` of each class), how the dense reward's carry distance
+    went while the element was held (`carry_course`), the median over the episodes and the worst. The reward means it
+    to fall along any clear way to the goal (a rank correlation near -1); on the site as built the class only says
+    what the obstacles would have left clear."""
+    from ms_construction.planning import MotionPlanningExpert
+
+    classes = LAYOUT_GROUPS["clear-way"]
+    lines = ["| task | clear way among the obstacles | scene | expert episodes placed | carry against the step: rank "
+             "correlation, median (worst) | held steps beyond the carry range %, median (worst) | carry at the grasp / "
+             "its most, median (rad) |", "|---|---|---|---|---|---|---|"]
+    for kind, env_id in PAPER_TASK_ENV_IDS.items():
+        solved = [e["seed"] for e in json.loads((out / f"expert_static_{kind}.json").read_text())["episodes"]
+                  if e["placed"]]
+        found = layouts(env_id, solved)
+        picked = {c: [s for s in solved if found[s]["clear-way"] == c][:per_class] for c in classes}
+        rows: dict[tuple[str, str], list[dict]] = {}
+        for scene in ("none", "static"):
+            env = HeldCarries(gym.make(env_id, num_envs=1, obs_mode="state", control_mode="pd_joint_pos",
+                                       reward_mode="dense", sim_backend="physx_cpu", curriculum_stage=FINAL_STAGE,
+                                       obstacles=None if scene == "none" else scene))
+            expert = MotionPlanningExpert(env)
+            for c, seeds in picked.items():
+                for seed in seeds:
+                    env.carries.clear()
+                    if expert.run(seed).placed and env.carries:
+                        rows.setdefault((c, scene), []).append(carry_course(env.carries, env.unwrapped.CARRY_RANGE))
+            expert.close()
+            env.close()
+        for c in classes:
+            for scene in ("none", "static"):
+                if not (courses := rows.get((c, scene))):
+                    continue
+                rho, beyond = [x["rho"] for x in courses], [x["beyond"] for x in courses]
+                lines.append(f"| {kind} | {c} | {scene} | {len(courses)} of {len(picked[c])} | {np.median(rho):.2f} "
+                             f"({max(rho):.2f}) | {100 * np.median(beyond):.0f} ({100 * max(beyond):.0f}) | "
+                             f"{np.median([x['first'] for x in courses]):.1f} / "
+                             f"{np.median([x['most'] for x in courses]):.1f} |")
+    return lines
 
 
 def touches_by(group: str, start: str, learner: Optional[str], share: float, out: Path,
@@ -501,7 +587,6 @@ def first_touches(checkpoint: str, env_id: str, seeds: list[int]) -> list[dict]:
     turned to (`CarryGeometry.path_sides`: +pi for a turret at or above 0, -pi below). Not always quite the
     evaluated episode: the physics carries state from one episode to the next, and the evaluation ran the seeds in
     another order, in two processes (a touch may come a step later, or not at all)."""
-    import gymnasium as gym
     from mani_skill.utils.gym_utils import find_max_episode_steps_value
 
     from baselines.ppo.checkpoints import load_policy
@@ -560,6 +645,9 @@ def main(args: Args) -> dict:
         return {}
     if args.episodes < 1 or args.workers < 1:
         raise SystemExit("--episodes and --workers must be positive")
+    if args.carry_along_expert > 0:
+        print("\n".join(carry_along_expert(args.out, args.carry_along_expert)))
+        return {}
     args.agents = with_more_agents(args.agents, args.more_agents)
     if args.train is not None:
         if args.snapshot_table:
@@ -605,11 +693,15 @@ def main(args: Args) -> dict:
                                        [(checkpoint, env_id, scene, s) for s in seeds], seeds, f"{name} {scene} {kind}",
                                        checkpoint)
                     rows.setdefault((label, scene + " (solvable seeds)"), {})[env_id] = summarize(episodes, False)
+    earlier = earlier_versions()
+    front = {key: per_task for key, per_task in rows.items() if key[0] not in earlier}
     body = ("## A site that changes: obstacles, zero-shot\n\n"
-            f"The moving scene, each agent (the expert's solvable seeds; every scene below):\n\n"
-            f"{table(rows, TRAIN_SCENE)}\n\n"
+            f"The moving scene, each agent (the expert's solvable seeds; every scene below; the snapshots of earlier "
+            f"versions of training among obstacles: [their table](experiments/{VERSIONS_PATH.name}"
+            "#every-version-trained-among-obstacles)):\n\n"
+            f"{table(front, TRAIN_SCENE)}\n\n"
             "<details><summary>Every scene: the site as built, static and moving obstacles; the command</summary>\n\n"
-            f"Command: `{command}`\n\n{table(rows)}\n\n</details>\n\n"
+            f"Command: `{command}`\n\n{table(front)}\n\n</details>\n\n"
             "Scenes: none (the site as trained on), static (a material stack and a scaffold post, seeded per episode), "
             "moving (the same, and a worker walking across the cell once). Episodes: per task, the seeds of "
             f"{args.seed}..{args.seed + args.episodes - 1} whose static scene the planning expert solved (the full table's first "
@@ -626,7 +718,16 @@ def main(args: Args) -> dict:
     if args.write_results:  # the table and its JSON (which experiments/summary.py reads) are one measurement
         (args.out / "summary.json").write_text(json.dumps({"command": command, "rows": summary}, indent=1) + "\n")
         update_section(RESULTS_PATH, "obstacles-zero-shot", title="Results", body=body)
-        print(f"wrote {RESULTS_PATH} and {args.out / 'summary.json'}")
+        versions = {key: per_task for key, per_task in rows.items()
+                    if key[0] == "planning expert" or key[0].endswith(TRAINED)}
+        update_section(VERSIONS_PATH, "obstacle-versions", title="Generalization", body=(
+            "## Every version trained among obstacles\n\n"
+            "Each snapshot of experiments/obstacles.py SHOWN, the moving scene (the expert beside them; every scene "
+            "below); the versions: OBSTACLE_REWARDS there. RESULTS shows today's version's.\n\n"
+            f"{table(versions, TRAIN_SCENE)}\n\n"
+            "<details><summary>Every scene</summary>\n\n"
+            f"Command: `{command}`\n\n{table(versions)}\n\n</details>\n"))
+        print(f"wrote {RESULTS_PATH}, {VERSIONS_PATH} and {args.out / 'summary.json'}")
     return summary
 
 

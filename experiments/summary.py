@@ -97,7 +97,7 @@ def generalization_table() -> list[str]:
 def trained_table() -> list[str]:
     """A row per generalization run that has been evaluated: trained on paneling (its placed %), with an opening of
     each task type held out (placed on the openings it never saw), or among moving obstacles (placed there; the
-    snapshots of obstacles.SHOWN)."""
+    snapshots of obstacles.SHOWN of today's version, OBSTACLE_REWARD; the earlier ones are the experiment page's)."""
     lines = ["| trained on | learner, from | seed | env steps | placed %: paneling, or ceiling / window / flooring "
              "| source |", "|---|---|---|---|---|---|"]
     for learner, start, seed in paneling.TRAIN_PLAN:
@@ -119,12 +119,17 @@ def trained_table() -> list[str]:
             lines.append(f"| {held_out} | {learner} | {number or '-'} | {unseen_openings.trained_steps(seed, data)} | "
                          + " / ".join(_placed(data["tasks"])) + f" | {path} |")
     moving = obstacles_scene_rows(_read(OBSTACLES) or {}, "moving")
+    built = obstacles_scene_rows(_read(OBSTACLES) or {}, "none")
     for start, learner, share, reward, seed, step in obstacles.SHOWN:
-        row = moving.get(obstacles.trained_label(start, learner, share, reward, seed, step))
-        if row is not None:
+        if reward != obstacles.OBSTACLE_REWARD:
+            continue
+        label = obstacles.trained_label(start, learner, share, reward, seed, step)
+        if (row := moving.get(label)) is not None:
+            # what training among obstacles left of the site as built, beside it
+            kept = f" (the site as built: {' / '.join(_placed(built[label]))})" if label in built else ""
             lines.append(f"| {obstacles.scene_name(share)}, {obstacles.version_name(reward)} | "
                          f"{transfer.start_name(start, learner)} | {seed} | {step:,} | " + " / ".join(_placed(row))
-                         + f" | {OBSTACLES} |")
+                         + f"{kept} | {OBSTACLES} |")
     return lines
 
 
@@ -141,7 +146,9 @@ def summary() -> str:
         "solvable seeds, the moving scene). From SAC's agent: the networks of the run the shipped reward-only agent "
         f"comes from ({transfer.SAC_STARTS['shipped']}); from PPO's: {transfer.STARTS['shipped']}. Obstacle rewards "
         f"and start-state devices: experiments/obstacles.py OBSTACLE_REWARDS (today's: "
-        f"{obstacles.version_name(obstacles.OBSTACLE_REWARD)}).", "", *trained_table(), "",
+        f"{obstacles.version_name(obstacles.OBSTACLE_REWARD)}; every earlier version's snapshots: "
+        f"[their table](experiments/{obstacles.VERSIONS_PATH.name}#every-version-trained-among-obstacles)).", "",
+        *trained_table(), "",
         "*Made by `python -m experiments.summary` from the files named; each section below gives the command that "
         "wrote them, its intervals and its failures.*"])
 

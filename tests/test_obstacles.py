@@ -705,17 +705,27 @@ def test_an_evaluation_without_write_results_leaves_results_and_the_summary_json
     agent = dict(placed=True, collided=False, length=10, policy_time_s=0.01)
     monkeypatch.setattr(obstacles, "run_row", lambda pool, path, fn, jobs, seeds, desc, checkpoint=None: [
         dict(expert if fn is obstacles._expert_episode else agent, seed=s) for s in seeds])
-    results = tmp_path / "RESULTS.md"
+    results, versions = tmp_path / "RESULTS.md", tmp_path / "versions.md"
     results.write_text("kept\n")
     monkeypatch.setattr(obstacles, "RESULTS_PATH", results)
-    args = dict(episodes=2, workers=1, out=tmp_path, agents={"an agent": "a/b.pt"})
+    monkeypatch.setattr(obstacles, "VERSIONS_PATH", versions)
+    earlier, today = ("shipped", "sac", 1.0, 3, 1, 100), ("shipped", "sac", 1.0, obstacles.OBSTACLE_REWARD, 1, 200)
+    monkeypatch.setattr(obstacles, "SHOWN", (earlier, today))
+    trained = {obstacles.trained_label(*shown): f"{shown[3]}.pt" for shown in (earlier, today)}
+    args = dict(episodes=2, workers=1, out=tmp_path, agents={"an agent": "a/b.pt", **trained})
     rows = obstacles.main(obstacles.Args(**args, write_results=False))
     assert "an agent | moving (solvable seeds)" in rows
-    assert results.read_text() == "kept\n" and not (tmp_path / "summary.json").exists()
+    assert results.read_text() == "kept\n" and not (tmp_path / "summary.json").exists() and not versions.exists()
     obstacles.main(obstacles.Args(**args))
     written = json.loads((tmp_path / "summary.json").read_text())["rows"]
     assert set(written) == set(rows) and "an agent | none (solvable seeds)" in written
     assert "obstacles, zero-shot" in results.read_text()
+    # RESULTS shows today's version beside the agents; the experiment page every version's snapshot, not the others
+    old_label, today_label = trained
+    assert today_label in results.read_text() and old_label not in results.read_text()
+    assert {old_label, today_label, "planning expert"} <= {line.split(" | ")[0][2:]
+                                                            for line in versions.read_text().splitlines()}
+    assert "an agent" not in versions.read_text()
 
 
 def test_the_results_table_of_one_scene_has_a_row_per_agent_and_the_full_one_every_scene():
@@ -731,3 +741,35 @@ def test_the_results_table_of_one_scene_has_a_row_per_agent_and_the_full_one_eve
     assert moving[0].count("|") == full[0].count("|") - 1 and len(full) == 2 + 2 * len(obstacles.SCENES)
     assert all(line.count("|") == moving[0].count("|") for line in moving)
     assert "moving" not in "".join(moving) and "100.0 [" in moving[2]
+
+
+def test_the_carry_course_of_an_episode_says_whether_the_carry_fell_and_how_long_it_paid_nothing():
+    """`carry_course` (what `--carry-along-expert` reports per episode): the rank correlation of the carry distance
+    with the step is -1 where it falls all the way and +1 where it rises; `beyond` counts the steps past the carry
+    range, where the carry term pays 0."""
+    from experiments.obstacles import carry_course, rank_correlation
+
+    assert rank_correlation([5.0, 4.0, 2.0, 1.0]) == pytest.approx(-1.0)
+    assert rank_correlation([1.0, 2.0, 4.0]) == pytest.approx(1.0)
+    assert rank_correlation([1.0, 2.0]) == 0.0
+    course = carry_course([6.0, 13.0, 15.0, 3.0, 1.0], carry_range=12.0)
+    assert course == dict(rho=pytest.approx(-0.6), beyond=pytest.approx(0.4), first=6.0, most=15.0)
+
+
+def test_the_carry_along_the_expert_is_measured_per_clear_way_and_scene_on_the_seeds_it_solved(tmp_path, monkeypatch):
+    """`--carry-along-expert`: one row per clear-way class and scene (the site as built, the static obstacles), each
+    over the expert's placed episodes of the seeds it solved (a seed it did not solve is not tried)."""
+    from experiments import obstacles
+
+    monkeypatch.setattr(obstacles, "PAPER_TASK_ENV_IDS", {"flooring": "Flooring-v1"})
+    episodes = [dict(seed=1_000_000, placed=True), dict(seed=1_000_001, placed=False), dict(seed=1_000_005, placed=True)]
+    (tmp_path / "expert_static_flooring.json").write_text(json.dumps({"episodes": episodes}))
+    rows = [line.split(" | ") for line in obstacles.carry_along_expert(tmp_path, per_class=1)[2:]]
+    assert [(r[1], r[2]) for r in rows] == [("a usable path", "none"), ("a usable path", "static"),
+                                            ("a detour only", "none"), ("a detour only", "static")]
+    for r in rows:
+        assert r[3] == "1 of 1"
+        median, worst = (float(x.strip("()")) for x in r[4].split())
+        assert -1 <= median <= worst <= 1
+        first, most = (float(x) for x in r[6].rstrip(" |").split(" / "))
+        assert 0 <= first <= most

@@ -83,12 +83,14 @@ def test_the_trained_generalization_rows_are_the_runs_evaluated_their_setting_le
                                                                              "checkpoint_step": 0}))
     from experiments import obstacles
 
-    shown = ("shipped", "sac", 0.5, 3, 2, 100)
-    monkeypatch.setattr(obstacles, "SHOWN", (shown, ("nothing", "sac", 1.0, 3, 1, 200)))  # the second not evaluated
+    today = obstacles.OBSTACLE_REWARD
+    shown, earlier = ("shipped", "sac", 0.5, today, 2, 100), ("shipped", "sac", 0.5, 3, 1, 100)
+    monkeypatch.setattr(obstacles, "SHOWN", (earlier, shown, ("nothing", "sac", 1.0, today, 1, 200)))
     label = obstacles.trained_label(*shown)
     uo.expert_json(seen=False).write_text(json.dumps({"tasks": _tasks(1.0)}))  # the expert beside the learners
-    (tmp_path / "obstacles.json").write_text(json.dumps({"rows": {
+    (tmp_path / "obstacles.json").write_text(json.dumps({"rows": {  # the third snapshot not evaluated
         f"{label} | moving (solvable seeds)": _tasks(0.5), f"{label} | none (solvable seeds)": _tasks(0.0),
+        f"{obstacles.trained_label(*earlier)} | moving (solvable seeds)": _tasks(0.75),  # an earlier version's
         "planning expert | moving (solvable seeds)": _tasks(1.0)}}))
     rows = sm.trained_table()[2:]
     assert rows == [
@@ -99,8 +101,8 @@ def test_the_trained_generalization_rows_are_the_runs_evaluated_their_setting_le
         f"{uo.evaluation_json('sac_s1', seen=False)} |",
         f"| openings 0 and 2 (placed at 1, never trained on) | imitation: its clone alone | - | "
         f"none: demonstrations only | 0.0 / 0.0 / 0.0 | {uo.evaluation_json('imitation_clone', seen=False)} |",
-        f"| moving obstacles in 50% of episodes, reward 3 | SAC from SAC's agent | 2 | 100 | 50.0 / 50.0 / 50.0 | "
-        f"{tmp_path / 'obstacles.json'} |"]
+        f"| moving obstacles in 50% of episodes, {obstacles.version_name(today)} | SAC from SAC's agent | 2 | 100 | "
+        f"50.0 / 50.0 / 50.0 (the site as built: 0.0 / 0.0 / 0.0) | {tmp_path / 'obstacles.json'} |"]
 
 
 def test_the_seeds_evaluation_table_shows_each_seed_s_chosen_snapshot_or_its_latest(tmp_path, monkeypatch):
