@@ -114,6 +114,7 @@ TRAIN_RUNS = {
     "the same, reward 4 (a touch ends with nothing after it)": ("shipped", "sac", 1.0, 4),
     "the same, near-goal starts handed back (version 5)": ("shipped", "sac", 1.0, 5),
     "the same, and reach starts (version 6)": ("shipped", "sac", 1.0, 6),
+    "version 6 on the mixed scene (--share 0.5)": ("shipped", "sac", 0.5, 6),
 }
 """the runs among obstacles `--training-curve` draws, each seed of TRAIN_SEEDS it has: label -> (--train, --learner,
 --share, --obstacle-reward)."""
@@ -134,6 +135,7 @@ SHOWN = (  # (--train, --learner, --share, --obstacle-reward, --train-seed, env 
     ("shipped", "sac", 1.0, 4, 1, 600_000),
     ("shipped", "sac", 1.0, 5, 1, 400_000),
     ("shipped", "sac", 1.0, 6, 1, 1_000_000),
+    ("shipped", "sac", 0.5, 6, 1, 400_000),
 )
 """the trained runs' snapshots evaluated with AGENTS (each an evaluated candidate, `candidate_path`): RESULTS shows
 those of today's version (OBSTACLE_REWARD), VERSIONS_PATH every one."""
