@@ -120,11 +120,10 @@ def trained_table() -> list[str]:
                          + " / ".join(_placed(data["tasks"])) + f" | {path} |")
     moving = obstacles_scene_rows(_read(OBSTACLES) or {}, "moving")
     built = obstacles_scene_rows(_read(OBSTACLES) or {}, "none")
+    earlier = obstacles.earlier_versions()
     for start, learner, share, reward, seed, step in obstacles.SHOWN:
-        if reward != obstacles.OBSTACLE_REWARD:
-            continue
         label = obstacles.trained_label(start, learner, share, reward, seed, step)
-        if (row := moving.get(label)) is not None:
+        if label not in earlier and (row := moving.get(label)) is not None:
             # what training among obstacles left of the site as built, beside it
             kept = f" (the site as built: {' / '.join(_placed(built[label]))})" if label in built else ""
             lines.append(f"| {obstacles.scene_name(share)}, {obstacles.version_name(reward)} | "
