@@ -75,7 +75,7 @@ TRAIN_SCENE = "moving"
 """the scene a training run among obstacles draws: the stack and the post, and the worker walking across."""
 TRAIN_BUDGET = 3_000_000
 """env steps of each training run among obstacles."""
-OBSTACLE_REWARDS = (1, 2, 3, 4, 5, 6)
+OBSTACLE_REWARDS = (1, 2, 3, 4, 5, 6, 7)
 OBSTACLE_REWARD = OBSTACLE_REWARDS[-1]
 """the version of what `--train` trains on among obstacles, the dense reward and the value of a touch, named in the
 run's folder: 1, the carry
@@ -89,9 +89,12 @@ valued it as they value success, the touching step's reward for ever, so that a 
 worth about as much as carrying on (`_r4`); 5, reward 4, and the near-goal starts handed back to ordinary resets
 once they cover the whole way to the goal (HAND_BACK_END; `_r5`): a start-state device, not the reward, but a change
 of what a run trains on all the same; 6, version 5, and half of the training episodes (before near-goal starts draw
-theirs) start on the way to the element, toward a turret side the clear ways leave from (REACH_START_SHARE; `_r6`).
-The site as built measures the same in all six."""
-TRAINABLE = (4, 5, 6)
+theirs) start on the way to the element, toward a turret side the clear ways leave from (REACH_START_SHARE; `_r6`);
+7, version 6 on reward 5: where the stack or the post blocks every usable start path of a turret side, the episode
+searches a via around them for that side's paths at reset (SiteObstacles.obstacle_ways), and the reach and the carry
+are paid along it, where versions 1-6 paid only a detour from the other side or the blocked paths (`_r7`).
+The site as built measures the same in all seven."""
+TRAINABLE = (7,)
 """the versions whose code is still here: a run on one of them can be trained (or resumed)."""
 HAND_BACK_END = 0.2
 """version 5: the share of near-goal starts each task type's falls to once its radius is 1 (the learners'
@@ -115,6 +118,7 @@ TRAIN_RUNS = {
     "the same, near-goal starts handed back (version 5)": ("shipped", "sac", 1.0, 5),
     "the same, and reach starts (version 6)": ("shipped", "sac", 1.0, 6),
     "version 6 on the mixed scene (--share 0.5)": ("shipped", "sac", 0.5, 6),
+    "version 7 (ways searched at reset), mixed scene": ("shipped", "sac", 0.5, 7),
 }
 """the runs among obstacles `--training-curve` draws, each seed of TRAIN_SEEDS it has: label -> (--train, --learner,
 --share, --obstacle-reward)."""
@@ -176,8 +180,10 @@ def scene_name(share: float) -> str:
 def version_name(reward: int) -> str:
     """What an OBSTACLE_REWARDS version trains on, in words for a row label: its reward, and from version 5 on the
     start-state devices (not a reward of their own)."""
-    return ("reward 4, near-goal starts handed back" + (", reach starts" if reward >= 6 else "") if reward >= 5
-            else f"reward {reward}")
+    if reward < 5:
+        return f"reward {reward}"
+    return (("reward 5 (ways searched at reset)" if reward >= 7 else "reward 4") + ", near-goal starts handed back"
+            + (", reach starts" if reward >= 6 else ""))
 
 
 def trained_label(start: str, learner: Optional[str], share: float, reward: int, seed: int, step: int) -> str:
@@ -468,7 +474,8 @@ def layouts(env_id: str, seeds: list[int]) -> dict[int, dict[str, str]]:
     u, found = env.unwrapped, {}
     for seed in seeds:
         env.reset(seed=seed)
-        clear = u.clear_paths()
+        ways = u.obstacle_ways()
+        clear = ways.clear & ~ways.searched  # the start paths as the site has them, before a via is searched
         usable = (u.geometry.paths["usable"][u.task_id, u.goal_slot] & clear).any()
         way = ("a usable path" if usable else "a detour only" if u.geometry.clear_ways(u.task_id, u.goal_slot, clear).any()
                else "none")

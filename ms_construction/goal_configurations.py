@@ -402,6 +402,47 @@ def _plan_via(planners: list, ends: tuple, turns: list[float]) -> Optional[list[
     return None
 
 
+WAY_SEARCH_DRAWS = 400
+"""via configurations drawn per turret side by `search_via` before it gives up."""
+WAY_SEARCH_SPREAD = 1.5
+"""rad; the spread (standard deviation per joint) of `search_via`'s last draw: its draws spread from near the straight
+joint line out to this, so that the first clear via found is about the nearest the draws reach."""
+
+
+def path_clear(planners: list, waypoints: np.ndarray, turns: list[float]) -> bool:
+    """`_clear_fraction(planners, waypoints, turns) == 1.0`, the points checked coarse to fine (a blocked path is found
+    after a few checks)."""
+    i = np.arange(1, PATH_CHECKS + 2)
+    fractions = np.linspace(0.0, 1.0, PATH_CHECKS + 1)[np.argsort(-(i & -i), kind="stable")]
+    for a in fractions:
+        q = path_point(waypoints, a)
+        for planner, t in zip(planners, turns):
+            shifted = q.copy()
+            shifted[5] += t
+            if planner.collides(shifted):
+                return False
+    return True
+
+
+def search_via(planners: list, ends: list[tuple], turns: list[float], rng: np.random.Generator,
+               limits: tuple[np.ndarray, np.ndarray]) -> Optional[tuple[int, np.ndarray]]:
+    """A via for one of the start paths with these `ends` (`_path_ends`, one per installation configuration) that
+    makes install - back-off - via - lift - table clear at every turn of `turns` among whatever the `planners` hold
+    (a site's obstacles too): (which of `ends`, the via), or None after WAY_SEARCH_DRAWS draws. Each draw is a point of
+    the straight joint line from the back-off to the lift, moved by Gaussian noise whose spread grows from draw to draw
+    up to WAY_SEARCH_SPREAD, within the joint `limits`. Unlike `_plan_via` (OMPL's RRT, whose draws are its own) it
+    draws from `rng`: a seeded episode plans the same way in every process, and it takes a few milliseconds where a
+    way is easy to find, about a tenth of a second where none is."""
+    for d in range(WAY_SEARCH_DRAWS):
+        which = d % len(ends)
+        q_install, q_back, q_lift, q_table = ends[which]
+        spread = WAY_SEARCH_SPREAD * (d + 1) / WAY_SEARCH_DRAWS
+        via = np.clip(q_back + rng.uniform() * (q_lift - q_back) + rng.normal(0.0, spread, 6), *limits)
+        if path_clear(planners, np.array([q_install, q_back, via, q_lift, q_table]), turns):
+            return which, via
+    return None
+
+
 def _plan(kinds: tuple[str, ...], wanted) -> dict:
     """{kind: {slot: {side: {configuration: via}}}} for the start paths `wanted(k)` names ([slots, configurations,
     2] bool) of each task type of `kinds`, those with a way out of their opening, by `_plan_via`."""

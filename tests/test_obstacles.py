@@ -213,10 +213,10 @@ def test_the_dense_reward_measures_the_carry_along_the_paths_clear_of_the_obstac
         pytest.fail("no seed of 20 with a usable start path blocked and another clear")
     blocked = int((usable & ~clear)[0].nonzero()[0, 0])
     path = u.geometry.paths["waypoints"][u.task_id, u.goal_slot][0, blocked]  # [P, 6]
-    on_path = path[len(path) // 2][None]
+    on_path = ((path[2] + path[3]) / 2)[None]  # past the back-off, which a way searched around the obstacles shares
     turn, side = torch.zeros(1), torch.full((1,), -1)
     along_all = u.geometry.project(on_path, turn, u.task_id, u.goal_slot, side)
-    along_clear = u.geometry.project(on_path, turn, u.task_id, u.goal_slot, side, clear)
+    along_clear = u.geometry.project(on_path, turn, u.task_id, u.goal_slot, side, u.obstacle_ways())
     # on the blocked path the arm is on a usable path, but off every path the reward now measures along
     assert float(along_clear.distance) > float(along_all.distance) + 0.1
     # and the obstacles parked far away block nothing
@@ -252,7 +252,8 @@ def test_the_paths_clear_of_the_obstacles_are_those_the_start_paths_own_check_fi
                     planner.set_obstacle(key, obj)
         whole = [_clear_fraction(planners, path, turns) == 1.0
                  for path in u.geometry.paths["waypoints"][kind, slot].numpy().astype(float)]
-        assert u.clear_paths()[0].tolist() == whole
+        ways = u.obstacle_ways()
+        assert (ways.clear & ~ways.searched)[0].tolist() == whole
         seen |= torch.tensor([not all(whole), any(whole)])
         kinds.add(kind)
     assert bool(seen.all()) and kinds == {0, 1, 2}
@@ -281,11 +282,15 @@ def test_near_goal_starts_pose_the_arm_on_the_paths_clear_of_the_obstacles():
     env.close()
 
 
-def test_where_the_obstacles_block_every_usable_path_the_reward_takes_a_clear_detour_from_the_other_side():
+def test_where_the_obstacles_block_every_usable_path_and_no_via_is_found_the_reward_takes_a_clear_detour(monkeypatch):
     """A window layout whose stack or post blocks every usable start path of its goal slot (all from one turret side)
-    and leaves a detour from the other side clear (`CarryGeometry.clear_ways`): the dense reward reaches for the
-    table from the detour's side and measures the carry along it, and a near-goal start is posed on it and touches
-    nothing. (Without the detours the reward fell back to the blocked paths, into the obstacle.)"""
+    where the search for a via around them finds none (here: it draws none) and a detour from the other side is clear
+    (`CarryGeometry.clear_ways`): the dense reward reaches for the table from the detour's side and measures the carry
+    along it, and a near-goal start is posed on it and touches nothing. (Without the detours the reward fell back to
+    the blocked paths, into the obstacle.)"""
+    from ms_construction import goal_configurations
+
+    monkeypatch.setattr(goal_configurations, "WAY_SEARCH_DRAWS", 0)
     env = make_env("WindowInstallation-v1", obstacles="static", reward_mode="dense")
     u = env.unwrapped
     g = u.geometry
@@ -306,17 +311,80 @@ def test_where_the_obstacles_block_every_usable_path_the_reward_takes_a_clear_de
     q = u.agent.robot.get_qpos()
     torch.testing.assert_close(u.reach_distance(), (g.table_q[u.task_id, side, :5] - q[:, :5]).abs().sum(-1))
     path = g.paths["waypoints"][u.task_id, u.goal_slot][0, int(ways[0].nonzero()[0, 0])]  # [install .. table]
-    at_via = g.project(path[2][None], torch.zeros(1), u.task_id, u.goal_slot, torch.full((1,), side), clear)
+    at_via = g.project(path[2][None], torch.zeros(1), u.task_id, u.goal_slot, torch.full((1,), side), u.obstacle_ways())
     assert float(at_via.distance) <= float((path[1:3] - path[:2]).abs().sum()) + 1e-4, "on the detour: its length left"
     # grasped from the other side (the turret cannot cross holding it): along that side's usable paths, blocked or not
     other = 1 - side
     config = int(usable[0].view(-1, 2)[:, other].nonzero()[0, 0])
     blocked = g.paths["waypoints"][u.task_id, u.goal_slot][0, config * 2 + other]
     assert torch.equal(g.carry_paths(u.task_id, u.goal_slot, torch.full((1,), other), clear), usable)
-    at_lift = g.project(blocked[3][None], torch.zeros(1), u.task_id, u.goal_slot, torch.full((1,), other), clear)
+    at_lift = g.project(blocked[3][None], torch.zeros(1), u.task_id, u.goal_slot, torch.full((1,), other),
+                        u.obstacle_ways())
     assert float(at_lift.distance) <= float((blocked[1:4] - blocked[:3]).abs().sum()) + 1e-4
-    before = g.project(blocked[3][None], torch.zeros(1), u.task_id, u.goal_slot, torch.full((1,), -1), clear)
+    before = g.project(blocked[3][None], torch.zeros(1), u.task_id, u.goal_slot, torch.full((1,), -1),
+                       u.obstacle_ways())
     assert float(before.distance) > float(at_lift.distance) + 0.1, "not grasped: along the clear detour only"
+    u.set_near_goal_starts(1.0, 1.0)
+    env.reset(seed=seed)
+    assert bool(u.near_goal_start[0]) and int(u.carry_side[0]) == side
+    _, _, _, _, info = env.step(u.agent.robot.get_qpos())
+    assert not bool(info["obstacle_collision"])
+    env.close()
+
+
+def test_where_the_obstacles_block_every_usable_path_of_a_side_the_episode_searches_a_clear_via_for_it(tmp_path):
+    """A flooring layout whose stack or post blocks every usable start path of its goal slot: the episode gets one of
+    them back through a via searched at reset (`SiteObstacles._search_vias`), wholly clear of the site and the
+    obstacles by goal_configurations' own check; the same via after a reset with the same seed and after
+    `set_state_dict`; the reward reaches for the table from that side and measures the carry along the searched way,
+    and a near-goal start is posed on it and touches nothing."""
+    import numpy as np
+
+    from ms_construction.goal_configurations import START_TURNS_DEG, _clear_fraction, _path_planners
+    from ms_construction.assets import load_manifest
+    from ms_construction.planning.collision_model import obstacle_objects, site_collision_objects
+
+    env = make_env("Flooring-v1", obstacles="static", reward_mode="dense")
+    u = env.unwrapped
+    g = u.geometry
+    for seed in range(40):
+        env.reset(seed=seed)
+        ways = u.obstacle_ways()
+        usable = g.paths["usable"][u.task_id, u.goal_slot]
+        if not (usable & ways.clear & ~ways.searched).any() and ways.searched.any():
+            break
+    else:
+        pytest.fail("no flooring seed of 40 whose obstacles block every usable path and whose search finds a via")
+    assert (ways.searched <= usable).all() and int(ways.searched.sum()) == 1
+    path = int(ways.searched[0].nonzero()[0, 0])
+    side = path % 2
+    searched = ways.waypoints[0, path]
+    # the slot's own path but for its corner, and clear of the site and the obstacles at every checked turn
+    site_path = g.paths["waypoints"][u.task_id, u.goal_slot][0, path]
+    assert torch.equal(searched[[0, 1, 3, 4]], site_path[[0, 1, 3, 4]]) and not torch.equal(searched[2], site_path[2])
+    planners = _path_planners(tmp_path, "flooring", site_collision_objects(load_manifest(), ("flooring",)))
+    for key, obj in obstacle_objects(u).items():
+        if key != "obstacle_worker":
+            for planner in planners:
+                planner.set_obstacle(key, obj)
+    turns = [float(np.deg2rad(t)) for t in START_TURNS_DEG]
+    assert _clear_fraction(planners, searched.numpy().astype(float), turns) == 1.0
+    assert _clear_fraction(planners, site_path.numpy().astype(float), turns) < 1.0
+    # seeded by the layout: the same way again, and after the state is set back
+    state = u.get_state_dict()
+    env.reset(seed=seed)
+    assert torch.equal(u.obstacle_ways().waypoints, ways.waypoints)
+    env.reset(seed=seed + 1)
+    u.set_state_dict(state)
+    assert torch.equal(u.obstacle_ways().waypoints, ways.waypoints)
+    # the reach pays the searched way's side; the carry falls along it after a grasp from there
+    assert g.path_sides(u.task_id, u.goal_slot, u.clear_paths())[0].tolist() == [side == 0, side == 1]
+    grasped = torch.full((1,), side)
+    at = [float(g.project(q[None], torch.zeros(1), u.task_id, u.goal_slot, grasped, u.obstacle_ways()).distance)
+          for q in (searched[3], searched[2], searched[1])]
+    assert at[0] > at[1] > at[2]
+    length_left = float((searched[1:3] - searched[:2]).abs().sum())
+    assert at[1] <= length_left + 1e-4, "at the via: the searched way's length left"
     u.set_near_goal_starts(1.0, 1.0)
     env.reset(seed=seed)
     assert bool(u.near_goal_start[0]) and int(u.carry_side[0]) == side
@@ -485,10 +553,10 @@ def test_sac_on_a_mixed_scene_is_its_own_run_unchanged_but_for_the_share_and_ref
     from experiments import obstacles
 
     full, mixed = obstacles.training_run("nothing"), obstacles.training_run("nothing", share=0.5)  # SAC by default
-    assert full == obstacles.training_run("nothing", learner="sac") and full.name == "obstacles_moving_r6_sac_s1"
+    assert full == obstacles.training_run("nothing", learner="sac") and full.name == "obstacles_moving_r7_sac_s1"
     changed = {k for k, v in vars(mixed.args).items() if v != vars(full.args)[k]}
     assert changed == {"obstacle_share", "exp_name"} and mixed.args.obstacle_share == 0.5
-    assert mixed.name == "obstacles_moving_share50_r6_sac_s1" != full.name
+    assert mixed.name == "obstacles_moving_share50_r7_sac_s1" != full.name
     assert mixed.command == "python -m experiments.obstacles --share 0.5 --train nothing --learner sac --train-seed 1"
     assert "in 50% of its training episodes" in mixed.what
     with pytest.raises(SystemExit, match="SAC's option"):
@@ -500,18 +568,22 @@ def test_sac_on_a_mixed_scene_is_its_own_run_unchanged_but_for_the_share_and_ref
 
 
 def test_the_runs_on_the_earlier_obstacle_reward_keep_their_folders_and_are_not_trained_on():
-    """OBSTACLE_REWARD names what a run among obstacles trains on: today's runs' folders carry it (`_r6`), the runs
-    on rewards 1 (before the detours), 2 and 3 (a touch valued as success is) keep theirs, for --evaluate and the
-    tables, and training one is refused; versions 4 and 5 can still be trained: 5 is 4 with the hand-back of
-    near-goal starts, 6 is 5 with reach starts."""
+    """OBSTACLE_REWARD names what a run among obstacles trains on: today's runs' folders carry it (`_r7`), the runs
+    on the earlier versions keep theirs, for --evaluate and the tables, and training one is refused (their reward
+    code is gone); 5 is 4 with the hand-back of near-goal starts, 6 is 5 with reach starts, and 7 trains as 6 does
+    (its change is the tasks' reward among obstacles, not an option of the run)."""
     from experiments import obstacles
 
     old = obstacles.training_run("shipped", 1, None, "sac", 0.5, reward=1)
     assert old.name == "obstacles_moving_share50_shipped_sac_s1" and "obstacle reward" not in old.what
     assert old.command.startswith("python -m experiments.obstacles --share 0.5 --obstacle-reward 1 --train shipped")
-    new = obstacles.training_run("shipped", 1, None, "sac", 0.5)
-    assert new.name == "obstacles_moving_share50_r6_shipped_sac_s1" and "--obstacle-reward" not in new.command
+    today = obstacles.training_run("shipped", 1, None, "sac", 0.5)
+    assert today.name == "obstacles_moving_share50_r7_shipped_sac_s1" and "--obstacle-reward" not in today.command
+    assert "(obstacle reward 5 (ways searched at reset), near-goal starts handed back, reach starts)" in today.what
+    new = obstacles.training_run("shipped", 1, None, "sac", 0.5, reward=6)
+    assert new.name == "obstacles_moving_share50_r6_shipped_sac_s1" and "--obstacle-reward 6" in new.command
     assert "(obstacle reward 4, near-goal starts handed back, reach starts)" in new.what
+    assert {k for k, v in vars(today.args).items() if v != vars(new.args)[k]} == {"exp_name"}
     r4, r5 = (obstacles.training_run("shipped", 1, None, "sac", 0.5, reward=v) for v in (4, 5))
     assert r4.name == "obstacles_moving_share50_r4_shipped_sac_s1" and "--obstacle-reward 4" in r4.command
     assert r5.name == "obstacles_moving_share50_r5_shipped_sac_s1" and "--obstacle-reward 5" in r5.command
@@ -525,9 +597,9 @@ def test_the_runs_on_the_earlier_obstacle_reward_keep_their_folders_and_are_not_
     assert probe.name == "obstacles_moving_share50_r2_shipped_sac_s1" and "--obstacle-reward 2" in probe.command
     r3 = obstacles.training_run("shipped", 1, None, "sac", 0.5, reward=3)
     assert r3.name == "obstacles_moving_share50_r3_shipped_sac_s1" and "--obstacle-reward 3" in r3.command
-    with pytest.raises(SystemExit, match="--obstacle-reward 7"):
-        obstacles.training_run("shipped", reward=7)
-    for earlier in (1, 2, 3):
+    with pytest.raises(SystemExit, match="--obstacle-reward 8"):
+        obstacles.training_run("shipped", reward=8)
+    for earlier in (1, 2, 3, 4, 5, 6):
         with pytest.raises(SystemExit, match="that reward is gone"):
             obstacles.main(obstacles.Args(train="shipped", learner="sac", share=0.5, obstacle_reward=earlier))
 
@@ -689,7 +761,8 @@ def test_the_layouts_of_a_scene_name_the_post_s_side_and_the_ways_the_reward_fin
         env.reset(seed=seed)
         assert layout["post-side"] == ("-y" if float(u.obstacle_layout[0, 5]) < 0 else "+y")
         assert layout["clear-way"] in LAYOUT_GROUPS["clear-way"]
-        clear = u.clear_paths()
+        ways = u.obstacle_ways()
+        clear = ways.clear & ~ways.searched  # the site's start paths: a layout's class is theirs
         usable_clear = bool((u.geometry.paths["usable"][u.task_id, u.goal_slot] & clear).any())
         assert (layout["clear-way"] == "a usable path") == usable_clear
         assert (layout["clear-way"] == "none") == (not bool(u.geometry.clear_ways(u.task_id, u.goal_slot, clear).any()))

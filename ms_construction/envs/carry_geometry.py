@@ -11,8 +11,10 @@ names a slot, an opening or a turret side:
   installation configuration out to the staging table, one per turret side, a planned via where the direct ones
   run into the site. The turret sides a slot's usable paths leave from are the sides its element is reached and
   grasped from (`path_sides`); the carry is measured along the grasp side's paths (`project`). From the sides a slot
-  has no usable path from, its detours (a planned via each): where a site's obstacles block every usable path, the
-  reward measures along the detours they leave clear (`usable`, `clear_ways`).
+  has no usable path from, its detours (a planned via each). Among a site's obstacles, each episode has its own
+  (`episode_ways`, `EpisodeWays`): a turret side whose usable paths they block all of gets one back through a via
+  searched around them at reset; where none is found and no usable path is clear, the reward measures along the
+  detours they leave clear (`usable`, `clear_ways`).
 
 `CarryGeometry.project` is the one projection per step the reward and the observation share: it is the cost of a
 dense-reward step, so it works on per-slot constants gathered in two index operations.
@@ -114,6 +116,24 @@ def _project(qpos: torch.Tensor, turn: torch.Tensor, period: torch.Tensor, segme
     return distance, at, to_install, to_path
 
 
+def path_tables(waypoints: torch.Tensor, via: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+    """The projection's constants (`_project`) of start paths `waypoints` [..., M, P, 6] whose corner is a planned via
+    where `via` [..., M]: segments [..., M, P - 1, 10] and vertices [..., M, P, 8]."""
+    seg = waypoints[..., 1:, :] - waypoints[..., :-1, :]
+    length = seg.abs().sum(-1)
+    before = torch.cumsum(length, -1) - length  # the path's length from the installation to each segment
+    # from the lift in, a planned via's path counts VIA_DEVIATION_WEIGHT; the table's segment keeps the lenient weight
+    # (the grasp's posture need not match the path's, and nothing lies across)
+    not_table = torch.arange(seg.shape[-2], device=seg.device) < seg.shape[-2] - 1
+    weight = torch.where(via[..., None] & not_table, VIA_DEVIATION_WEIGHT, PATH_DEVIATION_WEIGHT)
+    # a vertex is the end of the segments either side of it: it counts at the lighter of their weights
+    vertex_weight = torch.minimum(torch.cat([weight[..., :1], weight], -1), torch.cat([weight, weight[..., -1:]], -1))
+    vertex_before = torch.cat([torch.zeros_like(length[..., :1]), torch.cumsum(length, -1)], -1)
+    inv = 1.0 / (seg[..., :5] ** 2).sum(-1).clamp(min=1e-9)
+    return (torch.cat([seg, inv[..., None], length[..., None], before[..., None], weight[..., None]], -1),
+            torch.cat([waypoints, vertex_before[..., None], vertex_weight[..., None]], -1))
+
+
 @functools.lru_cache(maxsize=None)
 def _scripted(fn):
     """`fn` compiled by TorchScript, once per process (its interpreter runs a small op several times faster than
@@ -136,6 +156,25 @@ class Projection:
     """[n, 6] rad: the joint move to the point PATH_LOOKAHEAD ahead, toward the installation, of the point the carry is
     measured from, along its path (the installation itself within PATH_LOOKAHEAD of it): which way the carry falls
     from here."""
+
+
+@dataclass
+class EpisodeWays:
+    """The start paths of each env's goal slot as one episode among a site's obstacles has them
+    (`CarryGeometry.episode_ways`)."""
+
+    clear: torch.Tensor
+    """[n, M] bool: which keep clear of the obstacles (`SiteObstacles.clear_paths`)."""
+    searched: torch.Tensor
+    """[n, M] bool: the paths whose via was searched for this episode (goal_configurations.search_via): a turret side
+    whose usable paths the obstacles block all of gets one of them back, clear, through a via around them."""
+    waypoints: torch.Tensor
+    """[n, M, P, 6]: the slot's start paths, the searched ones through their via."""
+    free: torch.Tensor
+    """[n, M]: their clear fraction on the site (StartPaths.free; 1 for a searched one)."""
+    segments: torch.Tensor
+    vertices: torch.Tensor
+    """the projection's constants of `waypoints` (`path_tables`)."""
 
 
 class CarryGeometry:
@@ -178,25 +217,27 @@ class CarryGeometry:
             usable = torch.tensor(sp.usable & self.kept[..., None], device=self.device).flatten(2)  # [k, s, M]
             planned = torch.tensor(sp.planned, device=self.device).flatten(2)
             detour = torch.tensor(sp.detour & self.kept[..., None], device=self.device).flatten(2)
-            seg = w[..., 1:, :] - w[..., :-1, :]  # [k, s, M, S, 6]
-            length = seg.abs().sum(-1)
-            before = torch.cumsum(length, -1) - length  # the path's length from the installation to each segment
-            # from the lift in, a planned via's path counts VIA_DEVIATION_WEIGHT; the table's segment keeps the lenient
-            # weight (the grasp's posture need not match the path's, and nothing lies across)
-            not_table = torch.arange(seg.shape[-2], device=self.device) < seg.shape[-2] - 1
-            weight = torch.where((planned | detour)[..., None] & not_table, VIA_DEVIATION_WEIGHT, PATH_DEVIATION_WEIGHT)
-            # a vertex is the end of the segments either side of it: it counts at the lighter of their weights
-            vertex_weight = torch.minimum(torch.cat([weight[..., :1], weight], -1), torch.cat([weight, weight[..., -1:]], -1))
-            vertex_before = torch.cat([torch.zeros_like(length[..., :1]), torch.cumsum(length, -1)], -1)
-            inv = 1.0 / (seg[..., :5] ** 2).sum(-1).clamp(min=1e-9)
+            segments, vertices = path_tables(w, planned | detour)
             sides = usable.view(k, s, -1, 2).any(2)
             kept = torch.tensor(self.kept, device=self.device).repeat_interleave(2, -1)  # [k, s, M]
             self._paths = dict(
                 waypoints=w, free=torch.tensor(sp.free, **f32).flatten(2), usable=usable, planned=planned, detour=detour, kept=kept,
                 sides=sides | ~sides.any(-1, keepdim=True),
-                segments=torch.cat([seg, inv[..., None], length[..., None], before[..., None], weight[..., None]], -1),
-                vertices=torch.cat([w, vertex_before[..., None], vertex_weight[..., None]], -1))
+                segments=segments, vertices=vertices)
         return self._paths
+
+    def episode_ways(self, task: torch.Tensor, slot: torch.Tensor, clear: torch.Tensor,
+                     vias: dict[tuple[int, int], np.ndarray]) -> EpisodeWays:
+        """The start paths of each env's goal slot (`task`, `slot` [n]) for an episode among obstacles: `clear` [n, M]
+        as checked, and each path (env, index) of `vias` through that via configuration instead of its corner, clear."""
+        p = self.paths
+        waypoints, free = p["waypoints"][task, slot].clone(), p["free"][task, slot].clone()
+        via, clear = (p["planned"] | p["detour"])[task, slot].clone(), clear.clone()
+        searched = torch.zeros_like(clear)
+        for (env, path), q in vias.items():
+            waypoints[env, path, 2] = torch.as_tensor(q, dtype=waypoints.dtype, device=self.device)
+            free[env, path], clear[env, path], via[env, path], searched[env, path] = 1.0, True, True, True
+        return EpisodeWays(clear, searched, waypoints, free, *path_tables(waypoints, via))
 
     def clear_ways(self, task: torch.Tensor, slot: torch.Tensor, clear: torch.Tensor) -> torch.Tensor:
         """[n, M] bool: the start paths of each env's goal slot that keep clear of a site's obstacles (`clear` [n, M],
@@ -240,7 +281,7 @@ class CarryGeometry:
         return torch.where(sides.any(-1, keepdim=True), sides, True)
 
     def project(self, qpos: torch.Tensor, turn: torch.Tensor, task: torch.Tensor, slot: torch.Tensor,
-                side: torch.Tensor, clear: Optional[torch.Tensor] = None) -> Projection:
+                side: torch.Tensor, ways: Optional[EpisodeWays] = None) -> Projection:
         """How far the arm (`qpos` [n, 6], its element turned `turn` [n] on the plate) is from holding its element
         installed along the nearest usable start path of its goal slot: the least, over the points of the paths,
         of the path's weight (PATH_DEVIATION_WEIGHT, VIA_DEVIATION_WEIGHT) times the joint-space (L1) distance to
@@ -248,12 +289,16 @@ class CarryGeometry:
         modulo the element's symmetry. Only along the paths that leave the table from the turret side `side` [n]
         (0: +pi, 1: -pi, -1: none) the element was grasped from, where the slot has any: the turret cannot cross to
         the other side holding it. The candidates are each segment's nearest point by joints 1-5 (joint 6 is
-        compared modulo a period, which a projection cannot take) and every vertex. With `clear`, along the paths
-        clear of the site's obstacles, the grasp side's first (`carry_paths`)."""
+        compared modulo a period, which a projection cannot take) and every vertex. Among a site's obstacles (`ways`),
+        along the episode's paths clear of them, the grasp side's first (`carry_paths`), a searched via where one is.
+        """
         p = self.paths
+        segments, vertices = ((p["segments"][task, slot], p["vertices"][task, slot]) if ways is None
+                              else (ways.segments, ways.vertices))
         return Projection(*_scripted(_project)(
-            qpos, turn, self.period[task], p["segments"][task, slot], p["vertices"][task, slot],
-            self.carry_paths(task, slot, side, clear), p["kept"][task, slot], side, PATH_LOOKAHEAD))
+            qpos, turn, self.period[task], segments, vertices,
+            self.carry_paths(task, slot, side, None if ways is None else ways.clear), p["kept"][task, slot], side,
+            PATH_LOOKAHEAD))
 
     def reach_distance(self, qpos: torch.Tensor, task: torch.Tensor, slot: torch.Tensor,
                        clear: Optional[torch.Tensor] = None) -> torch.Tensor:

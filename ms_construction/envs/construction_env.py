@@ -540,7 +540,7 @@ class ConstructionTaskEnv(SiteObstacles, StartStates, BaseEnv):
         (`CarryGeometry.project`): what the carry and the path offset measure."""
         return self._per_step("projection", lambda: self.geometry.project(
             self.agent.robot.get_qpos(), self.plate_turn(), self.task_id, self.goal_slot, self.carry_side,
-            self.clear_paths()))
+            self.obstacle_ways()))
 
     def carry_distance(self) -> torch.Tensor:
         """[n] rad; how far the arm is from holding its element installed, along the start paths of its goal slot
@@ -670,5 +670,5 @@ class ConstructionTaskEnv(SiteObstacles, StartStates, BaseEnv):
             self._place_goal_markers(torch.arange(self.num_envs, device=self.device))
             if self.has_obstacles:
                 self._pose_obstacles()
-                self._clear_paths = None
+                self._ways = None
 

@@ -15,8 +15,10 @@ fronts, the arm's rest pose and (the post) the ceiling openings; none of the thr
 layout may still block every way to a goal: `experiments/generalization.py` keeps the evaluation seeds whose static
 scene the planning expert solves ("solvable at its start").
 
-The dense reward measures its carry along the start paths that keep clear of the stack and the post (`clear_paths`),
-a detour from the other turret side where they block every usable one (`CarryGeometry.clear_ways`).
+The dense reward measures its carry along the start paths that keep clear of the stack and the post (`clear_paths`);
+where they block every usable one of a turret side, along one of them through a via searched around them at reset
+(`obstacle_ways`, seeded by the layout), and a detour from the other side where no via is found
+(`CarryGeometry.clear_ways`).
 A touch of the arm or the element on an obstacle is `info["obstacle_collision"]`; `info["fail"]` (ManiSkill's
 failure key, which ends the episode) holds once one happened. The obstacles are kinematic bodies (immovable; the
 static site does not collide with them). physx_cpu only for now: the GPU path (pairwise contact queries, kinematic
@@ -26,6 +28,7 @@ poses applied per step) is not written.
 from __future__ import annotations
 
 import tempfile
+from pathlib import Path
 from typing import Optional
 
 import numpy as np
@@ -34,6 +37,7 @@ import torch
 
 from mani_skill.utils.structs import Actor, Pose
 
+from ms_construction.envs.carry_geometry import EpisodeWays
 from ms_construction.parameters import SiteParams
 from ms_construction.rotations import quat_z
 
@@ -190,7 +194,7 @@ class SiteObstacles:
         # None: the entry where there are obstacles; True: always (zeros without them: a policy trained among
         # obstacles on a site without); False: never (a policy trained without them meets them blind)
         self.obs_obstacles = mode != "none" if obs_obstacles is None else bool(obs_obstacles)
-        self._clear_paths: Optional[torch.Tensor] = None
+        self._ways: Optional[EpisodeWays] = None
 
     @property
     def has_obstacles(self) -> bool:
@@ -232,7 +236,7 @@ class SiteObstacles:
         self._worker_parked_xy = torch.tensor(WORKER_PARKED_XY, device=self.device)
 
     def _place_obstacles(self, env_idx: torch.Tensor) -> None:
-        self._clear_paths = None
+        self._ways = None
         if not self.has_obstacles:
             return
         layouts = sample_layouts(len(env_idx), self._obstacle_site, self.control_freq, self.device, self.obstacle_share)
@@ -307,18 +311,60 @@ class SiteObstacles:
 
     def clear_paths(self) -> Optional[torch.Tensor]:
         """[n, M] bool: which start paths of each env's goal slot (`CarryGeometry.paths`) keep the arm and its element
-        clear of the stack and the post as they stand (None without obstacles): the dense reward measures the carry
-        along the usable ones of those, where any is, else along the clear detours (`CarryGeometry.usable`), so that
-        it does not lead the arm into them. Checked as the
-        start paths are against the site (goal_configurations: the same points, turns and margins), once per
-        episode when the reward first asks; the walking worker is left out (it is outside the cell at the start)."""
+        clear of the stack and the post as they stand, a searched via's among them (`obstacle_ways`); None without
+        obstacles. The dense reward measures the carry along the usable ones of those, where any is, else along the
+        clear detours (`CarryGeometry.usable`), so that it does not lead the arm into them."""
+        ways = self.obstacle_ways()
+        return None if ways is None else ways.clear
+
+    def obstacle_ways(self) -> Optional[EpisodeWays]:
+        """The start paths of each env's goal slot as this episode has them among its obstacles (None without them),
+        once per episode when first asked: which keep clear of the stack and the post (checked as the start paths are
+        against the site, goal_configurations: the same points, turns and margins; the walking worker is left out, as
+        it is outside the cell at the start), and, for a turret side whose usable paths they block all of, a via
+        around them searched for that side's paths (`_search_vias`): the carry is paid along a clear way from the
+        side the element is usually grasped from, as the site as built pays it, rather than only along a detour from
+        the other side or into the obstacles. An episode without them (`obstacle_share`) has every path clear."""
         if not self.has_obstacles:
             return None
-        if self._clear_paths is None:
+        if self._ways is None:
             n_paths = self.geometry.paths["waypoints"].shape[2]
-            self._clear_paths = (self._check_paths() if bool(self.obstacles_present().all())
-                                 else torch.ones(self.num_envs, n_paths, dtype=torch.bool, device=self.device))
-        return self._clear_paths
+            present = bool(self.obstacles_present().all())
+            clear = (self._check_paths() if present
+                     else torch.ones(self.num_envs, n_paths, dtype=torch.bool, device=self.device))
+            self._ways = self.geometry.episode_ways(self.task_id, self.goal_slot, clear,
+                                                    self._search_vias(clear) if present else {})
+        return self._ways
+
+    def _search_vias(self, clear: torch.Tensor) -> dict[tuple[int, int], np.ndarray]:
+        """{(env, path): via} for each turret side of the episode's goal slot that has usable start paths, none of them
+        clear (`clear` [1, M]): a via that makes one of them clear among the site and the stack and the post
+        (goal_configurations.search_via), from a generator seeded by the
+        task type, the goal slot and the layout, so that the episode's ways are the same in every process, in a replay
+        and after `set_state_dict`. A side where none is found keeps its blocked paths (the detours stay)."""
+        from ms_construction.goal_configurations import START_TURNS_DEG, search_via
+
+        kind, slot = int(self.task_id[0]), int(self.goal_slot[0])
+        usable = self.geometry.paths["usable"][kind, slot].cpu().numpy()
+        clear = clear[0].cpu().numpy()
+        waypoints = self.geometry.paths["waypoints"][kind, slot].cpu().numpy().astype(np.float64)
+        turns = [float(np.deg2rad(t)) for t in START_TURNS_DEG]
+        limits = self.agent.robot.get_qlimits()[0].cpu().numpy().astype(np.float64).T
+        layout = self.obstacle_layout[0].cpu().numpy().astype(np.float32).view(np.uint32)
+        rng = np.random.default_rng([kind, slot, *layout.tolist()])
+        vias = {}
+        for side in (0, 1):
+            paths = [m for m in range(side, len(usable), 2) if usable[m]]
+            if not paths or clear[paths].any():
+                continue
+            planners = self._path_planners(kind, with_site=True)
+            for planner in planners:
+                for key, obj in self._static_obstacles().items():
+                    planner.set_obstacle(key, obj)
+            found = search_via(planners, [tuple(waypoints[m][[0, 1, 3, 4]]) for m in paths], turns, rng, limits)
+            if found is not None:
+                vias[0, paths[found[0]]] = found[1]
+        return vias
 
     def _check_paths(self) -> torch.Tensor:
         """[1, M]: `_clear_fraction(...) == 1` of goal_configurations for each start path of the episode's goal slot
@@ -326,31 +372,41 @@ class SiteObstacles:
         arm collides with itself at each checked point is the same in every episode, so it is checked once per goal
         slot (`_path_points`), and each episode checks only the obstacles, at the points of the paths clear of the
         arm itself, coarse to fine (a blocked path is found after a few checks)."""
-        from ms_construction.planning.collision_model import obstacle_objects
-
         kind, slot = int(self.task_id[0]), int(self.goal_slot[0])
         planners = self._path_planners(kind)
         points, self_clear = self._path_points(kind, slot)
-        static = {k: v for k, v in obstacle_objects(self).items() if k != "obstacle_worker"}
         for planner in planners:
-            for key, obj in static.items():
+            for key, obj in self._static_obstacles().items():
                 planner.set_obstacle(key, obj)
         clear = [bool(free) and not any(planner.world.set_qpos_all(q) or planner.world.collide_with_others()
                                         for q_turns in path for planner, q in zip(planners, q_turns))
                  for path, free in zip(points, self_clear)]
         return torch.tensor([clear], device=self.device)
 
-    def _path_planners(self, kind: int) -> list:
-        """goal_configurations' path checkers (one per START_TURNS_DEG) for task type `kind`, made once per env."""
+    def _path_planners(self, kind: int, with_site: bool = False) -> list:
+        """goal_configurations' path checkers (one per START_TURNS_DEG) for task type `kind`, made once per env: the
+        arm holding its element among the obstacles alone (the start paths were checked against the site when they
+        were made), or `with_site` among the site's collision parts too (for a via's search)."""
+        from ms_construction.assets import load_manifest
         from ms_construction.goal_configurations import _path_planners
         from ms_construction.parameters import ELEMENT_KINDS
+        from ms_construction.planning.collision_model import site_collision_objects
 
         if not hasattr(self, "_path_checkers"):
             self._path_checkers_dir = tempfile.TemporaryDirectory(prefix="ms_construction_obstacles_")
             self._path_checkers, self._path_point_cache = {}, {}
-        if kind not in self._path_checkers:
-            self._path_checkers[kind] = _path_planners(self._path_checkers_dir.name, ELEMENT_KINDS[kind], {})
-        return self._path_checkers[kind]
+        if (kind, with_site) not in self._path_checkers:
+            site = site_collision_objects(load_manifest(), (ELEMENT_KINDS[kind],)) if with_site else {}
+            folder = Path(self._path_checkers_dir.name) / ("site" if with_site else "obstacles")
+            folder.mkdir(exist_ok=True)
+            self._path_checkers[kind, with_site] = _path_planners(folder, ELEMENT_KINDS[kind], site)
+        return self._path_checkers[kind, with_site]
+
+    def _static_obstacles(self) -> dict:
+        """The stack and the post where they stand, as FCL objects (the planners' obstacles)."""
+        from ms_construction.planning.collision_model import obstacle_objects
+
+        return {k: v for k, v in obstacle_objects(self).items() if k != "obstacle_worker"}
 
     def _path_points(self, kind: int, slot: int) -> tuple[np.ndarray, np.ndarray]:
         """The checked configurations of goal slot `slot`'s start paths, [M, PATH_CHECKS + 1, turns, 6] with the

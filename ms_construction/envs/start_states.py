@@ -76,18 +76,22 @@ class StartStates:
         paths, b = self.geometry.paths, len(env_idx)
         chosen = torch.rand(b) < self.near_goal_share[self.task_id[env_idx].cpu()]
         usable = paths["usable"][self.task_id[env_idx], self.goal_slot[env_idx]]
-        clear = self._clear_paths_of(env_idx)
-        if clear is not None:  # with obstacles: on a way clear of them (a detour where no usable path is), and an
-            # ordinary reset where none is
-            usable = self.geometry.clear_ways(self.task_id[env_idx], self.goal_slot[env_idx], clear)
+        waypoints = paths["waypoints"][self.task_id[env_idx], self.goal_slot[env_idx]]
+        free = paths["free"][self.task_id[env_idx], self.goal_slot[env_idx]]
+        ways = self.obstacle_ways()
+        if ways is not None:  # with obstacles: on a way clear of them (a searched via or a detour where no usable
+            # path is), and an ordinary reset where none is
+            usable = self.geometry.clear_ways(self.task_id[env_idx], self.goal_slot[env_idx], ways.clear[env_idx])
+            waypoints, free = ways.waypoints[env_idx], ways.free[env_idx]
             chosen &= usable.any(-1)
         if not bool(chosen.any()):
             return
         idx = env_idx[chosen]
-        task, slot = self.task_id[idx], self.goal_slot[idx]
+        task = self.task_id[idx]
         path = torch.multinomial(usable[chosen].float(), 1)[:, 0]  # a usable (configuration, side)
-        frac = torch.rand(len(idx)) * torch.minimum(paths["free"][task, slot, path], self.near_goal_radius[task])
-        q = path_points(paths["waypoints"][task, slot, path], frac)
+        rows = torch.arange(len(idx))
+        frac = torch.rand(len(idx)) * torch.minimum(free[chosen][rows, path], self.near_goal_radius[task])
+        q = path_points(waypoints[chosen][rows, path], frac)
         turn = (torch.rand(len(idx)) * 2 - 1) * START_YAW_NOISE_DEG  # the element's turn on the plate
         q[:, 5] += torch.deg2rad(turn)
         qpos = self.agent.robot.get_qpos()[env_idx].clone()
