@@ -260,7 +260,7 @@ class Args(transfer.TrainOptions):
     --no-write-results (a snapshot evaluated on its own, say) both are left as they are and the table only printed."""
     training_curve: bool = False
     """draw the training runs among obstacles (TRAIN_RUNS, those with a progress.csv) to TRAIN_CURVE, and exit."""
-    touches_by: Optional[Literal["post-side", "clear-way"]] = None
+    touches_by: Optional[Literal["post-side", "clear-way", "searched-way"]] = None
     """with --train: per task, the episodes each evaluated snapshot of that run (each seed's), and the blind reward-only
     agent (BLIND), placed its element in and touched an obstacle in (static scene), by the side of the arm the scaffold post stands on
     (post-side) or by the ways the dense reward finds clear of the obstacles (clear-way: LAYOUT_GROUPS); and exit.
@@ -459,11 +459,13 @@ def snapshot_table(start: str, learner: Optional[str], share: float, out: Path,
 LAYOUT_GROUPS = {
     "post-side": ("-y", "+y"),
     "clear-way": ("a usable path", "a detour only", "none"),
+    "searched-way": ("a via searched", "the start paths only"),
 }
 """how `--touches-by` groups the static scene's layouts (`layouts`): the side of the arm (its base at the origin) the
-scaffold post stands on; the ways the dense reward finds clear of the stack and the post for the episode's goal slot
+scaffold post stands on; the start paths clear of the stack and the post for the episode's goal slot
 (CarryGeometry.clear_ways: a usable start path; only a detour from a turret side without usable paths; none, where
-it measures along the usable paths, into the obstacles)."""
+it measures along the usable paths, into the obstacles); whether the episode got a way through a via searched around
+them at reset (SiteObstacles.obstacle_ways: for a turret side whose usable paths they block all of; version 7 on)."""
 
 
 def layouts(env_id: str, seeds: list[int]) -> dict[int, dict[str, str]]:
@@ -479,7 +481,8 @@ def layouts(env_id: str, seeds: list[int]) -> dict[int, dict[str, str]]:
         usable = (u.geometry.paths["usable"][u.task_id, u.goal_slot] & clear).any()
         way = ("a usable path" if usable else "a detour only" if u.geometry.clear_ways(u.task_id, u.goal_slot, clear).any()
                else "none")
-        found[seed] = {"post-side": "-y" if float(u.obstacle_layout[0, 5]) < 0 else "+y", "clear-way": way}
+        found[seed] = {"post-side": "-y" if float(u.obstacle_layout[0, 5]) < 0 else "+y", "clear-way": way,
+                       "searched-way": LAYOUT_GROUPS["searched-way"][0 if bool(ways.searched.any()) else 1]}
     env.close()
     return found
 

@@ -751,7 +751,8 @@ def test_a_replayed_episode_is_the_evaluated_one_to_its_first_touch():
 
 def test_the_layouts_of_a_scene_name_the_post_s_side_and_the_ways_the_reward_finds_clear():
     """`layouts` (what `--touches-by` groups by) on real window scenes: each seed's post side is the sign of its
-    post's y, and its clear way is the one `CarryGeometry.clear_ways` gives for its goal slot."""
+    post's y, its clear way the one `CarryGeometry.clear_ways` gives for its goal slot's start paths, and whether the
+    episode searched a via around the obstacles."""
     from experiments.obstacles import LAYOUT_GROUPS, layouts
 
     found = layouts("WindowInstallation-v1", list(range(6)))
@@ -766,6 +767,7 @@ def test_the_layouts_of_a_scene_name_the_post_s_side_and_the_ways_the_reward_fin
         usable_clear = bool((u.geometry.paths["usable"][u.task_id, u.goal_slot] & clear).any())
         assert (layout["clear-way"] == "a usable path") == usable_clear
         assert (layout["clear-way"] == "none") == (not bool(u.geometry.clear_ways(u.task_id, u.goal_slot, clear).any()))
+        assert (layout["searched-way"] == "a via searched") == bool(ways.searched.any())
     env.close()
 
 
