@@ -339,9 +339,9 @@ class SiteObstacles:
     def _search_vias(self, clear: torch.Tensor) -> dict[tuple[int, int], np.ndarray]:
         """{(env, path): via} for each turret side of the episode's goal slot that has usable start paths, none of them
         clear (`clear` [1, M]): a via that makes one of them clear among the site and the stack and the post
-        (goal_configurations.search_via), from a generator seeded by the
-        task type, the goal slot and the layout, so that the episode's ways are the same in every process, in a replay
-        and after `set_state_dict`. A side where none is found keeps its blocked paths (the detours stay)."""
+        (goal_configurations.search_via), from a generator seeded by the task type, the goal slot and the layout, so
+        that the episode's ways are the same in every process, in a replay and after `set_state_dict`. A side where
+        none is found keeps its blocked paths (the detours stay)."""
         from ms_construction.goal_configurations import START_TURNS_DEG, search_via
 
         kind, slot = int(self.task_id[0]), int(self.goal_slot[0])
@@ -357,11 +357,8 @@ class SiteObstacles:
             paths = [m for m in range(side, len(usable), 2) if usable[m]]
             if not paths or clear[paths].any():
                 continue
-            planners = self._path_planners(kind, with_site=True)
-            for planner in planners:
-                for key, obj in self._static_obstacles().items():
-                    planner.set_obstacle(key, obj)
-            found = search_via(planners, [tuple(waypoints[m][[0, 1, 3, 4]]) for m in paths], turns, rng, limits)
+            ends = [tuple(waypoints[m][[0, 1, 3, 4]]) for m in paths]  # install, back-off, lift, table
+            found = search_via(self._path_planners(kind, with_site=True), ends, turns, rng, limits)
             if found is not None:
                 vias[0, paths[found[0]]] = found[1]
         return vias
@@ -375,22 +372,20 @@ class SiteObstacles:
         kind, slot = int(self.task_id[0]), int(self.goal_slot[0])
         planners = self._path_planners(kind)
         points, self_clear = self._path_points(kind, slot)
-        for planner in planners:
-            for key, obj in self._static_obstacles().items():
-                planner.set_obstacle(key, obj)
         clear = [bool(free) and not any(planner.world.set_qpos_all(q) or planner.world.collide_with_others()
                                         for q_turns in path for planner, q in zip(planners, q_turns))
                  for path, free in zip(points, self_clear)]
         return torch.tensor([clear], device=self.device)
 
     def _path_planners(self, kind: int, with_site: bool = False) -> list:
-        """goal_configurations' path checkers (one per START_TURNS_DEG) for task type `kind`, made once per env: the
-        arm holding its element among the obstacles alone (the start paths were checked against the site when they
-        were made), or `with_site` among the site's collision parts too (for a via's search)."""
+        """goal_configurations' path checkers (one per START_TURNS_DEG) for task type `kind`, made once per env, with
+        the stack and the post where they stand now: the arm holding its element among them alone (the start paths
+        were checked against the site when they were made), or `with_site` among the site's collision parts too (for
+        a via's search)."""
         from ms_construction.assets import load_manifest
         from ms_construction.goal_configurations import _path_planners
         from ms_construction.parameters import ELEMENT_KINDS
-        from ms_construction.planning.collision_model import site_collision_objects
+        from ms_construction.planning.collision_model import obstacle_objects, site_collision_objects
 
         if not hasattr(self, "_path_checkers"):
             self._path_checkers_dir = tempfile.TemporaryDirectory(prefix="ms_construction_obstacles_")
@@ -400,13 +395,12 @@ class SiteObstacles:
             folder = Path(self._path_checkers_dir.name) / ("site" if with_site else "obstacles")
             folder.mkdir(exist_ok=True)
             self._path_checkers[kind, with_site] = _path_planners(folder, ELEMENT_KINDS[kind], site)
-        return self._path_checkers[kind, with_site]
-
-    def _static_obstacles(self) -> dict:
-        """The stack and the post where they stand, as FCL objects (the planners' obstacles)."""
-        from ms_construction.planning.collision_model import obstacle_objects
-
-        return {k: v for k, v in obstacle_objects(self).items() if k != "obstacle_worker"}
+        planners = self._path_checkers[kind, with_site]
+        for key, obj in obstacle_objects(self).items():
+            if key != "obstacle_worker":
+                for planner in planners:
+                    planner.set_obstacle(key, obj)
+        return planners
 
     def _path_points(self, kind: int, slot: int) -> tuple[np.ndarray, np.ndarray]:
         """The checked configurations of goal slot `slot`'s start paths, [M, PATH_CHECKS + 1, turns, 6] with the

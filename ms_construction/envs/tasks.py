@@ -118,8 +118,10 @@ velocity): `obs_obstacles=None` (the default) where there are obstacles, `True` 
 episodes obstacles, drawn per episode (a mixed scene for training; the others as on the site as built, the entry
 zeros). The dense reward measures
 the carry and the reach along the goal slot's start paths that keep clear of the stack and the post (checked once
-per episode; along all of them where none does). A layout may block every way to a goal: the evaluations keep the
-seeds the planning expert solves at the start.
+per episode); where they block every usable path of a turret side, along one of them through a via searched around
+them at reset (seeded by the layout: the same in every process and replay); where none is found either, along a clear
+detour from the other side, or along the blocked paths where none is. A layout may block every way to a goal: the
+evaluations keep the seeds the planning expert solves at the start.
 """
 
 
