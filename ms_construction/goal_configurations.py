@@ -211,15 +211,21 @@ class StartPaths:
     `obstacles`, CarryGeometry.usable)."""
 
 
+def _collides_at(planners: list, q: np.ndarray, turns: list[float]) -> bool:
+    """Whether the arm at `q` collides holding its element turned by any of `turns` on the plate (one planner each)."""
+    for planner, t in zip(planners, turns):
+        shifted = q.copy()
+        shifted[5] += t
+        if planner.collides(shifted):
+            return True
+    return False
+
+
 def _clear_fraction(planners: list, waypoints: np.ndarray, turns: list[float]) -> float:
     clear = 0.0
     for a in np.linspace(0.0, 1.0, PATH_CHECKS + 1):
-        q = path_point(waypoints, a)
-        for planner, t in zip(planners, turns):
-            shifted = q.copy()
-            shifted[5] += t
-            if planner.collides(shifted):
-                return clear
+        if _collides_at(planners, path_point(waypoints, a), turns):
+            return clear
         clear = a
     return clear
 
@@ -414,14 +420,7 @@ def path_clear(planners: list, waypoints: np.ndarray, turns: list[float]) -> boo
     after a few checks)."""
     i = np.arange(1, PATH_CHECKS + 2)
     fractions = np.linspace(0.0, 1.0, PATH_CHECKS + 1)[np.argsort(-(i & -i), kind="stable")]
-    for a in fractions:
-        q = path_point(waypoints, a)
-        for planner, t in zip(planners, turns):
-            shifted = q.copy()
-            shifted[5] += t
-            if planner.collides(shifted):
-                return False
-    return True
+    return not any(_collides_at(planners, path_point(waypoints, a), turns) for a in fractions)
 
 
 def search_via(planners: list, ends: list[tuple], turns: list[float], rng: np.random.Generator,
