@@ -415,11 +415,11 @@ WAY_SEARCH_SPREAD = 1.5
 joint line out to this, so that the first clear via found is about the nearest the draws reach."""
 
 
-def path_clear(planners: list, waypoints: np.ndarray, turns: list[float]) -> bool:
-    """`_clear_fraction(planners, waypoints, turns) == 1.0`, the points checked coarse to fine (a blocked path is found
-    after a few checks)."""
-    i = np.arange(1, PATH_CHECKS + 2)
-    fractions = np.linspace(0.0, 1.0, PATH_CHECKS + 1)[np.argsort(-(i & -i), kind="stable")]
+def path_clear(planners: list, waypoints: np.ndarray, turns: list[float], checks: int = PATH_CHECKS) -> bool:
+    """`_clear_fraction(planners, waypoints, turns) == 1.0` (at `checks` + 1 points, PATH_CHECKS + 1 there), the points
+    checked coarse to fine (a blocked path is found after a few checks)."""
+    i = np.arange(1, checks + 2)
+    fractions = np.linspace(0.0, 1.0, checks + 1)[np.argsort(-(i & -i), kind="stable")]
     return not any(_collides_at(planners, path_point(waypoints, a), turns) for a in fractions)
 
 
