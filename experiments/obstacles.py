@@ -140,7 +140,7 @@ SHOWN = (  # (--train, --learner, --share, --obstacle-reward, --train-seed, env 
     ("shipped", "sac", 1.0, 5, 1, 400_000),
     ("shipped", "sac", 1.0, 6, 1, 1_000_000),
     ("shipped", "sac", 0.5, 6, 1, 400_000),
-    ("shipped", "sac", 0.5, 7, 1, 400_000),
+    ("shipped", "sac", 0.5, 7, 1, 600_000),
 )
 """the trained runs' snapshots evaluated with AGENTS (each an evaluated candidate, `candidate_path`): RESULTS shows
 those of today's version (OBSTACLE_REWARD), VERSIONS_PATH every one."""
