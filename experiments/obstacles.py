@@ -610,7 +610,7 @@ def first_touches(checkpoint: str, env_id: str, seeds: list[int]) -> list[dict]:
     u, found = env.unwrapped, []
     for seed in seeds:
         obs, _ = env.reset(seed=seed)
-        sides = u.geometry.path_sides(u.task_id, u.goal_slot, u.clear_paths())[0]
+        sides = u.geometry.path_sides(u.task_id, u.goal_slot, u.obstacle_ways())[0]
         for step in range(1, find_max_episode_steps_value(env) + 1):
             with torch.no_grad():
                 obs, _, terminated, truncated, info = env.step(agent.get_action(obs, deterministic=True))

@@ -29,11 +29,13 @@ from pathlib import Path
 
 import gymnasium as gym
 import numpy as np
+import torch
 import tyro
 
 from experiments.obstacles import HeldCarries, layouts, rank_correlation
 from ms_construction.curriculum import FINAL_STAGE
 from ms_construction.envs import PAPER_TASK_ENV_IDS
+from ms_construction.envs.carry_geometry import wrap
 from ms_construction.goal_configurations import (START_TURNS_DEG, _collides_at, path_clear, path_point,
                                                   symmetry_period)
 from ms_construction.parameters import ELEMENT_KINDS
@@ -76,7 +78,7 @@ class HeldSteps(HeldCarries):
 def wrapped(d: np.ndarray, period: float) -> np.ndarray:
     """Joint moves `d` [..., 6] with joint 6's part taken modulo the element's symmetry `period`."""
     d = d.copy()
-    d[..., 5] = (d[..., 5] + period / 2) % period - period / 2
+    d[..., 5] = wrap(torch.from_numpy(d[..., 5]), torch.tensor(period)).numpy()
     return d
 
 

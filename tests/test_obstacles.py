@@ -25,6 +25,28 @@ from ms_construction.planning import MotionPlanningExpert
 from tests.helpers import TEST_EXPERT_CONFIG, make_env
 
 
+def first_seed(env, found, seeds: int, what: str) -> int:
+    """The first of seeds 0 .. `seeds` - 1 after whose reset `found(env.unwrapped)` holds (the env is left reset on
+    it); the test fails naming `what` where none does."""
+    for seed in range(seeds):
+        env.reset(seed=seed)
+        if found(env.unwrapped):
+            return seed
+    pytest.fail(f"no seed of {seeds} {what}")
+
+
+def clear_at_every_turn(u, path: torch.Tensor, with_site: bool = False) -> float:
+    """goal_configurations' whole check of `path` [P, 6] (`_clear_fraction`: the share of its points clear at every
+    START_TURNS_DEG) for env `u`'s task type, with the stack and the post where they stand (`with_site`: and the
+    site's collision parts)."""
+    import numpy as np
+
+    from ms_construction.goal_configurations import START_TURNS_DEG, _clear_fraction
+
+    planners = u._path_planners(int(u.task_id[0]), with_site)
+    return _clear_fraction(planners, path.numpy().astype(float), [float(np.deg2rad(t)) for t in START_TURNS_DEG])
+
+
 def test_an_unknown_obstacles_option_raises_naming_the_allowed_ones():
     with pytest.raises(ValueError, match="'static'.*'moving'"):
         make_env("Flooring-v1", obstacles="walls")
@@ -210,13 +232,13 @@ def test_obstacles_are_refused_on_the_gpu_until_written_there():
 def test_the_dense_reward_measures_the_carry_along_the_paths_clear_of_the_obstacles():
     env = make_env("CeilingInstallation-v1", obstacles="static", reward_mode="dense")
     u = env.unwrapped
-    for seed in range(20):  # an episode where the stack or the post blocks one of its goal slot's usable paths
-        env.reset(seed=seed)
+
+    def one_blocked_one_clear(u):  # the stack or the post blocks one of the goal slot's usable paths, not all
         usable, clear = u.geometry.paths["usable"][u.task_id, u.goal_slot], u.clear_paths()
-        if (usable & ~clear).any() and (usable & clear).any():
-            break
-    else:
-        pytest.fail("no seed of 20 with a usable start path blocked and another clear")
+        return bool((usable & ~clear).any() and (usable & clear).any())
+
+    first_seed(env, one_blocked_one_clear, 20, "with a usable start path blocked and another clear")
+    usable, clear = u.geometry.paths["usable"][u.task_id, u.goal_slot], u.clear_paths()
     blocked = int((usable & ~clear)[0].nonzero()[0, 0])
     path = u.geometry.paths["waypoints"][u.task_id, u.goal_slot][0, blocked]  # [P, 6]
     on_path = ((path[2] + path[3]) / 2)[None]  # past the back-off, which a way searched around the obstacles shares
@@ -234,30 +256,17 @@ def test_the_dense_reward_measures_the_carry_along_the_paths_clear_of_the_obstac
     env.close()
 
 
-def test_the_paths_clear_of_the_obstacles_are_those_the_start_paths_own_check_finds_clear(tmp_path):
+def test_the_paths_clear_of_the_obstacles_are_those_the_start_paths_own_check_finds_clear():
     """The env checks the arm's self-collision once per goal slot and the obstacles per episode: the same paths as
     goal_configurations' whole check (`_clear_fraction`) with the stack and the post in its world, on every task
     type, blocked and clear paths both among them."""
-    import numpy as np
-
-    from ms_construction.goal_configurations import START_TURNS_DEG, _clear_fraction, _path_planners
-    from ms_construction.parameters import ELEMENT_KINDS
-    from ms_construction.planning.collision_model import obstacle_objects
-
     env = make_env("ConstructionPickPlace-v1", obstacles="static")
     u = env.unwrapped
-    turns = [float(np.deg2rad(t)) for t in START_TURNS_DEG]
     seen, kinds = torch.zeros(2, dtype=torch.bool), set()
     for seed in range(12):
         env.reset(seed=seed)
         kind, slot = int(u.task_id[0]), int(u.goal_slot[0])
-        planners = _path_planners(tmp_path, ELEMENT_KINDS[kind], {})
-        for key, obj in obstacle_objects(u).items():
-            if key != "obstacle_worker":
-                for planner in planners:
-                    planner.set_obstacle(key, obj)
-        whole = [_clear_fraction(planners, path, turns) == 1.0
-                 for path in u.geometry.paths["waypoints"][kind, slot].numpy().astype(float)]
+        whole = [clear_at_every_turn(u, path) == 1.0 for path in u.geometry.paths["waypoints"][kind, slot]]
         ways = u.obstacle_ways()
         assert (ways.clear & ~ways.searched)[0].tolist() == whole
         seen |= torch.tensor([not all(whole), any(whole)])
@@ -300,15 +309,16 @@ def test_where_the_obstacles_block_every_usable_path_and_no_via_is_found_the_rew
     env = make_env("WindowInstallation-v1", obstacles="static", reward_mode="dense")
     u = env.unwrapped
     g = u.geometry
-    for seed in range(40):
-        env.reset(seed=seed)
+
+    def only_a_detour_clear(u):
         clear = u.clear_paths()
-        usable = g.paths["usable"][u.task_id, u.goal_slot]
-        ways = g.clear_ways(u.task_id, u.goal_slot, clear)
-        if not (usable & clear).any() and ways.any():
-            break
-    else:
-        pytest.fail("no window seed of 40 whose obstacles block every usable path and leave a detour")
+        return bool(not (g.paths["usable"][u.task_id, u.goal_slot] & clear).any()
+                    and g.clear_ways(u.task_id, u.goal_slot, clear).any())
+
+    seed = first_seed(env, only_a_detour_clear, 40, "whose obstacles block every usable path and leave a detour")
+    clear = u.clear_paths()
+    usable = g.paths["usable"][u.task_id, u.goal_slot]
+    ways = g.clear_ways(u.task_id, u.goal_slot, clear)
     assert (ways <= g.paths["detour"][u.task_id, u.goal_slot]).all()
     assert torch.equal(g.usable(u.task_id, u.goal_slot, clear), ways)
     sides = ways.view(-1, 2).any(0)
@@ -323,7 +333,8 @@ def test_where_the_obstacles_block_every_usable_path_and_no_via_is_found_the_rew
     other = 1 - side
     config = int(usable[0].view(-1, 2)[:, other].nonzero()[0, 0])
     blocked = g.paths["waypoints"][u.task_id, u.goal_slot][0, config * 2 + other]
-    assert torch.equal(g.carry_paths(u.task_id, u.goal_slot, torch.full((1,), other), clear), usable)
+    assert torch.equal(g.carry_paths(u.task_id, u.goal_slot, torch.full((1,), other), u.obstacle_ways()),
+                       usable)
     at_lift = g.project(blocked[3][None], torch.zeros(1), u.task_id, u.goal_slot, torch.full((1,), other),
                         u.obstacle_ways())
     assert float(at_lift.distance) <= float((blocked[1:4] - blocked[:3]).abs().sum()) + 1e-4
@@ -338,29 +349,25 @@ def test_where_the_obstacles_block_every_usable_path_and_no_via_is_found_the_rew
     env.close()
 
 
-def test_where_the_obstacles_block_every_usable_path_of_a_side_the_episode_searches_a_clear_via_for_it(tmp_path):
+def test_where_the_obstacles_block_every_usable_path_of_a_side_the_episode_searches_a_clear_via_for_it():
     """A flooring layout whose stack or post blocks every usable start path of its goal slot: the episode gets one of
     them back through a via searched at reset (`SiteObstacles._search_vias`), wholly clear of the site and the
     obstacles by goal_configurations' own check; the same via after a reset with the same seed and after
     `set_state_dict`; the reward reaches for the table from that side and measures the carry along the searched way,
     and a near-goal start is posed on it and touches nothing."""
-    import numpy as np
-
-    from ms_construction.goal_configurations import START_TURNS_DEG, _clear_fraction, _path_planners
-    from ms_construction.assets import load_manifest
-    from ms_construction.planning.collision_model import obstacle_objects, site_collision_objects
-
     env = make_env("Flooring-v1", obstacles="static", reward_mode="dense")
     u = env.unwrapped
     g = u.geometry
-    for seed in range(40):
-        env.reset(seed=seed)
+
+    def only_a_searched_way_clear(u):
         ways = u.obstacle_ways()
-        usable = g.paths["usable"][u.task_id, u.goal_slot]
-        if not (usable & ways.clear & ~ways.searched).any() and ways.searched.any():
-            break
-    else:
-        pytest.fail("no flooring seed of 40 whose obstacles block every usable path and whose search finds a via")
+        return bool(not (g.paths["usable"][u.task_id, u.goal_slot] & ways.clear & ~ways.searched).any()
+                    and ways.searched.any())
+
+    seed = first_seed(env, only_a_searched_way_clear, 40, "whose obstacles block every usable path and whose search "
+                      "finds a via")
+    ways = u.obstacle_ways()
+    usable = g.paths["usable"][u.task_id, u.goal_slot]
     assert (ways.searched <= usable).all() and int(ways.searched.sum()) == 1
     path = int(ways.searched[0].nonzero()[0, 0])
     side = path % 2
@@ -368,14 +375,8 @@ def test_where_the_obstacles_block_every_usable_path_of_a_side_the_episode_searc
     # the slot's own path but for its corner, and clear of the site and the obstacles at every checked turn
     site_path = g.paths["waypoints"][u.task_id, u.goal_slot][0, path]
     assert torch.equal(searched[[0, 1, 3, 4]], site_path[[0, 1, 3, 4]]) and not torch.equal(searched[2], site_path[2])
-    planners = _path_planners(tmp_path, "flooring", site_collision_objects(load_manifest(), ("flooring",)))
-    for key, obj in obstacle_objects(u).items():
-        if key != "obstacle_worker":
-            for planner in planners:
-                planner.set_obstacle(key, obj)
-    turns = [float(np.deg2rad(t)) for t in START_TURNS_DEG]
-    assert _clear_fraction(planners, searched.numpy().astype(float), turns) == 1.0
-    assert _clear_fraction(planners, site_path.numpy().astype(float), turns) < 1.0
+    assert clear_at_every_turn(u, searched, with_site=True) == 1.0
+    assert clear_at_every_turn(u, site_path, with_site=True) < 1.0
     # seeded by the layout: the same way again, and after the state is set back
     state = u.get_state_dict()
     env.reset(seed=seed)
@@ -384,7 +385,7 @@ def test_where_the_obstacles_block_every_usable_path_of_a_side_the_episode_searc
     u.set_state_dict(state)
     assert torch.equal(u.obstacle_ways().waypoints, ways.waypoints)
     # the reach pays the searched way's side; the carry falls along it after a grasp from there
-    assert g.path_sides(u.task_id, u.goal_slot, u.clear_paths())[0].tolist() == [side == 0, side == 1]
+    assert g.path_sides(u.task_id, u.goal_slot, u.obstacle_ways())[0].tolist() == [side == 0, side == 1]
     grasped = torch.full((1,), side)
     at = [float(g.project(q[None], torch.zeros(1), u.task_id, u.goal_slot, grasped, u.obstacle_ways()).distance)
           for q in (searched[3], searched[2], searched[1])]

@@ -175,6 +175,12 @@ class EpisodeWays:
     segments: torch.Tensor
     vertices: torch.Tensor
     """the projection's constants of `waypoints` (`path_tables`)."""
+    sides: torch.Tensor
+    """[n, 2] bool: the turret sides the reach pays for (`CarryGeometry.path_sides`)."""
+    carried: torch.Tensor
+    """[n, 3, M] bool: the paths the carry is measured along after a grasp from turret side 0 (+pi), 1 (-pi), and
+    before a grasp (`CarryGeometry.carry_paths`; the last row is the one side -1 indexes). Fixed for the episode, so
+    worked out once rather than at every step."""
 
 
 class CarryGeometry:
@@ -237,7 +243,20 @@ class CarryGeometry:
         for (env, path), q in vias.items():
             waypoints[env, path, 2] = torch.as_tensor(q, dtype=waypoints.dtype, device=self.device)
             free[env, path], clear[env, path], via[env, path], searched[env, path] = 1.0, True, True, True
-        return EpisodeWays(clear, searched, waypoints, free, *path_tables(waypoints, via))
+        ways = self.usable(task, slot, clear)
+        sides = ways.view(len(task), -1, 2).any(1)
+        sides = torch.where(sides.any(-1, keepdim=True), sides, True)
+        # after a grasp from one side, that side's usable paths clear of the obstacles where any is, else its clear
+        # detours, else its usable paths even though blocked: the turret cannot cross to the other side holding the
+        # element, so another side's clear way is no way for it; before a grasp, every way the reward measures along
+        on_side = torch.arange(ways.shape[-1], device=self.device) % 2 == torch.arange(2, device=self.device)[:, None]
+        usable, detour = (self.paths[key][task, slot][:, None] & on_side for key in ("usable", "detour"))  # [n, 2, M]
+        grasped = usable & clear[:, None]
+        for fallback in (detour & clear[:, None], usable):
+            grasped = torch.where(grasped.any(-1, keepdim=True), grasped, fallback)
+        grasped = torch.where(grasped.any(-1, keepdim=True), grasped, ways[:, None])
+        return EpisodeWays(clear, searched, waypoints, free, *path_tables(waypoints, via), sides,
+                           torch.cat([grasped, ways[:, None]], 1))
 
     def clear_ways(self, task: torch.Tensor, slot: torch.Tensor, clear: torch.Tensor) -> torch.Tensor:
         """[n, M] bool: the start paths of each env's goal slot that keep clear of a site's obstacles (`clear` [n, M],
@@ -257,28 +276,18 @@ class CarryGeometry:
         return torch.where(ways.any(-1, keepdim=True), ways, usable)
 
     def carry_paths(self, task: torch.Tensor, slot: torch.Tensor, side: torch.Tensor,
-                    clear: Optional[torch.Tensor] = None) -> torch.Tensor:
-        """[n, M] bool: the paths the carry is measured along: `usable`; among a site's obstacles (`clear`), after a
+                    ways: Optional[EpisodeWays] = None) -> torch.Tensor:
+        """[n, M] bool: the paths the carry is measured along: `usable`; among a site's obstacles (`ways`), after a
         grasp from turret side `side` [n] (0: +pi, 1: -pi; -1: none), that side's usable paths clear of them where any
-        is, else its clear detours, else its usable paths even though blocked: the turret cannot cross to the other
-        side holding the element, so another side's clear way is no way for it."""
-        ways = self.usable(task, slot, clear)
-        if clear is None:
-            return ways
-        on_side = torch.remainder(torch.arange(ways.shape[-1], device=ways.device), 2)[None] == side[:, None]
-        usable, detour = self.paths["usable"][task, slot] & on_side, self.paths["detour"][task, slot] & on_side
-        grasped = usable & clear
-        for fallback in (detour & clear, usable):
-            grasped = torch.where(grasped.any(-1, keepdim=True), grasped, fallback)
-        return torch.where(grasped.any(-1, keepdim=True), grasped, ways)
+        is, else its clear detours, else its usable paths even though blocked (`EpisodeWays.carried`)."""
+        if ways is None:
+            return self.paths["usable"][task, slot]
+        return ways.carried[torch.arange(len(side), device=side.device), side]
 
-    def path_sides(self, task: torch.Tensor, slot: torch.Tensor, clear: Optional[torch.Tensor] = None) -> torch.Tensor:
-        """[n, 2] bool: the turret sides (+pi, -pi) a usable start path (`usable`) of each goal slot leaves the table
-        from; both for a slot without usable paths."""
-        if clear is None:
-            return self.paths["sides"][task, slot]
-        sides = self.usable(task, slot, clear).view(len(task), -1, 2).any(1)
-        return torch.where(sides.any(-1, keepdim=True), sides, True)
+    def path_sides(self, task: torch.Tensor, slot: torch.Tensor, ways: Optional[EpisodeWays] = None) -> torch.Tensor:
+        """[n, 2] bool: the turret sides (+pi, -pi) a usable start path (`usable`; among a site's obstacles, `ways`:
+        one the reward measures along) of each goal slot leaves the table from; both for a slot without any."""
+        return self.paths["sides"][task, slot] if ways is None else ways.sides
 
     def project(self, qpos: torch.Tensor, turn: torch.Tensor, task: torch.Tensor, slot: torch.Tensor,
                 side: torch.Tensor, ways: Optional[EpisodeWays] = None) -> Projection:
@@ -297,15 +306,15 @@ class CarryGeometry:
                               else (ways.segments, ways.vertices))
         return Projection(*_scripted(_project)(
             qpos, turn, self.period[task], segments, vertices,
-            self.carry_paths(task, slot, side, None if ways is None else ways.clear), p["kept"][task, slot], side,
+            self.carry_paths(task, slot, side, ways), p["kept"][task, slot], side,
             PATH_LOOKAHEAD))
 
     def reach_distance(self, qpos: torch.Tensor, task: torch.Tensor, slot: torch.Tensor,
-                       clear: Optional[torch.Tensor] = None) -> torch.Tensor:
+                       ways: Optional[EpisodeWays] = None) -> torch.Tensor:
         """[n] rad; how far the arm is, in joint space (joints 1-5 summed: the plate's roll does not matter to the
         suction grasp, which keeps the element's turn), from the nearest configuration that grasps its element where
         it lies on the staging table, on a turret side that a usable start path of its goal slot leaves the table
         from (`path_sides`): an element grasped from the other side has no collision-free way to its goal along
         them."""
         distance = (self.table_q[task][..., :5] - qpos[:, None, :5]).abs().sum(-1)  # [n, 2 turret sides]
-        return torch.where(self.path_sides(task, slot, clear), distance, torch.inf).amin(-1)
+        return torch.where(self.path_sides(task, slot, ways), distance, torch.inf).amin(-1)

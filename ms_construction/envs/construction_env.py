@@ -563,7 +563,8 @@ class ConstructionTaskEnv(SiteObstacles, StartStates, BaseEnv):
     def reach_distance(self) -> torch.Tensor:
         """[n] rad; the arm's joint-space distance (joints 1-5) from the nearest configuration that grasps its element
         on the staging table from a turret side its goal slot's start paths leave from (`CarryGeometry.reach_distance`)."""
-        return self.geometry.reach_distance(self.agent.robot.get_qpos(), self.task_id, self.goal_slot, self.clear_paths())
+        return self.geometry.reach_distance(self.agent.robot.get_qpos(), self.task_id, self.goal_slot,
+                                            self.obstacle_ways())
 
     PROGRESS_GAIN = 1.25
     """per rad; the progress term pays this much per radian the carry distance fell since the last step, within

@@ -110,11 +110,6 @@ class StartStates:
         self.near_goal_start[idx] = True
         self.reach_start_side[idx] = -1  # a near-goal start takes the place of a reach start drawn before it
 
-    def _clear_paths_of(self, idx: torch.Tensor) -> Optional[torch.Tensor]:
-        """`clear_paths` (the start paths clear of the site's obstacles; None without them) of the envs `idx`."""
-        clear = self.clear_paths()
-        return None if clear is None else clear[idx]
-
     def _pose_arm(self, qpos: torch.Tensor) -> None:
         """Set the arm of the envs being reset to `qpos`, its links posed at once (on the GPU they follow the new
         joint positions only after a kinematics update)."""
@@ -161,8 +156,8 @@ class StartStates:
             return
         idx = env_idx[chosen]
         task = self.task_id[idx]
-        side = torch.multinomial(self.geometry.path_sides(task, self.goal_slot[idx], self._clear_paths_of(idx)).float(),
-                                 1)[:, 0]
+        sides = self.geometry.path_sides(self.task_id, self.goal_slot, self.obstacle_ways())[idx]
+        side = torch.multinomial(sides.float(), 1)[:, 0]
         qpos = self.agent.robot.get_qpos()[env_idx].clone()
         if self.reach_start_radius is not None:
             if self._grasp_start_q is None:
