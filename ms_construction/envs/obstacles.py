@@ -259,11 +259,15 @@ class SiteObstacles:
 
     def _pose_worker(self) -> None:
         """The worker at its place by the layout and the clock (the stack and the post stay where an episode put
-        them: per control step only the worker moves)."""
+        them: per control step only the worker moves), and its place and velocity as the observation gives them
+        until it moves again (`_worker_now`, [n, 4]: worked out once per step rather than again for the
+        observation)."""
         n = len(self.obstacle_layout)
         upright = self._worker_upright.expand(n, 4)
         worker_z = torch.full((n, 1), WORKER_HEIGHT / 2, device=self.device)
-        self.obstacles["worker"].set_pose(Pose.create(torch.cat([self.worker_xy(), worker_z, upright], -1)))
+        xy = self.worker_xy()
+        self._worker_now = torch.cat([xy, self.worker_velocity()], -1)
+        self.obstacles["worker"].set_pose(Pose.create(torch.cat([xy, worker_z, upright], -1)))
 
     def obstacles_present(self) -> torch.Tensor:
         """[n] whether each env's episode has its obstacles on the site (not PARKED: `obstacle_share`)."""
@@ -430,7 +434,7 @@ class SiteObstacles:
         lay = self.obstacle_layout
         two_yaw = 2 * lay[:, 3]  # the box looks the same turned half a turn
         obs = torch.cat([lay[:, 0:3], torch.cos(two_yaw)[:, None], torch.sin(two_yaw)[:, None], lay[:, 4:6],
-                         self.worker_xy(), self.worker_velocity()], -1)
+                         self._worker_now], -1)
         return torch.where(self.obstacles_present()[:, None], obs, 0.0)
 
     def obstacle_info(self) -> dict:
